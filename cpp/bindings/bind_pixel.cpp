@@ -1,0 +1,52 @@
+#include "bindings.hpp"
+
+#include <pybind11/stl.h>
+
+using evstwin::DarkModel;
+using evstwin::LowPass;
+using evstwin::PixelParams;
+
+namespace {
+std::string dark_model_name(DarkModel m) {
+    switch (m) {
+        case DarkModel::Poisson: return "poisson";
+        case DarkModel::Paper: return "paper";
+        default: return "none";
+    }
+}
+DarkModel dark_model_from(const std::string& s) {
+    if (s == "poisson") return DarkModel::Poisson;
+    if (s == "paper") return DarkModel::Paper;
+    if (s == "none") return DarkModel::None;
+    throw py::value_error("dark_model must be one of 'poisson', 'paper', 'none'; got dark_model='" + s + "'");
+}
+LowPass lowpass_from(const std::string& s) {
+    if (s == "exact") return LowPass::Exact;
+    if (s == "euler") return LowPass::Euler;
+    throw py::value_error("lowpass must be one of 'exact', 'euler'; got lowpass='" + s + "'");
+}
+}  // namespace
+
+#define EVSTWIN_FIELD(name) .def_readwrite(#name, &PixelParams::name)
+
+void register_pixel(py::module_& m) {
+    py::class_<PixelParams>(m, "PixelParams", "C++ pixel parameters (see evstwin.PixelParams)")
+        .def(py::init<>())
+        EVSTWIN_FIELD(theta_on) EVSTWIN_FIELD(theta_off) EVSTWIN_FIELD(refractory_s)
+        EVSTWIN_FIELD(cutoff_hz) EVSTWIN_FIELD(leak_rate_hz) EVSTWIN_FIELD(shot_noise_rate_hz)
+        EVSTWIN_FIELD(shot_noise_factor) EVSTWIN_FIELD(shot_noise_i_max_a) EVSTWIN_FIELD(dark_rate_e_per_s)
+        EVSTWIN_FIELD(photon_shot_noise) EVSTWIN_FIELD(threshold_sigma) EVSTWIN_FIELD(fill_factor)
+        EVSTWIN_FIELD(internal_qe) EVSTWIN_FIELD(transmission) EVSTWIN_FIELD(absorption_per_m)
+        EVSTWIN_FIELD(depletion_width_m) EVSTWIN_FIELD(pr_pole) EVSTWIN_FIELD(pr_cutoff_ref_hz)
+        EVSTWIN_FIELD(pr_ref_current_a)
+        .def_property(
+            "dark_model", [](const PixelParams& p) { return dark_model_name(p.dark_model); },
+            [](PixelParams& p, const std::string& s) { p.dark_model = dark_model_from(s); })
+        .def_property(
+            "lowpass", [](const PixelParams& p) { return std::string(p.lowpass == LowPass::Exact ? "exact" : "euler"); },
+            [](PixelParams& p, const std::string& s) { p.lowpass = lowpass_from(s); })
+        .def("validate", [](const PixelParams& p) { evstwin::validate(p); },
+             "Raise ValueError naming the first parameter out of range.")
+        .def("electrons_per_photon", &PixelParams::electrons_per_photon,
+             "Electrons per photon arriving on the pixel: fill factor x eq. 2 without e.");
+}

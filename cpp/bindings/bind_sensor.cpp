@@ -1,0 +1,102 @@
+#include "bindings.hpp"
+
+#include <pybind11/stl.h>
+
+#include <optional>
+#include <string>
+
+using evstwin::Sensor;
+
+namespace {
+
+std::string shape_str(const py::array& a) {
+    std::string s = "(";
+    for (py::ssize_t i = 0; i < a.ndim(); ++i) s += (i ? ", " : "") + std::to_string(a.shape(i));
+    return s + (a.ndim() == 1 ? ",)" : ")");
+}
+
+/// Checks with the GIL held; returns a C-contiguous float32/float64 array (the same object
+/// when it already is one, so no copy).
+py::array checked_rates(const Sensor& s, py::array rate) {
+    const auto kind = rate.dtype().kind();
+    if (kind != 'f' || (rate.itemsize() != 4 && rate.itemsize() != 8))
+        throw py::type_error("photon_rate must be a float32 or float64 array of photons/s; got dtype " +
+                             std::string(py::str(rate.dtype())));
+    if (rate.ndim() != 3 || rate.shape(1) != s.height() || rate.shape(2) != s.width())
+        throw py::value_error("photon_rate must have shape (T, height, width) = (T, " + std::to_string(s.height()) +
+                              ", " + std::to_string(s.width()) + "); got shape " + shape_str(rate));
+    if (!(rate.flags() & py::array::c_style)) rate = py::module_::import("numpy").attr("ascontiguousarray")(rate);
+    return rate;
+}
+
+py::array_t<double> checked_times(py::array t_s, py::ssize_t n) {
+    if (t_s.dtype().kind() != 'f' && t_s.dtype().kind() != 'i' && t_s.dtype().kind() != 'u')
+        throw py::type_error("t_s must be an array of real times in seconds; got dtype " +
+                             std::string(py::str(t_s.dtype())));
+    auto t = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(t_s);
+    if (!t || t.ndim() != 1 || t.shape(0) != n)
+        throw py::value_error("t_s must be 1-D with one time per sample of photon_rate (" + std::to_string(n) +
+                              "); got shape " + shape_str(t_s));
+    return t;
+}
+
+template <class Real>
+std::vector<evstwin::Event> run_typed(Sensor& s, const py::array& rate, const py::array_t<double>& t,
+                                      const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace) {
+    const Real* data = static_cast<const Real*>(rate.data());
+    const double* times = t.data();
+    const std::size_t n = static_cast<std::size_t>(rate.shape(0));
+    py::gil_scoped_release release;
+    return s.run(data, times, n, probe, trace);
+}
+
+std::vector<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, const std::vector<std::uint32_t>* probe,
+                                    std::vector<evstwin::TraceSample>* trace) {
+    rate = checked_rates(s, rate);
+    auto t = checked_times(t_s, rate.shape(0));
+    if (rate.itemsize() == 4) return run_typed<float>(s, rate, t, probe, trace);
+    return run_typed<double>(s, rate, t, probe, trace);
+}
+
+int threads_arg(const std::optional<int>& n) {
+    if (n && *n < 1)
+        throw py::value_error("num_threads must be >= 1 or None; got num_threads=" + std::to_string(*n));
+    return n ? *n : 0;
+}
+
+}  // namespace
+
+void register_sensor(py::module_& m) {
+    m.attr("TRACE_DTYPE") = py::dtype::of<evstwin::TraceSample>();
+
+    py::class_<Sensor>(m, "Sensor")
+        .def(py::init([](int width, int height, const evstwin::PixelParams& p, std::uint64_t seed,
+                         std::optional<int> num_threads) {
+                 return new Sensor(width, height, p, seed, threads_arg(num_threads));
+             }),
+             py::arg("width"), py::arg("height"), py::arg("params"), py::arg("seed") = 0,
+             py::arg("num_threads") = py::none())
+        .def("run",
+             [](Sensor& s, py::array rate, py::array t_s) { return to_numpy(run_any(s, rate, t_s, nullptr, nullptr)); },
+             py::arg("photon_rate"), py::arg("t_s"))
+        .def("run_probe",
+             [](Sensor& s, py::array rate, py::array t_s, std::vector<std::uint32_t> pixels) {
+                 std::vector<evstwin::TraceSample> trace;
+                 auto ev = run_any(s, rate, t_s, &pixels, &trace);
+                 const auto n = static_cast<py::ssize_t>(pixels.size());
+                 const auto T = static_cast<py::ssize_t>(trace.size()) / std::max<py::ssize_t>(n, 1);
+                 return py::make_tuple(to_numpy(std::move(ev)), to_numpy(std::move(trace), {T, n}));
+             },
+             py::arg("photon_rate"), py::arg("t_s"), py::arg("pixels"))
+        .def("reset", &Sensor::reset)
+        .def("thresholds",
+             [](const Sensor& s, bool on) { return to_numpy(s.thresholds(on), {s.height(), s.width()}); },
+             py::arg("on"))
+        .def_property_readonly("width", &Sensor::width)
+        .def_property_readonly("height", &Sensor::height)
+        .def_property_readonly("seed", &Sensor::seed)
+        .def_property_readonly("samples_seen", &Sensor::samples_seen)
+        .def_property_readonly("last_time_s", &Sensor::last_time_s)
+        .def_property("num_threads", &Sensor::num_threads,
+                      [](Sensor& s, std::optional<int> n) { s.set_num_threads(threads_arg(n)); });
+}

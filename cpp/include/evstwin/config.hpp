@@ -1,0 +1,26 @@
+// OpenMP shim: the library compiles and gives identical events with or without OpenMP.
+// A consumer opts in by compiling with OpenMP (e.g. linking OpenMP::OpenMP_CXX); the
+// evstwin::evstwin target never forces it on anyone.
+#pragma once
+
+#if defined(_OPENMP) && !defined(EVSTWIN_NO_OPENMP)
+#include <omp.h>
+#define EVSTWIN_HAS_OPENMP 1
+#else
+#define EVSTWIN_HAS_OPENMP 0
+#endif
+
+namespace evstwin {
+
+/// Number of threads a parallel loop would use by default (1 without OpenMP).
+inline int default_num_threads() {
+#if EVSTWIN_HAS_OPENMP
+    return omp_get_max_threads();
+#else
+    return 1;
+#endif
+}
+
+inline constexpr bool has_openmp() { return EVSTWIN_HAS_OPENMP != 0; }
+
+}  // namespace evstwin

@@ -1,0 +1,10 @@
+// evstwin: a physics-based digital twin of an event-based vision sensor. Umbrella header.
+#pragma once
+
+#include "config.hpp"
+#include "constants.hpp"
+#include "event.hpp"
+#include "pixel.hpp"
+#include "rng.hpp"
+#include "sensor.hpp"
+#include "version.hpp"

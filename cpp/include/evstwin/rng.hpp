@@ -1,0 +1,174 @@
+// Counter-based randomness: every random number is a pure function of
+// (seed, pixel, sample index, purpose), so events do not depend on the thread count, on the
+// order pixels are visited, or on how the input is cut into chunks.
+//
+// The generator is Philox4x32-10 (Salmon et al., "Parallel random numbers: as easy as 1, 2,
+// 3", SC'11), the counter-based generator of Random123, cuRAND and NumPy. The transforms to
+// uniform, normal and Poisson variates are written here rather than taken from <random>,
+// whose distributions differ between standard libraries.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+namespace evstwin {
+
+using Philox4x32Counter = std::array<std::uint32_t, 4>;
+using Philox4x32Key = std::array<std::uint32_t, 2>;
+
+/// Philox4x32-10: 128 random bits from a 128-bit counter and a 64-bit key.
+inline Philox4x32Counter philox4x32(Philox4x32Counter c, Philox4x32Key k) {
+    constexpr std::uint32_t M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
+    constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
+    for (int round = 0; round < 10; ++round) {
+        const std::uint64_t p0 = static_cast<std::uint64_t>(M0) * c[0];
+        const std::uint64_t p1 = static_cast<std::uint64_t>(M1) * c[2];
+        const std::uint32_t hi0 = static_cast<std::uint32_t>(p0 >> 32), lo0 = static_cast<std::uint32_t>(p0);
+        const std::uint32_t hi1 = static_cast<std::uint32_t>(p1 >> 32), lo1 = static_cast<std::uint32_t>(p1);
+        c = {hi1 ^ c[1] ^ k[0], lo1, hi0 ^ c[3] ^ k[1], lo0};
+        k[0] += W0;
+        k[1] += W1;
+    }
+    return c;
+}
+
+/// A uniform in the open interval (0, 1) from 32 random bits: (w + 1/2) / 2^32.
+inline double uniform_open(std::uint32_t w) { return (static_cast<double>(w) + 0.5) * 0x1p-32; }
+
+/// What a random number is for: the fourth counter word. Distinct purposes never share
+/// a number, so switching one noise source on or off leaves the others' draws unchanged
+/// (common random numbers across a sweep).
+enum Purpose : std::uint32_t {
+    PURPOSE_SAMPLE = 0,            ///< per pixel-sample block: photon/dark count, shot noise
+    PURPOSE_POISSON_EXTRA = 1,     ///< further uniforms of the rejection sampler (+ iteration)
+    PURPOSE_PAPER_DARK = 0x40000000u,     ///< eq. 4 dark draw (+ iteration)
+    PURPOSE_MISMATCH_ON = 0x80000000u,    ///< per pixel ON threshold mismatch (+ retry)
+    PURPOSE_MISMATCH_OFF = 0xC0000000u,   ///< per pixel OFF threshold mismatch (+ retry)
+};
+
+/// The random numbers of one (seed, pixel, sample) with a given purpose base: a lazily
+/// refilled sequence of 32-bit words, four per Philox call.
+class CounterStream {
+public:
+    CounterStream(Philox4x32Key key, std::uint32_t pixel, std::uint64_t sample, std::uint32_t purpose)
+        : key_(key), pixel_(pixel), sample_(sample), purpose_(purpose) {}
+
+    double uniform() {
+        if (used_ == 4) refill();
+        return uniform_open(buf_[used_++]);
+    }
+
+private:
+    void refill() {
+        buf_ = philox4x32({static_cast<std::uint32_t>(sample_), static_cast<std::uint32_t>(sample_ >> 32),
+                           pixel_, purpose_ + block_++},
+                          key_);
+        used_ = 0;
+    }
+    Philox4x32Key key_;
+    std::uint32_t pixel_;
+    std::uint64_t sample_;
+    std::uint32_t purpose_;
+    std::uint32_t block_ = 0;
+    Philox4x32Counter buf_{};
+    int used_ = 4;
+};
+
+inline Philox4x32Key key_from_seed(std::uint64_t seed) {
+    return {static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32)};
+}
+
+/// Standard normal from two uniforms in (0, 1) (Box-Muller, first output).
+inline double normal_from_uniforms(double u1, double u2) {
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * 3.14159265358979323846 * u2);
+}
+
+/// ln(k!) for integer k >= 0: a table below 256, Stirling's series above (relative error
+/// < 1e-15 there). std::lgamma is avoided because glibc's writes the global `signgam`,
+/// a data race under OpenMP.
+inline double log_factorial(double k) {
+    static const std::vector<double> table = [] {
+        std::vector<double> t(256, 0.0);
+        for (int i = 2; i < 256; ++i) t[i] = t[i - 1] + std::log(static_cast<double>(i));
+        return t;
+    }();
+    if (k < 256.0) return table[static_cast<std::size_t>(k)];
+    const double n = k + 1.0, inv = 1.0 / n, inv2 = inv * inv;
+    return (n - 0.5) * std::log(n) - n + 0.91893853320467274178 +
+           inv * (1.0 / 12.0 - inv2 * (1.0 / 360.0 - inv2 * (1.0 / 1260.0)));
+}
+
+/// Poisson variates.
+///
+/// Small means (mu < POISSON_TABLE_MAX_MEAN) use inversion of the cumulative distribution;
+/// the table for the last mean is kept, because on a sensor most pixels in a sample share
+/// one mean (the dark or sky background), so the table is built once and searched many
+/// times. The result is a pure function of (mu, u): the table is rebuilt with the same
+/// arithmetic whenever mu changes. Larger means use Hormann's PTRS transformed rejection
+/// ("The transformed rejection method for generating Poisson random variables", 1993),
+/// the algorithm NumPy uses, with further uniforms drawn from a CounterStream.
+class PoissonSampler {
+public:
+    static constexpr double POISSON_TABLE_MAX_MEAN = 64.0;
+
+    /// One variate of mean mu >= 0. u is a uniform in (0, 1) used by inversion; `more`
+    /// supplies uniforms for the rejection sampler.
+    template <class Stream>
+    std::uint64_t operator()(double mu, double u, Stream&& more) {
+        if (mu <= 0.0) return 0;
+        if (mu < POISSON_TABLE_MAX_MEAN) return invert(mu, u);
+        return ptrs(mu, more);
+    }
+
+    std::uint64_t invert(double mu, double u) {
+        if (mu != table_mean_) build(mu);
+        // First k with u <= F(k); binary search over the cumulative table.
+        std::size_t lo = 0, hi = cdf_.size();
+        while (lo < hi) {
+            const std::size_t mid = (lo + hi) / 2;
+            if (cdf_[mid] < u) lo = mid + 1; else hi = mid;
+        }
+        return lo;  // == cdf_.size() only in the tail beyond 1 - 2^-33, where F was cut.
+    }
+
+private:
+    void build(double mu) {
+        cdf_.clear();
+        double p = std::exp(-mu), c = p;
+        cdf_.push_back(c);
+        const double cap = mu + 40.0 * std::sqrt(mu) + 40.0;
+        for (double k = 1.0; c < 1.0 - 0x1p-33 && k < cap; k += 1.0) {
+            p *= mu / k;
+            c += p;
+            cdf_.push_back(c);
+        }
+        table_mean_ = mu;
+    }
+
+    template <class Stream>
+    static std::uint64_t ptrs(double lam, Stream& more) {
+        const double slam = std::sqrt(lam), loglam = std::log(lam);
+        const double b = 0.931 + 2.53 * slam;
+        const double a = -0.059 + 0.02483 * b;
+        const double invalpha = 1.1239 + 1.1328 / (b - 3.4);
+        const double vr = 0.9277 - 3.6224 / (b - 2.0);
+        for (;;) {
+            const double U = more.uniform() - 0.5;
+            const double V = more.uniform();
+            const double us = 0.5 - std::fabs(U);
+            const double kd = std::floor((2.0 * a / us + b) * U + lam + 0.43);
+            if (us >= 0.07 && V <= vr) return static_cast<std::uint64_t>(kd);
+            if (kd < 0.0 || (us < 0.013 && V > us)) continue;
+            if (std::log(V) + std::log(invalpha) - std::log(a / (us * us) + b) <=
+                -lam + kd * loglam - log_factorial(kd))
+                return static_cast<std::uint64_t>(kd);
+        }
+    }
+
+    double table_mean_ = -1.0;
+    std::vector<double> cdf_;
+};
+
+}  // namespace evstwin

@@ -1,0 +1,320 @@
+// A width x height array of pixels, stateful and streaming: feed it chunks of photon rates
+// with their sample times and it returns the events of that chunk, sorted by time.
+//
+// Parallel over pixels with OpenMP when compiled with it. The pixels are cut into fixed
+// blocks (independent of the thread count); each block keeps its own event list, and the
+// lists are joined in block order and sorted by (t, pixel) with a stable sort, so the
+// output is the same bit for bit whatever the thread count or chunking.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <exception>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "config.hpp"
+#include "event.hpp"
+#include "pixel.hpp"
+#include "rng.hpp"
+
+namespace evstwin {
+
+class Sensor {
+public:
+    /// Pixels per block: the unit of parallel work and of event bookkeeping.
+    static constexpr std::size_t BLOCK = 256;
+
+    /// num_threads <= 0 means the OpenMP default.
+    Sensor(int width, int height, const PixelParams& params, std::uint64_t seed = 0, int num_threads = 0)
+        : model_(params), width_(width), height_(height), seed_(seed), key_(key_from_seed(seed)) {
+        if (width < 1 || width > 65535)
+            throw std::invalid_argument("width must be in [1, 65535]; got width=" + std::to_string(width));
+        if (height < 1 || height > 65535)
+            throw std::invalid_argument("height must be in [1, 65535]; got height=" + std::to_string(height));
+        const std::uint64_t n = static_cast<std::uint64_t>(width) * static_cast<std::uint64_t>(height);
+        if (n > 0xFFFFFFFFull)
+            throw std::invalid_argument("width * height must be below 2^32; got " + std::to_string(n));
+        set_num_threads(num_threads);
+        state_.resize(static_cast<std::size_t>(n));
+        reset();
+    }
+
+    int width() const { return width_; }
+    int height() const { return height_; }
+    std::size_t num_pixels() const { return state_.size(); }
+    std::uint64_t seed() const { return seed_; }
+    const PixelParams& params() const { return model_.p; }
+    /// Samples consumed since construction or the last reset.
+    std::uint64_t samples_seen() const { return samples_; }
+    /// Time of the last sample consumed [s] (-inf before the first).
+    double last_time_s() const { return last_t_; }
+    int num_threads() const { return num_threads_; }
+
+    void set_num_threads(int num_threads) {
+        if (num_threads < 0)
+            throw std::invalid_argument("num_threads must be >= 1 (or 0/None for the default); got num_threads=" +
+                                        std::to_string(num_threads));
+        num_threads_ = num_threads == 0 ? default_num_threads() : num_threads;
+    }
+
+    /// Forget the past: the next sample is a first sample again. Mismatch stays (it is a
+    /// property of the pixels for this seed).
+    void reset() {
+        for (std::size_t i = 0; i < state_.size(); ++i) {
+            state_[i] = PixelState{};
+            model_.init_thresholds(state_[i], key_, static_cast<std::uint32_t>(i));
+        }
+        samples_ = 0;
+        last_t_ = -std::numeric_limits<double>::infinity();
+    }
+
+    /// Per-pixel thresholds (mismatch included), row-major.
+    std::vector<double> thresholds(bool on) const {
+        std::vector<double> out(state_.size());
+        for (std::size_t i = 0; i < state_.size(); ++i) out[i] = on ? state_[i].theta_on : state_[i].theta_off;
+        return out;
+    }
+
+    /// Consume n_samples samples. photon_rate is C-ordered (n_samples, height, width) in
+    /// photons/s arriving on each pixel; t_s the sample times in seconds, strictly increasing
+    /// and after the last sample of the previous run. Returns the events, sorted by t.
+    ///
+    /// probe_pixels (row-major indices) and trace, when given, record the pixel's internal
+    /// signals at every sample: trace is resized to n_samples * probe_pixels.size().
+    ///
+    /// Throws std::invalid_argument, before any state changes, on a bad input.
+    template <class Real>
+    std::vector<Event> run(const Real* photon_rate, const double* t_s, std::size_t n_samples,
+                           const std::vector<std::uint32_t>* probe_pixels = nullptr,
+                           std::vector<TraceSample>* trace = nullptr) {
+        const std::size_t npix = state_.size();
+        if (n_samples == 0) return {};
+        check_times(t_s, n_samples);
+        check_rates(photon_rate, n_samples);
+        const std::vector<SampleConstants> consts = sample_constants(t_s, n_samples);
+
+        std::vector<std::int32_t> probe_slot;
+        std::size_t n_probe = 0;
+        if (probe_pixels && trace && !probe_pixels->empty()) {
+            probe_slot.assign(npix, -1);
+            n_probe = probe_pixels->size();
+            for (std::size_t j = 0; j < n_probe; ++j) {
+                const std::uint32_t px = (*probe_pixels)[j];
+                if (px >= npix)
+                    throw std::invalid_argument("probe pixel index " + std::to_string(px) + " is outside the " +
+                                                std::to_string(npix) + "-pixel sensor");
+                probe_slot[px] = static_cast<std::int32_t>(j);
+            }
+            trace->assign(n_samples * n_probe, TraceSample{});
+        }
+
+        const std::size_t nblocks = (npix + BLOCK - 1) / BLOCK;
+        block_events_.resize(nblocks);
+        for (auto& b : block_events_) b.clear();
+        const bool fresh = samples_ == 0;
+
+        std::exception_ptr error;
+        const std::int64_t nb = static_cast<std::int64_t>(nblocks);
+#if EVSTWIN_HAS_OPENMP
+#pragma omp parallel num_threads(num_threads_)
+#endif
+        {
+            PoissonSampler poisson;  // per thread: its table cache never changes results
+#if EVSTWIN_HAS_OPENMP
+#pragma omp for schedule(dynamic, 4)
+#endif
+            for (std::int64_t b = 0; b < nb; ++b) {
+                try {
+                    run_block(static_cast<std::size_t>(b), photon_rate, n_samples, consts, fresh, poisson,
+                              probe_slot.empty() ? nullptr : probe_slot.data(), n_probe,
+                              trace ? trace->data() : nullptr);
+                } catch (...) {
+#if EVSTWIN_HAS_OPENMP
+#pragma omp critical(evstwin_error)
+#endif
+                    if (!error) error = std::current_exception();
+                }
+            }
+        }
+        if (error) std::rethrow_exception(error);
+
+        samples_ += n_samples;
+        last_t_ = t_s[n_samples - 1];
+        return collect();
+    }
+
+private:
+    struct RawEvent {
+        double t;
+        std::uint32_t pixel;
+        std::uint8_t p;
+    };
+
+    void check_times(const double* t_s, std::size_t n) const {
+        for (std::size_t k = 0; k < n; ++k) {
+            if (!std::isfinite(t_s[k]))
+                throw std::invalid_argument("t_s must be finite; got t_s[" + std::to_string(k) + "]=" + detail::fmt(t_s[k]));
+            const double prev = k == 0 ? last_t_ : t_s[k - 1];
+            if (!(t_s[k] > prev)) {
+                if (k == 0)
+                    throw std::invalid_argument("t_s must continue after the previous run's last sample (" +
+                                                detail::fmt(last_t_) + " s); got t_s[0]=" + detail::fmt(t_s[0]));
+                throw std::invalid_argument("t_s must be strictly increasing; got t_s[" + std::to_string(k - 1) +
+                                            "]=" + detail::fmt(prev) + " and t_s[" + std::to_string(k) +
+                                            "]=" + detail::fmt(t_s[k]));
+            }
+            if (t_s[k] > 9.2e12)
+                throw std::invalid_argument("t_s must be below 9.2e12 s (int64 microseconds); got t_s[" +
+                                            std::to_string(k) + "]=" + detail::fmt(t_s[k]));
+            if (k > 0 || samples_ > 0) {
+                const double dt = t_s[k] - prev;
+                if (model_.has_filter && model_.euler && 2.0 * PI * *model_.p.cutoff_hz * dt > 2.0)
+                    throw std::invalid_argument(
+                        "lowpass='euler' (eq. 7) is unstable when 2 pi cutoff_hz dt > 2; got cutoff_hz=" +
+                        detail::fmt(*model_.p.cutoff_hz) + " and dt=" + detail::fmt(dt) +
+                        " s at t_s[" + std::to_string(k) + "]: use lowpass='exact' or shorter samples");
+                if (model_.p.shot_noise_rate_hz * dt > 0.5)
+                    throw std::invalid_argument(
+                        "shot_noise_rate_hz * dt must be <= 0.5 (eq. 13-15 draw at most one event per sample); got "
+                        "shot_noise_rate_hz=" + detail::fmt(model_.p.shot_noise_rate_hz) + " and dt=" + detail::fmt(dt) + " s");
+            }
+        }
+    }
+
+    template <class Real>
+    void check_rates(const Real* rate, std::size_t n_samples) const {
+        const std::size_t npix = state_.size();
+        const std::int64_t total = static_cast<std::int64_t>(n_samples * npix);
+        const bool zero_is_bad = model_.dark_mean_e_per_s <= 0.0;
+        // First bad index (smallest, so the message does not depend on the thread count).
+        std::int64_t first_bad = total;
+#if EVSTWIN_HAS_OPENMP
+#pragma omp parallel for num_threads(num_threads_) reduction(min : first_bad) schedule(static)
+#endif
+        for (std::int64_t i = 0; i < total; ++i) {
+            const double v = static_cast<double>(rate[i]);
+            // v > max also catches +inf; !(v >= 0) catches NaN and negatives.
+            const bool bad = !(v >= 0.0) || v > std::numeric_limits<double>::max() || (zero_is_bad && v == 0.0);
+            if (bad && i < first_bad) first_bad = i;
+        }
+        if (first_bad < total) {
+            const std::size_t k = static_cast<std::size_t>(first_bad) / npix, pix = static_cast<std::size_t>(first_bad) % npix;
+            const double v = static_cast<double>(rate[first_bad]);
+            const std::string where = "photon_rate[" + std::to_string(k) + ", " + std::to_string(pix / width_) + ", " +
+                                      std::to_string(pix % width_) + "]=" + detail::fmt(v);
+            if (v == 0.0)
+                throw std::invalid_argument(
+                    "photon_rate must be > 0 where there is no dark current (dark_model='none' or "
+                    "dark_rate_e_per_s=0): the log photoreceptor needs a positive current; got " + where);
+            throw std::invalid_argument("photon_rate must be finite and >= 0 photons/s; got " + where);
+        }
+    }
+
+    std::vector<SampleConstants> sample_constants(const double* t_s, std::size_t n) const {
+        std::vector<SampleConstants> out(n);
+        double prev = last_t_;
+        for (std::size_t k = 0; k < n; ++k) {
+            SampleConstants& c = out[k];
+            c.t0 = prev;
+            c.t1 = t_s[k];
+            c.dt = c.t1 - c.t0;
+            c.index = samples_ + k;
+            if (c.index > 0) {
+                c.log_e_over_dt = std::log(ELEMENTARY_CHARGE_C / c.dt);
+                if (model_.has_filter) {
+                    const double u = 2.0 * PI * *model_.p.cutoff_hz * c.dt;
+                    if (model_.euler) {
+                        c.sf_ramp = u;
+                        c.sf_decay = 1.0 - u;
+                    } else {
+                        c.sf_decay = std::exp(-u);
+                        c.sf_ramp = u > 1e-12 ? -std::expm1(-u) / u : 1.0;
+                    }
+                }
+            }
+            prev = t_s[k];
+        }
+        return out;
+    }
+
+    template <class Real>
+    void run_block(std::size_t b, const Real* rate, std::size_t n_samples, const std::vector<SampleConstants>& consts,
+                   bool fresh, PoissonSampler& poisson, const std::int32_t* probe_slot, std::size_t n_probe,
+                   TraceSample* trace) {
+        const std::size_t npix = state_.size();
+        const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
+        std::vector<RawEvent>& out = block_events_[b];
+        std::uint32_t pixel = 0;
+        auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
+        std::size_t k0 = 0;
+        if (fresh) {
+            for (std::size_t i = lo; i < hi; ++i) model_.init_state(state_[i], static_cast<double>(rate[i]));
+            if (probe_slot) {
+                for (std::size_t i = lo; i < hi; ++i) {
+                    if (probe_slot[i] < 0) continue;
+                    const PixelState& s = state_[i];
+                    trace[probe_slot[i]] = {std::exp(s.x), s.x, s.y, s.ref};
+                }
+            }
+            k0 = 1;
+        }
+        for (std::size_t k = k0; k < n_samples; ++k) {
+            const SampleConstants& c = consts[k];
+            const Real* row = rate + k * npix;
+            if (!probe_slot) {
+                for (std::size_t i = lo; i < hi; ++i) {
+                    pixel = static_cast<std::uint32_t>(i);
+                    model_.step(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit);
+                }
+            } else {
+                for (std::size_t i = lo; i < hi; ++i) {
+                    pixel = static_cast<std::uint32_t>(i);
+                    TraceSample* tr = probe_slot[i] >= 0 ? trace + k * n_probe + probe_slot[i] : nullptr;
+                    model_.step(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit, tr);
+                }
+            }
+        }
+    }
+
+    std::vector<Event> collect() {
+        std::size_t total = 0;
+        for (const auto& b : block_events_) total += b.size();
+        std::vector<RawEvent> all;
+        all.reserve(total);
+        for (const auto& b : block_events_) all.insert(all.end(), b.begin(), b.end());
+        std::vector<std::int64_t> t_us(total);
+        for (std::size_t i = 0; i < total; ++i) t_us[i] = std::llround(all[i].t * 1e6);
+        std::vector<std::uint32_t> order(total);
+        for (std::size_t i = 0; i < total; ++i) order[i] = static_cast<std::uint32_t>(i);
+        // Stable: a pixel's own events keep their time order within one microsecond.
+        std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+            if (t_us[a] != t_us[b]) return t_us[a] < t_us[b];
+            return all[a].pixel < all[b].pixel;
+        });
+        std::vector<Event> events(total);
+        const std::uint32_t w = static_cast<std::uint32_t>(width_);
+        for (std::size_t j = 0; j < total; ++j) {
+            const RawEvent& e = all[order[j]];
+            events[j] = Event{t_us[order[j]], static_cast<std::uint16_t>(e.pixel % w),
+                              static_cast<std::uint16_t>(e.pixel / w), e.p};
+        }
+        return events;
+    }
+
+    PixelModel model_;
+    int width_, height_;
+    std::uint64_t seed_;
+    Philox4x32Key key_;
+    int num_threads_ = 1;
+    std::vector<PixelState> state_;
+    std::uint64_t samples_ = 0;
+    double last_t_ = -std::numeric_limits<double>::infinity();
+    std::vector<std::vector<RawEvent>> block_events_;
+};
+
+}  // namespace evstwin

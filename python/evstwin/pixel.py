@@ -1,0 +1,114 @@
+"""Pixel parameters: the Python face of the C++ ``evstwin::PixelParams``.
+
+Every default is read from the C++ struct, the one place it is written; the docstring of
+each field gives its unit and its source in the paper (../shared/seed, "the paper").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Literal, Optional
+
+from . import _core
+
+_DEFAULT = _core.PixelParams()
+
+DarkModel = Literal["poisson", "paper", "none"]
+LowPass = Literal["exact", "euler"]
+
+
+@dataclass(frozen=True)
+class PixelParams:
+    """Parameters shared by every pixel of a sensor (defaults: the paper's DAVIS346 pixel).
+
+    Thresholds are in natural-log units of photocurrent: an ON event fires when
+    ``ln I`` (after the low-pass) has risen by ``theta_on`` since the last event.
+    """
+
+    theta_on: float = _DEFAULT.theta_on
+    """ON threshold [ln units], > 0. Paper sec. 3.1 (Table 1 biases): 0.2061."""
+    theta_off: float = _DEFAULT.theta_off
+    """OFF threshold magnitude [ln units], > 0. Paper sec. 3.1: 0.093."""
+    refractory_s: float = _DEFAULT.refractory_s
+    """Dead time after each event [s], in [0, 1]. 1 ms, inside McReynolds et al.'s 0.33-10 ms."""
+    cutoff_hz: Optional[float] = _DEFAULT.cutoff_hz
+    """Source-follower low-pass cutoff [Hz] (eq. 6); None = no filter. Paper: 10 Hz."""
+    lowpass: LowPass = _DEFAULT.lowpass  # type: ignore[assignment]
+    """'exact' first-order update (default) or 'euler' (eq. 7, unstable for 2 pi fc dt > 2)."""
+    leak_rate_hz: float = _DEFAULT.leak_rate_hz
+    """Leak event rate f_leak [Hz] (eq. 10-11). Paper: 0.1 Hz."""
+    shot_noise_rate_hz: float = _DEFAULT.shot_noise_rate_hz
+    """Statistical shot-noise rate R_n [Hz] of each polarity in the dark (eq. 12). Paper: 0.05 Hz."""
+    shot_noise_factor: float = _DEFAULT.shot_noise_factor
+    """F of eq. 12: the noise rate at I_max as a fraction of R_n. Paper: 0.25."""
+    shot_noise_i_max_a: float = _DEFAULT.shot_noise_i_max_a
+    """I_max of eq. 12 [A]. Paper: 3.16 nA."""
+    dark_rate_e_per_s: float = _DEFAULT.dark_rate_e_per_s
+    """Mean dark-current electron rate [e-/s] (eq. 4). Paper (iniVation): 18000."""
+    dark_model: DarkModel = _DEFAULT.dark_model  # type: ignore[assignment]
+    """'poisson': Poisson(rate*dt) electrons per sample (default, physical); 'paper': eq. 4
+    literally, Poisson(rate) per sample whatever dt; 'none'."""
+    photon_shot_noise: bool = _DEFAULT.photon_shot_noise
+    """Poisson statistics of the signal electrons (on by default)."""
+    threshold_sigma: float = _DEFAULT.threshold_sigma
+    """Per-pixel threshold mismatch, Gaussian sigma as a fraction of the threshold, in [0, 1]."""
+    fill_factor: float = _DEFAULT.fill_factor
+    """Photodiode share of the pixel area. DAVIS346: 0.22 (paper sec. 3.1)."""
+    internal_qe: float = _DEFAULT.internal_qe
+    """Internal quantum efficiency eta_i (eq. 2). Table 3: 1."""
+    transmission: float = _DEFAULT.transmission
+    """Transmission coefficient tau (eq. 2). Table 3: 0.68."""
+    absorption_per_m: float = _DEFAULT.absorption_per_m
+    """Absorption coefficient alpha [1/m] (eq. 2). Table 3: 3e4."""
+    depletion_width_m: float = _DEFAULT.depletion_width_m
+    """Depletion width W [m] (eq. 2). Table 3: 1.1637e-7."""
+    pr_pole: bool = _DEFAULT.pr_pole
+    """Photoreceptor pole in series, cutoff pr_cutoff_ref_hz * I / pr_ref_current_a (off)."""
+    pr_cutoff_ref_hz: float = _DEFAULT.pr_cutoff_ref_hz
+    """Photoreceptor cutoff [Hz] at the reference current (an order-of-magnitude estimate)."""
+    pr_ref_current_a: float = _DEFAULT.pr_ref_current_a
+    """Reference photocurrent [A] for pr_cutoff_ref_hz."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name in ("dark_model", "lowpass"):
+                if not isinstance(value, str):
+                    raise TypeError(f"{f.name} must be a string; got {f.name}={value!r}")
+            elif f.name in ("photon_shot_noise", "pr_pole"):
+                if not isinstance(value, bool):
+                    raise TypeError(f"{f.name} must be True or False; got {f.name}={value!r}")
+            elif f.name == "cutoff_hz" and value is None:
+                pass
+            elif isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise TypeError(f"{f.name} must be a number; got {f.name}={value!r}")
+        self.to_core().validate()
+
+    def to_core(self) -> Any:
+        """The C++ struct (raises ValueError naming a bad enum value)."""
+        core = _core.PixelParams()
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            setattr(core, f.name, float(value) if isinstance(value, int) and not isinstance(value, bool) else value)
+        return core
+
+    def replace(self, **changes: Any) -> "PixelParams":
+        """A copy with some fields changed (unknown names raise TypeError)."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise TypeError(f"unknown PixelParams field(s) {unknown}; known: {sorted(names)}")
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @property
+    def electrons_per_photon(self) -> float:
+        """Signal electrons per photon arriving on the pixel (fill factor x eq. 2 / e)."""
+        return float(self.to_core().electrons_per_photon())
+
+    @classmethod
+    def field_names(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls)]

@@ -1,0 +1,45 @@
+// A tiny self-contained test harness: CHECK records failures, main() reports and returns
+// non-zero if any check failed. No framework is fetched at build time.
+#pragma once
+
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace check {
+inline int& failures() { static int n = 0; return n; }
+inline std::vector<std::pair<std::string, std::function<void()>>>& registry() {
+    static std::vector<std::pair<std::string, std::function<void()>>> r;
+    return r;
+}
+struct Register {
+    Register(const char* name, std::function<void()> f) { registry().emplace_back(name, std::move(f)); }
+};
+inline int run_all() {
+    int tests = 0;
+    for (auto& [name, f] : registry()) {
+        const int before = failures();
+        f();
+        ++tests;
+        std::printf("%s %s\n", failures() == before ? "PASS" : "FAIL", name.c_str());
+    }
+    std::printf("%d tests, %d failed checks\n", tests, failures());
+    return failures() == 0 ? 0 : 1;
+}
+}  // namespace check
+
+#define TEST(name) \
+    static void name(); \
+    static check::Register name##_reg(#name, name); \
+    static void name()
+#define CHECK(cond) \
+    do { if (!(cond)) { ++check::failures(); std::printf("  %s:%d: CHECK(%s) failed\n", __FILE__, __LINE__, #cond); } } while (0)
+#define CHECK_NEAR(a, b, tol) \
+    do { const double _a = (a), _b = (b); if (!(std::fabs(_a - _b) <= (tol))) { ++check::failures(); \
+         std::printf("  %s:%d: %s = %.17g, expected %.17g +- %g\n", __FILE__, __LINE__, #a, _a, _b, (double)(tol)); } } while (0)
+#define CHECK_THROWS(stmt) \
+    do { bool _t = false; try { stmt; } catch (const std::exception&) { _t = true; } \
+         if (!_t) { ++check::failures(); std::printf("  %s:%d: %s did not throw\n", __FILE__, __LINE__, #stmt); } } while (0)
+#define TEST_MAIN() int main() { return check::run_all(); }

@@ -1,0 +1,95 @@
+// C++ tests of the pixel engine: analytic cases, determinism, bad input.
+#include <evstwin/evstwin.hpp>
+
+#include <cstring>
+
+#include "check.hpp"
+
+using namespace evstwin;
+
+static PixelParams ideal() {
+    PixelParams p;
+    p.photon_shot_noise = false;
+    p.dark_model = DarkModel::None;
+    p.leak_rate_hz = 0.0;
+    p.shot_noise_rate_hz = 0.0;
+    p.cutoff_hz.reset();
+    p.refractory_s = 0.0;
+    p.theta_on = p.theta_off = 0.2;
+    return p;
+}
+
+TEST(philox_known_answer) {
+    // Random123's published known-answer vectors for Philox4x32-10.
+    auto r = philox4x32({0, 0, 0, 0}, {0, 0});
+    CHECK(r[0] == 0x6627e8d5u && r[1] == 0xe169c58du && r[2] == 0xbc57ac4cu && r[3] == 0x9b00dbd8u);
+    r = philox4x32({0xffffffffu, 0xffffffffu, 0xffffffffu, 0xffffffffu}, {0xffffffffu, 0xffffffffu});
+    CHECK(r[0] == 0x408f276du && r[1] == 0x41c83b0eu && r[2] == 0xa20bc7c6u && r[3] == 0x6d5451fdu);
+}
+
+TEST(step_gives_floor_ln_r_over_theta_events) {
+    for (double R : {1.5, 3.0, 10.0, 0.1}) {
+        Sensor s(1, 1, ideal());
+        const double rate[2] = {1e8, 1e8 * R};
+        const double t[2] = {0.0, 1e-3};
+        auto ev = s.run(rate, t, 2);
+        const std::size_t expect = static_cast<std::size_t>(std::floor(std::fabs(std::log(R)) / 0.2));
+        CHECK(ev.size() == expect);
+        for (auto& e : ev) CHECK(e.p == (R > 1 ? ON : OFF));
+    }
+}
+
+TEST(exponential_ramp_crossings_at_analytic_times) {
+    // ln(rate) rises by g per second: crossing n at n theta / g.
+    const double g = 50.0, theta = 0.2;
+    Sensor s(1, 1, ideal());
+    std::vector<double> rate, t;
+    for (int k = 0; k <= 100; ++k) {
+        t.push_back(k * 1e-3);
+        rate.push_back(1e8 * std::exp(g * t.back()));
+    }
+    auto ev = s.run(rate.data(), t.data(), t.size());
+    CHECK(ev.size() == static_cast<std::size_t>(std::floor(g * 0.1 / theta + 1e-9)));
+    for (std::size_t n = 0; n < ev.size(); ++n) CHECK_NEAR(double(ev[n].t), (n + 1) * theta / g * 1e6, 0.5);
+}
+
+TEST(build_without_openmp_or_one_thread_matches_two_threads) {
+    PixelParams p;  // all noise on
+    p.threshold_sigma = 0.05;
+    p.leak_rate_hz = 5.0;
+    p.shot_noise_rate_hz = 2.0;
+    const int w = 40, h = 30;
+    std::vector<double> rate(20 * w * h), t(20);
+    for (int k = 0; k < 20; ++k) {
+        t[k] = k * 1e-3;
+        for (int i = 0; i < w * h; ++i) rate[k * w * h + i] = 1e6 * (1.0 + (i % 7) * (k % 3));
+    }
+    Sensor a(w, h, p, 7, 1), b(w, h, p, 7, 2);
+    auto ea = a.run(rate.data(), t.data(), 20);
+    auto eb = b.run(rate.data(), t.data(), 10);
+    auto eb2 = b.run(rate.data() + 10 * w * h, t.data() + 10, 10);
+    eb.insert(eb.end(), eb2.begin(), eb2.end());
+    CHECK(!ea.empty());
+    CHECK(ea.size() == eb.size());
+    CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
+}
+
+TEST(bad_input_throws_before_changing_state) {
+    Sensor s(2, 1, ideal());
+    const double rate[2] = {1e6, -1.0};
+    const double t[1] = {0.0};
+    CHECK_THROWS(s.run(rate, t, 1));
+    CHECK(s.samples_seen() == 0);
+    const double t2[2] = {0.0, 0.0};
+    const double rate2[4] = {1, 1, 1, 1};
+    CHECK_THROWS(s.run(rate2, t2, 2));
+    PixelParams p = ideal();
+    p.theta_on = 0.0;
+    CHECK_THROWS(Sensor(1, 1, p));
+    p = ideal();
+    p.refractory_s = -1e-3;
+    CHECK_THROWS(Sensor(1, 1, p));
+    CHECK_THROWS(Sensor(0, 1, ideal()));
+}
+
+TEST_MAIN()
