@@ -1,0 +1,394 @@
+"""The pixel engine against analytic results (issue 2's acceptance tests).
+
+Noise-free cases compare event times with closed-form crossing times; noisy cases compare
+rates, means and variances with the formulas of the paper's eq. 4 and 12-13 within the
+statistical error of the run.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import evstwin
+from evstwin import EVENT_DTYPE, PixelParams, Sensor
+
+E = evstwin._core.ELEMENTARY_CHARGE_C
+
+IDEAL = PixelParams(
+    theta_on=0.2,
+    theta_off=0.15,
+    refractory_s=0.0,
+    cutoff_hz=None,
+    leak_rate_hz=0.0,
+    shot_noise_rate_hz=0.0,
+    dark_model="none",
+    photon_shot_noise=False,
+)
+
+
+def constant_run(params: PixelParams, rate: float, n: int, dt: float, shape=(1, 1), seed: int = 0, **kw):
+    h, w = shape
+    sensor = Sensor(w, h, params, seed=seed, **kw)
+    t = np.arange(n) * dt
+    return sensor, sensor.run(np.full((n, h, w), rate), t)
+
+
+def test_event_dtype_is_the_fields_convention() -> None:
+    assert EVENT_DTYPE == np.dtype([("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+    assert EVENT_DTYPE.itemsize == 13
+
+
+@pytest.mark.parametrize("ratio", [1.3, 2.0, math.e, 10.0, 1e3, 0.5, 0.01])
+def test_step_gives_floor_ln_ratio_over_theta_events(ratio: float) -> None:
+    sensor = Sensor(3, 2, IDEAL)
+    rate = np.full((2, 2, 3), 1e9)
+    rate[1] *= ratio
+    ev = sensor.run(rate, [0.0, 1e-3])
+    theta = IDEAL.theta_on if ratio > 1 else IDEAL.theta_off
+    per_pixel = math.floor(abs(math.log(ratio)) / theta)
+    assert len(ev) == 6 * per_pixel
+    assert np.all(ev["p"] == (1 if ratio > 1 else 0))
+    assert np.all(np.diff(ev["t"]) >= 0)
+    # Interpolated times (eq. 16): the n-th level is crossed at n theta / |ln R| of the interval.
+    first_pixel = ev[(ev["x"] == 0) & (ev["y"] == 0)]
+    expect_us = 1e3 * theta * np.arange(1, per_pixel + 1) / abs(math.log(ratio))
+    np.testing.assert_allclose(first_pixel["t"], np.round(expect_us), atol=1)
+
+
+def test_first_sample_sets_steady_state_without_events() -> None:
+    rng = np.random.default_rng(1)
+    rate = rng.uniform(1e3, 1e12, size=(1, 20, 30))
+    params = PixelParams(threshold_sigma=0.2)  # every noise source on
+    assert len(Sensor(30, 20, params).run(rate, [0.0])) == 0
+
+
+def test_exponential_ramp_crossings_at_analytic_times() -> None:
+    g = 40.0  # d ln(rate) / dt [1/s]
+    t = np.linspace(0.0, 0.25, 97)  # deliberately not aligned with the crossings
+    rate = (1e8 * np.exp(g * t))[:, None, None]
+    ev = Sensor(1, 1, IDEAL).run(rate, t)
+    n = np.arange(1, math.floor(g * 0.25 / IDEAL.theta_on) + 1)
+    assert len(ev) == len(n)
+    assert np.all(ev["p"] == 1)
+    np.testing.assert_allclose(ev["t"], n * IDEAL.theta_on / g * 1e6, atol=0.5)
+    # And falling: OFF events at n theta_off / g.
+    ev = Sensor(1, 1, IDEAL).run(rate[::-1].copy(), t)
+    n = np.arange(1, math.floor(g * 0.25 / IDEAL.theta_off + 1e-9) + 1)
+    assert len(ev) == len(n) and np.all(ev["p"] == 0)
+    np.testing.assert_allclose(ev["t"], n * IDEAL.theta_off / g * 1e6, atol=0.5)
+
+
+@pytest.mark.parametrize("refr_over_tc", [0.5, 1.0 - 1e-6, 2.5, 4.0])
+def test_refractory_removes_exactly_the_crossings_inside_it(refr_over_tc: float) -> None:
+    # Crossings every tc on a ramp. A refractory period shorter than tc removes nothing; a
+    # longer one leaves one event at the first crossing and then one every refractory
+    # period (the pixel fires as soon as it wakes, merging the levels it missed).
+    g, theta = 50.0, IDEAL.theta_on
+    tc = theta / g
+    refr = refr_over_tc * tc
+    t = np.linspace(0.0, 0.2, 801)
+    ev = Sensor(1, 1, IDEAL.replace(refractory_s=refr)).run((1e8 * np.exp(g * t))[:, None, None], t)
+    if refr < tc:
+        expect = tc * np.arange(1, math.floor(0.2 / tc + 1e-9) + 1)
+    else:
+        expect = tc + refr * np.arange(0, math.floor((0.2 - tc) / refr + 1e-9) + 1)
+    assert len(ev) == len(expect)
+    np.testing.assert_allclose(ev["t"], expect * 1e6, atol=0.5)
+
+
+def test_lowpass_delays_a_step_by_the_analytic_time() -> None:
+    fc, ratio = 10.0, 8.0
+    tau = 1.0 / (2 * math.pi * fc)
+    # A step at t = 0 (the input rises over 1 us), then samples every 20 us for 0.2 s.
+    t = np.concatenate([[-1e-6], np.arange(0.0, 0.2, 20e-6)])
+    rate = np.full(len(t), 1e9 * ratio)
+    rate[0] = 1e9
+    ev = Sensor(1, 1, IDEAL.replace(cutoff_hz=fc)).run(rate[:, None, None], t)
+    delta = math.log(ratio)
+    n = np.arange(1, math.floor(delta / IDEAL.theta_on) + 1)
+    # y(t) = x1 - delta exp(-t/tau): level n*theta is crossed at -tau ln(1 - n theta / delta).
+    expect_us = -tau * np.log(1.0 - n * IDEAL.theta_on / delta) * 1e6
+    assert len(ev) == len(n)
+    np.testing.assert_allclose(ev["t"], expect_us, atol=1.0)
+    assert ev["t"][0] > 1500  # the filter really delays: 1.6 ms for the first level
+
+
+def test_euler_option_is_eq7() -> None:
+    fc, dt = 10.0, 1e-3
+    a = 2 * math.pi * fc * dt
+    rng = np.random.default_rng(2)
+    rate = rng.uniform(1e8, 1e9, size=(50, 1, 1))
+    t = np.arange(50) * dt
+    _, trace = Sensor(1, 1, IDEAL.replace(cutoff_hz=fc, lowpass="euler")).run_probe(rate, t, [(0, 0)])
+    x, y = trace["log_current"][:, 0], trace["filtered"][:, 0]
+    np.testing.assert_allclose(x, np.log(E * rate[:, 0, 0] * IDEAL.electrons_per_photon), rtol=1e-12)
+    np.testing.assert_allclose(y[1:], a * x[:-1] + (1 - a) * y[:-1], rtol=1e-12)
+    with pytest.raises(ValueError, match="euler.*cutoff_hz=10.*dt=0.05"):
+        Sensor(1, 1, IDEAL.replace(cutoff_hz=fc, lowpass="euler")).run(np.ones((2, 1, 1)) * 1e9, [0.0, 0.05])
+
+
+def test_leak_alone_gives_on_events_at_f_leak() -> None:
+    f_leak = 4.0
+    _, ev = constant_run(IDEAL.replace(leak_rate_hz=f_leak), 1e9, 3001, 1e-3)
+    assert len(ev) == 12 and np.all(ev["p"] == 1)
+    np.testing.assert_allclose(ev["t"], np.arange(1, 13) / f_leak * 1e6, atol=0.5)
+
+
+def test_statistical_shot_noise_rates_follow_eq12() -> None:
+    rn, factor = 2.0, 0.25
+    params = IDEAL.replace(shot_noise_rate_hz=rn, shot_noise_factor=factor)
+    i_ratio = 0.4
+    photon_rate = i_ratio * params.shot_noise_i_max_a / E / params.electrons_per_photon
+    n_pix, duration, dt = 40 * 50, 5.0, 2e-3
+    _, ev = constant_run(params, photon_rate, int(duration / dt) + 1, dt, shape=(40, 50), seed=3)
+    r = ((factor - 1) * i_ratio + 1) * rn  # eq. 12, per polarity
+    expect = r * n_pix * duration
+    for pol in (0, 1):
+        count = int(np.sum(ev["p"] == pol))
+        assert abs(count - expect) < 4 * math.sqrt(expect), (pol, count, expect)
+    # (A noise event resets the reference to the level there, so it has no follow-on
+    # events: those would have pushed the counts above the eq. 12 rate.)
+
+
+def probe_currents(params: PixelParams, rate: float, dt: float, n: int, n_pix: int = 100, seed: int = 5) -> np.ndarray:
+    sensor = Sensor(n_pix, 1, params, seed=seed)
+    _, trace = sensor.run_probe(np.full((n, 1, n_pix), rate), np.arange(n) * dt, [(i, 0) for i in range(n_pix)])
+    return trace["current_a"][1:].ravel()  # sample 0 is the noise-free steady state
+
+
+@pytest.mark.parametrize("dt", [1e-3, 10e-3])  # mean 18 (table inversion) and 180 (PTRS)
+def test_poisson_dark_current_mean_and_variance(dt: float) -> None:
+    lam = 18000.0
+    params = IDEAL.replace(dark_model="poisson", dark_rate_e_per_s=lam)
+    i = probe_currents(params, 0.0, dt, 400)
+    mean, var = lam * E, lam * E * E / dt  # N ~ Poisson(lam dt), I = N e / dt
+    n = i.size
+    assert abs(i.mean() - mean) < 5 * math.sqrt(var / n)
+    assert abs(i.var() / var - 1) < 5 * math.sqrt(2 / n)
+
+
+def test_paper_dark_current_mean_and_variance_do_not_depend_on_dt() -> None:
+    lam = 18000.0
+    params = IDEAL.replace(dark_model="paper", dark_rate_e_per_s=lam)
+    for dt in (1e-4, 1e-2):
+        i = probe_currents(params, 0.0, dt, 200)
+        mean, var = lam * E, lam * E * E  # eq. 4: I = Poisson(lam) e
+        assert abs(i.mean() - mean) < 5 * math.sqrt(var / i.size)
+        assert abs(i.var() / var - 1) < 5 * math.sqrt(2 / i.size)
+
+
+def test_zero_electron_interval_counts_as_half_an_electron() -> None:
+    lam, dt = 300.0, 1e-3
+    params = IDEAL.replace(dark_model="poisson", dark_rate_e_per_s=lam)
+    i = probe_currents(params, 0.0, dt, 500)
+    zero = np.isclose(i, 0.5 * E / dt, rtol=1e-12, atol=0.0)
+    p0 = math.exp(-lam * dt)
+    assert abs(zero.mean() - p0) < 5 * math.sqrt(p0 * (1 - p0) / i.size)
+    assert np.all(np.isclose(i[~zero] / (E / dt), np.round(i[~zero] / (E / dt)), rtol=1e-9, atol=0.0))
+
+
+def test_photon_shot_noise_is_poisson_on_the_signal() -> None:
+    params = IDEAL.replace(photon_shot_noise=True)
+    dt = 1e-3
+    photon_rate = 5e4 / params.electrons_per_photon  # 50 electrons per sample
+    i = probe_currents(params, photon_rate, dt, 300)
+    mean, var = 5e4 * E, 5e4 * E * E / dt
+    assert abs(i.mean() - mean) < 5 * math.sqrt(var / i.size)
+    assert abs(i.var() / var - 1) < 5 * math.sqrt(2 / i.size)
+
+
+def test_threshold_mismatch_is_gaussian_and_fixed_per_seed() -> None:
+    params = IDEAL.replace(threshold_sigma=0.1)
+    on, off = Sensor(100, 100, params, seed=1).thresholds()
+    assert abs(on.mean() / 0.2 - 1) < 4 * 0.1 / 100
+    assert abs(on.std() / (0.1 * 0.2) - 1) < 0.05
+    assert abs(np.corrcoef(on.ravel(), off.ravel())[0, 1]) < 0.05
+    on2, _ = Sensor(100, 100, params, seed=1).thresholds()
+    on3, _ = Sensor(100, 100, params, seed=2).thresholds()
+    assert np.array_equal(on, on2) and not np.array_equal(on, on3)
+    same, _ = Sensor(10, 10, IDEAL, seed=1).thresholds()
+    assert np.all(same == 0.2)
+
+
+def test_photoreceptor_pole_makes_the_pixel_slow_in_the_dark() -> None:
+    # Off by default. On, the first event of a 4x step comes later at low light.
+    def first_event_us(params: PixelParams, level: float) -> int:
+        t = np.concatenate([[-1e-6], np.arange(0.0, 0.05, 5e-6)])
+        rate = np.full(len(t), 4 * level)
+        rate[0] = level
+        return int(Sensor(1, 1, params).run(rate[:, None, None], t)["t"][0])
+
+    pole = IDEAL.replace(pr_pole=True)
+    bright, dim = 1e12, 1e8
+    assert first_event_us(IDEAL, bright) == first_event_us(IDEAL, dim)
+    slow, fast = first_event_us(pole, dim), first_event_us(pole, bright)
+    assert slow > fast + 50
+    # At the step's end level the pixel's cutoff is f = f_ref I / I_ref; the first level is
+    # crossed near -ln(1 - theta / ln 4) / (2 pi f) (the pole tracks the rising current,
+    # so the real delay lies between the cutoffs at the start and end currents).
+    i_end = 4 * dim * E * IDEAL.electrons_per_photon
+    i_start = dim * E * IDEAL.electrons_per_photon
+    base = -math.log(1 - 0.2 / math.log(4)) / (2 * math.pi * IDEAL.pr_cutoff_ref_hz / IDEAL.pr_ref_current_a)
+    assert base / i_end * 1e6 - 2 <= slow <= base / i_start * 1e6 + 2
+
+
+NOISY = PixelParams(threshold_sigma=0.05, leak_rate_hz=2.0, shot_noise_rate_hz=1.0, refractory_s=3e-4)
+
+
+def moving_spot(n: int, w: int, h: int, dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    t = np.arange(n) * dt
+    yy, xx = np.mgrid[0:h, 0:w]
+    xc = 3 + 200 * t
+    rate = 1e7 + 5e9 * np.exp(-((xx[None] - xc[:, None, None]) ** 2 + (yy[None] - h / 2) ** 2) / 2.0)
+    return rate, t
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_same_events_whatever_threads_and_chunks(dtype: type) -> None:
+    rate, t = moving_spot(120, 37, 23)
+    rate = rate.astype(dtype)
+    ref = Sensor(37, 23, NOISY, seed=11, num_threads=1).run(rate, t)
+    assert len(ref) > 200 and np.all(np.diff(ref["t"]) >= 0)
+    two = Sensor(37, 23, NOISY, seed=11, num_threads=2).run(rate, t)
+    assert ref.tobytes() == two.tobytes()
+    chunked = Sensor(37, 23, NOISY, seed=11, num_threads=2)
+    parts = [chunked.run(rate[a:b], t[a:b]) for a, b in [(0, 1), (1, 7), (7, 60), (60, 61), (61, 120)]]
+    assert np.concatenate(parts).tobytes() == ref.tobytes()
+    other_seed = Sensor(37, 23, NOISY, seed=12).run(rate, t)
+    assert other_seed.tobytes() != ref.tobytes()
+
+
+def test_reset_replays_the_same_events() -> None:
+    rate, t = moving_spot(50, 20, 10)
+    sensor = Sensor(20, 10, NOISY, seed=4)
+    first = sensor.run(rate, t)
+    with pytest.raises(ValueError, match="continue after"):
+        sensor.run(rate, t)
+    sensor.reset()
+    assert sensor.samples_seen == 0
+    assert sensor.run(rate, t).tobytes() == first.tobytes()
+
+
+def test_output_owns_its_memory_and_input_is_not_modified() -> None:
+    rate, t = moving_spot(30, 16, 8)
+    before = rate.copy()
+    sensor = Sensor(16, 8, NOISY)
+    a = sensor.run(rate[:15], t[:15])
+    b = sensor.run(rate[15:], t[15:])
+    assert np.array_equal(rate, before)
+    assert not np.shares_memory(a, b)
+    assert not np.shares_memory(a, rate)
+    a["t"] = 0  # writable and independent
+    # A Fortran-ordered or strided input is accepted (copied) and gives the same events.
+    f = np.asfortranarray(before)
+    assert Sensor(16, 8, NOISY).run(f, t).tobytes() == Sensor(16, 8, NOISY).run(before, t).tobytes()
+
+
+def test_gil_is_released_while_the_engine_runs() -> None:
+    rate, t = moving_spot(400, 200, 100)
+    ticks: list[float] = []
+    stop = threading.Event()
+
+    def tick() -> None:
+        while not stop.is_set():
+            ticks.append(time.perf_counter())
+            time.sleep(0.0005)
+
+    sensor = Sensor(200, 100, NOISY, num_threads=1)
+    thread = threading.Thread(target=tick)
+    thread.start()
+    start = time.perf_counter()
+    sensor.run(rate, t)
+    end = time.perf_counter()
+    stop.set()
+    thread.join()
+    # With the GIL held for the whole run the other thread could not tick in between.
+    inside = [x for x in ticks if start + 0.2 * (end - start) < x < end - 0.2 * (end - start)]
+    assert len(inside) >= 2
+
+
+@pytest.mark.parametrize(
+    "field,value,message",
+    [
+        ("theta_on", 0.0, r"theta_on must be in .*got theta_on=0"),
+        ("theta_off", -0.1, r"theta_off=-0.1"),
+        ("refractory_s", -1e-3, r"refractory_s=-0.001"),
+        ("refractory_s", 5.0, r"refractory_s=5"),
+        ("cutoff_hz", 0.0, r"cutoff_hz=0"),
+        ("cutoff_hz", float("inf"), r"cutoff_hz=inf"),
+        ("cutoff_hz", float("nan"), r"cutoff_hz=nan"),
+        ("leak_rate_hz", -1.0, r"leak_rate_hz=-1"),
+        ("threshold_sigma", 2.0, r"threshold_sigma=2"),
+        ("dark_model", "thermal", r"dark_model must be one of 'poisson', 'paper', 'none'; got dark_model='thermal'"),
+        ("lowpass", "rk4", r"lowpass must be one of 'exact', 'euler'; got lowpass='rk4'"),
+    ],
+)
+def test_bad_params_raise_value_error_naming_them(field: str, value: object, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        IDEAL.replace(**{field: value})
+
+
+def test_bad_param_types_and_names() -> None:
+    with pytest.raises(TypeError, match="theta_on must be a number"):
+        PixelParams(theta_on="0.2")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="photon_shot_noise must be True or False"):
+        PixelParams(photon_shot_noise=1)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="unknown PixelParams field"):
+        IDEAL.replace(theta=0.3)
+
+
+def test_bad_sensor_arguments() -> None:
+    with pytest.raises(ValueError, match="width must be in .*got width=0"):
+        Sensor(0, 5)
+    with pytest.raises(ValueError, match="height=70000"):
+        Sensor(5, 70000)
+    with pytest.raises(ValueError, match="num_threads=0"):
+        Sensor(5, 5, num_threads=0)
+    with pytest.raises(ValueError, match="seed=-1"):
+        Sensor(5, 5, seed=-1)
+    with pytest.raises(TypeError, match="width must be an integer"):
+        Sensor(5.5, 5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="params must be an evstwin.PixelParams"):
+        Sensor(5, 5, {"theta_on": 0.2})  # type: ignore[arg-type]
+
+
+def test_bad_inputs_raise_and_leave_the_sensor_untouched() -> None:
+    sensor = Sensor(4, 3, IDEAL)
+    good = np.full((3, 3, 4), 1e9)
+    t = [0.0, 1e-3, 2e-3]
+    cases = [
+        (np.full((3, 4, 3), 1e9), t, ValueError, r"shape \(T, height, width\) = \(T, 3, 4\); got shape \(3, 4, 3\)"),
+        (np.full((3, 12), 1e9), t, ValueError, r"got shape \(3, 12\)"),
+        (good.astype(np.int64), t, TypeError, "float32 or float64.*int64"),
+        (good, [0.0, 1e-3], ValueError, r"t_s must be 1-D with one time per sample.*\(3\)"),
+        (good, [0.0, 1e-3, 1e-3], ValueError, r"strictly increasing; got t_s\[1\]=0.001 and t_s\[2\]=0.001"),
+        (good, [0.0, float("nan"), 1.0], ValueError, r"t_s must be finite; got t_s\[1\]=nan"),
+        (good, ["a", "b", "c"], TypeError, "t_s must be an array of real times"),
+    ]
+    for rate, times, exc, message in cases:
+        with pytest.raises(exc, match=message):
+            sensor.run(rate, times)
+    for value, message in [(-1.0, "-1"), (np.nan, "nan"), (np.inf, "inf")]:
+        bad = good.copy()
+        bad[2, 1, 3] = value
+        with pytest.raises(ValueError, match=rf"finite and >= 0 photons/s; got photon_rate\[2, 1, 3\]={message}"):
+            sensor.run(bad, t)
+    zero = good.copy()
+    zero[1, 0, 0] = 0.0
+    with pytest.raises(ValueError, match=r"needs a positive current; got photon_rate\[1, 0, 0\]=0"):
+        sensor.run(zero, t)
+    assert sensor.samples_seen == 0
+    # Zero light is fine where there is dark current.
+    assert len(Sensor(4, 3, IDEAL.replace(dark_model="poisson")).run(zero, t)) >= 0
+    assert len(sensor.run(good, t)) == 0 and sensor.samples_seen == 3
+    with pytest.raises(ValueError, match=r"continue after the previous run's last sample \(0.002 s\); got t_s\[0\]=0.002"):
+        sensor.run(good[:1], [2e-3])
+    with pytest.raises(ValueError, match="pixels must lie on the 4x3 sensor"):
+        sensor.run_probe(good[:1], [1.0], [(4, 0)])
+    with pytest.raises(ValueError, match=r"shot_noise_rate_hz \* dt must be <= 0.5"):
+        Sensor(1, 1, IDEAL.replace(shot_noise_rate_hz=10.0)).run(np.ones((2, 1, 1)), [0.0, 0.1])
