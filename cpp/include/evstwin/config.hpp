@@ -10,6 +10,16 @@
 #define EVSTWIN_HAS_OPENMP 0
 #endif
 
+// The per-pixel update is called once per pixel and sample; inlining it into the sensor
+// loop removes a call and lets the compiler keep the pixel state in registers.
+#if defined(__GNUC__) || defined(__clang__)
+#define EVSTWIN_ALWAYS_INLINE inline __attribute__((always_inline))
+#elif defined(_MSC_VER)
+#define EVSTWIN_ALWAYS_INLINE __forceinline
+#else
+#define EVSTWIN_ALWAYS_INLINE inline
+#endif
+
 namespace evstwin {
 
 /// Number of threads a parallel loop would use by default (1 without OpenMP).

@@ -21,6 +21,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "config.hpp"
 #include "constants.hpp"
 #include "event.hpp"
 #include "rng.hpp"
@@ -123,13 +124,16 @@ struct PixelState {
     double refr_until = -std::numeric_limits<double>::infinity();  ///< refractory end [s]
     double theta_on = 0.0;     ///< this pixel's thresholds, mismatch included
     double theta_off = 0.0;
+    std::uint64_t spare_words = 0;                ///< Philox words 2-3 of the last even sample
+    std::uint64_t spare_sample = ~std::uint64_t{0};  ///< the odd sample they belong to
 };
 
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
 struct SampleConstants {
     double t0 = 0.0, t1 = 0.0, dt = 0.0;
     std::uint64_t index = 0;   ///< global sample index since reset (the RNG counter)
-    double log_e_over_dt = 0;  ///< ln(e / dt): log of the current of one electron per interval
+    double e_over_dt = 0;      ///< e / dt: the current of one electron per interval [A]
+    double log_e_over_dt = 0;  ///< ln(e / dt)
     double sf_decay = 0;       ///< exact: exp(-2 pi fc dt); euler: 1 - 2 pi fc dt
     double sf_ramp = 0;        ///< exact: (1 - exp(-u)) / u, u = 2 pi fc dt; euler: 2 pi fc dt
 };
@@ -149,6 +153,7 @@ struct PixelModel {
     double dark_mean_e_per_s = 0;
     bool has_filter = false;
     bool euler = false;
+    double shot_slope_per_a = 0;  ///< (F - 1) R_n / I_max: eq. 12's slope in the current
 
     explicit PixelModel(const PixelParams& params) : p(params) {
         validate(p);
@@ -156,6 +161,7 @@ struct PixelModel {
         dark_mean_e_per_s = p.dark_model == DarkModel::None ? 0.0 : p.dark_rate_e_per_s;
         has_filter = p.cutoff_hz.has_value();
         euler = p.lowpass == LowPass::Euler;
+        shot_slope_per_a = (p.shot_noise_factor - 1.0) * p.shot_noise_rate_hz / p.shot_noise_i_max_a;
     }
 
     /// Mean electron rate of a pixel receiving `photon_rate` photons/s.
@@ -178,12 +184,26 @@ struct PixelModel {
     /// Advance one pixel over (c.t0, c.t1] to the sample `photon_rate` and emit its events
     /// through emit(t_s, polarity), in time order.
     template <class Emit>
-    void step(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
+    EVSTWIN_ALWAYS_INLINE void step(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
               PoissonSampler& poisson, Emit&& emit, TraceSample* trace = nullptr) const {
-        const Philox4x32Counter w =
-            philox4x32({static_cast<std::uint32_t>(c.index), static_cast<std::uint32_t>(c.index >> 32), pixel,
-                        PURPOSE_SAMPLE},
-                       key);
+        // One Philox call serves two consecutive samples (words 0-1 for the even one, 2-3 for
+        // the odd one); the odd sample's pair is kept in the state, and recomputed when the
+        // even sample was not seen (a fresh start), so the draws stay a pure function of
+        // (seed, pixel, sample).
+        std::uint32_t w[2];
+        if ((c.index & 1u) && s.spare_sample == c.index) {
+            w[0] = static_cast<std::uint32_t>(s.spare_words);
+            w[1] = static_cast<std::uint32_t>(s.spare_words >> 32);
+        } else {
+            const std::uint64_t pair = c.index >> 1;
+            const Philox4x32Counter r = philox4x32(
+                {static_cast<std::uint32_t>(pair), static_cast<std::uint32_t>(pair >> 32), pixel, PURPOSE_SAMPLE}, key);
+            const int off = (c.index & 1u) ? 2 : 0;
+            w[0] = r[off];
+            w[1] = r[off + 1];
+            s.spare_words = static_cast<std::uint64_t>(r[2]) | (static_cast<std::uint64_t>(r[3]) << 32);
+            s.spare_sample = c.index | 1u;
+        }
 
         // Photodiode current over the interval, eq. 1-2 and 4. Poisson counts are pooled into
         // one draw where signal and dark are both Poisson over dt (their sum is Poisson).
@@ -191,27 +211,27 @@ struct PixelModel {
         double x;          // ln(I / 1 A)
         double current_a;  // I
         if (p.photon_shot_noise && p.dark_model != DarkModel::Paper) {
-            CounterStream more(key, pixel, c.index, PURPOSE_POISSON_EXTRA);
+            const auto more = [&] { return CounterStream(key, pixel, c.index, PURPOSE_POISSON_EXTRA); };
             const double n = static_cast<double>(
                 poisson((signal_e_per_s + dark_mean_e_per_s) * c.dt, uniform_open(w[0]), more));
             // A log photoreceptor cannot represent zero current: an empty interval counts as
             // half an electron (the usual continuity correction), documented in the README.
             x = log_count(n) + c.log_e_over_dt;
-            current_a = std::exp(x);
+            current_a = (n > 0.0 ? n : 0.5) * c.e_over_dt;
         } else {
             double e_per_s = p.photon_shot_noise ? 0.0 : signal_e_per_s;
             if (p.photon_shot_noise) {
-                CounterStream more(key, pixel, c.index, PURPOSE_POISSON_EXTRA);
+                const auto more = [&] { return CounterStream(key, pixel, c.index, PURPOSE_POISSON_EXTRA); };
                 e_per_s += static_cast<double>(poisson(signal_e_per_s * c.dt, uniform_open(w[0]), more)) / c.dt;
             }
             if (p.dark_model == DarkModel::Poisson) {
-                CounterStream more(key, pixel, c.index, PURPOSE_POISSON_EXTRA);
+                const auto more = [&] { return CounterStream(key, pixel, c.index, PURPOSE_POISSON_EXTRA); };
                 e_per_s += static_cast<double>(poisson(dark_mean_e_per_s * c.dt, uniform_open(w[0]), more)) / c.dt;
             } else if (p.dark_model == DarkModel::Paper) {
                 // eq. 4 literally: Poisson(lambda_dark) electrons "per sample", read as e/s,
                 // so the fluctuation does not shrink with longer samples.
-                CounterStream more(key, pixel, c.index, PURPOSE_PAPER_DARK);
-                e_per_s += static_cast<double>(poisson(dark_mean_e_per_s, uniform_open(w[2]), more));
+                const auto paper = [&] { return CounterStream(key, pixel, c.index, PURPOSE_PAPER_DARK); };
+                e_per_s += static_cast<double>(poisson(dark_mean_e_per_s, paper().uniform(), paper));
             }
             if (e_per_s <= 0.0) e_per_s = 0.5 / c.dt;  // the half-electron rule above
             current_a = ELEMENTARY_CHARGE_C * e_per_s;
@@ -239,8 +259,9 @@ struct PixelModel {
         int noise_pol = -1;
         double t_noise = 0.0;
         if (p.shot_noise_rate_hz > 0.0) {
-            const double ratio = std::min(current_a / p.shot_noise_i_max_a, 1.0);
-            const double prob = ((p.shot_noise_factor - 1.0) * ratio + 1.0) * p.shot_noise_rate_hz * c.dt;
+            // r = ((F - 1) min(I / I_max, 1) + 1) R_n, with I / I_max saturating at the top of
+            // the dynamic range (beyond it eq. 12 would turn negative).
+            const double prob = (shot_slope_per_a * std::min(current_a, p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
             const double u = uniform_open(w[1]);
             if (u < prob) {
                 noise_pol = OFF;
@@ -288,7 +309,7 @@ private:
     /// whole thresholds: the levels crossed while the pixel was dead are merged into that
     /// single event, as a real pixel cannot report them separately.
     template <class Emit>
-    void compare(PixelState& s, double y1, const SampleConstants& c, int noise_pol, double t_noise, Emit& emit) const {
+    EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, const SampleConstants& c, int noise_pol, double t_noise, Emit& emit) const {
         const double th_on = s.theta_on, th_off = s.theta_off, refr = p.refractory_s;
         const double g = (y1 - s.y) / c.dt + p.leak_rate_hz * th_on;  // d(d)/dt
         double tb = c.t0;

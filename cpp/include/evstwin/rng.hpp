@@ -13,13 +13,15 @@
 #include <cstdint>
 #include <vector>
 
+#include "config.hpp"
+
 namespace evstwin {
 
 using Philox4x32Counter = std::array<std::uint32_t, 4>;
 using Philox4x32Key = std::array<std::uint32_t, 2>;
 
 /// Philox4x32-10: 128 random bits from a 128-bit counter and a 64-bit key.
-inline Philox4x32Counter philox4x32(Philox4x32Counter c, Philox4x32Key k) {
+EVSTWIN_ALWAYS_INLINE Philox4x32Counter philox4x32(Philox4x32Counter c, Philox4x32Key k) {
     constexpr std::uint32_t M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
     constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
     for (int round = 0; round < 10; ++round) {
@@ -113,24 +115,26 @@ class PoissonSampler {
 public:
     static constexpr double POISSON_TABLE_MAX_MEAN = 64.0;
 
-    /// One variate of mean mu >= 0. u is a uniform in (0, 1) used by inversion; `more`
-    /// supplies uniforms for the rejection sampler.
-    template <class Stream>
-    std::uint64_t operator()(double mu, double u, Stream&& more) {
+    /// One variate of mean mu >= 0. u is a uniform in (0, 1) used by inversion; the
+    /// rejection sampler draws further uniforms from `more`, a CounterStream it builds only
+    /// when needed (building one per call would cost the hot loop for nothing).
+    template <class MakeStream>
+    inline std::uint64_t operator()(double mu, double u, MakeStream&& more) {
         if (mu <= 0.0) return 0;
         if (mu < POISSON_TABLE_MAX_MEAN) return invert(mu, u);
-        return ptrs(mu, more);
+        auto stream = more();
+        return ptrs(mu, stream);
     }
 
     std::uint64_t invert(double mu, double u) {
         if (mu != table_mean_) build(mu);
-        // First k with u <= F(k); binary search over the cumulative table.
-        std::size_t lo = 0, hi = cdf_.size();
-        while (lo < hi) {
-            const std::size_t mid = (lo + hi) / 2;
-            if (cdf_[mid] < u) lo = mid + 1; else hi = mid;
-        }
-        return lo;  // == cdf_.size() only in the tail beyond 1 - 2^-33, where F was cut.
+        // First k with u <= F(k). The guide table (Chen and Asau's indexed search) gives the
+        // first candidate for u's bucket, so the linear search takes about one step; the
+        // answer is the same as a search from k = 0.
+        std::size_t k = guide_[static_cast<std::size_t>(u * static_cast<double>(guide_.size()))];
+        const std::size_t n = cdf_.size();
+        while (k < n && cdf_[k] < u) ++k;
+        return k;  // == cdf_.size() only in the tail beyond 1 - 2^-33, where F was cut.
     }
 
 private:
@@ -143,6 +147,16 @@ private:
             p *= mu / k;
             c += p;
             cdf_.push_back(c);
+        }
+        // guide_[j] = first k with F(k) >= j / m: no k below it can be the answer for a u in
+        // bucket j, since u >= j / m there.
+        const std::size_t m = cdf_.size();
+        guide_.assign(m, 0);
+        std::size_t k = 0;
+        for (std::size_t j = 0; j < m; ++j) {
+            const double level = static_cast<double>(j) / static_cast<double>(m);
+            while (k < m && cdf_[k] < level) ++k;
+            guide_[j] = k;
         }
         table_mean_ = mu;
     }
@@ -169,6 +183,7 @@ private:
 
     double table_mean_ = -1.0;
     std::vector<double> cdf_;
+    std::vector<std::size_t> guide_;
 };
 
 }  // namespace evstwin

@@ -191,16 +191,27 @@ private:
         const std::size_t npix = state_.size();
         const std::int64_t total = static_cast<std::int64_t>(n_samples * npix);
         const bool zero_is_bad = model_.dark_mean_e_per_s <= 0.0;
-        // First bad index (smallest, so the message does not depend on the thread count).
-        std::int64_t first_bad = total;
+        // A vectorisable pass answers "is anything bad?"; only then a second pass finds the
+        // first bad index (the smallest, so the message does not depend on the thread count).
+        int any_bad = 0;
+        const double top = std::numeric_limits<double>::max();
 #if EVSTWIN_HAS_OPENMP
-#pragma omp parallel for num_threads(num_threads_) reduction(min : first_bad) schedule(static)
+#pragma omp parallel for num_threads(num_threads_) reduction(| : any_bad) schedule(static)
 #endif
         for (std::int64_t i = 0; i < total; ++i) {
             const double v = static_cast<double>(rate[i]);
-            // v > max also catches +inf; !(v >= 0) catches NaN and negatives.
-            const bool bad = !(v >= 0.0) || v > std::numeric_limits<double>::max() || (zero_is_bad && v == 0.0);
-            if (bad && i < first_bad) first_bad = i;
+            // !(v >= 0) catches NaN and negatives, v > max catches +inf.
+            any_bad |= static_cast<int>(!(v >= 0.0)) | static_cast<int>(v > top) | static_cast<int>(zero_is_bad && v == 0.0);
+        }
+        std::int64_t first_bad = total;
+        if (any_bad) {
+            for (std::int64_t i = 0; i < total; ++i) {
+                const double v = static_cast<double>(rate[i]);
+                if (!(v >= 0.0) || v > top || (zero_is_bad && v == 0.0)) {
+                    first_bad = i;
+                    break;
+                }
+            }
         }
         if (first_bad < total) {
             const std::size_t k = static_cast<std::size_t>(first_bad) / npix, pix = static_cast<std::size_t>(first_bad) % npix;
@@ -225,7 +236,8 @@ private:
             c.dt = c.t1 - c.t0;
             c.index = samples_ + k;
             if (c.index > 0) {
-                c.log_e_over_dt = std::log(ELEMENTARY_CHARGE_C / c.dt);
+                c.e_over_dt = ELEMENTARY_CHARGE_C / c.dt;
+                c.log_e_over_dt = std::log(c.e_over_dt);
                 if (model_.has_filter) {
                     const double u = 2.0 * PI * *model_.p.cutoff_hz * c.dt;
                     if (model_.euler) {
