@@ -58,6 +58,39 @@ std::vector<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, co
     return run_typed<double>(s, rate, t, probe, trace);
 }
 
+std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::array rate, py::array t_s) {
+    if (pixels.dtype().kind() != 'i' && pixels.dtype().kind() != 'u')
+        throw py::type_error("pixels must be an integer array of row-major pixel indices; got dtype " +
+                             std::string(py::str(pixels.dtype())));
+    auto idx = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(pixels);
+    if (!idx || idx.ndim() != 1) throw py::value_error("pixels must be 1-D; got shape " + shape_str(pixels));
+    const auto n = idx.shape(0);
+    std::vector<std::uint32_t> px(static_cast<std::size_t>(n));
+    for (py::ssize_t j = 0; j < n; ++j) {
+        const std::int64_t v = idx.data()[j];
+        if (v < 0 || static_cast<std::uint64_t>(v) >= s.num_pixels())
+            throw py::value_error("pixels[" + std::to_string(j) + "]=" + std::to_string(v) + " is outside the " +
+                                  std::to_string(s.num_pixels()) + "-pixel sensor");
+        px[static_cast<std::size_t>(j)] = static_cast<std::uint32_t>(v);
+    }
+    const auto kind = rate.dtype().kind();
+    if (kind != 'f' || (rate.itemsize() != 4 && rate.itemsize() != 8))
+        throw py::type_error("photon_rate must be a float32 or float64 array of photons/s; got dtype " +
+                             std::string(py::str(rate.dtype())));
+    if (rate.ndim() != 2 || rate.shape(1) != n)
+        throw py::value_error("photon_rate must have shape (T, len(pixels)) = (T, " + std::to_string(n) +
+                              "); got shape " + shape_str(rate));
+    if (!(rate.flags() & py::array::c_style)) rate = py::module_::import("numpy").attr("ascontiguousarray")(rate);
+    auto t = checked_times(t_s, rate.shape(0));
+    const std::size_t T = static_cast<std::size_t>(rate.shape(0));
+    const double* times = t.data();
+    const void* data = rate.data();
+    const bool single = rate.itemsize() == 4;
+    py::gil_scoped_release release;
+    if (single) return s.run_pixels(px.data(), px.size(), static_cast<const float*>(data), times, T);
+    return s.run_pixels(px.data(), px.size(), static_cast<const double*>(data), times, T);
+}
+
 int threads_arg(const std::optional<int>& n) {
     if (n && *n < 1)
         throw py::value_error("num_threads must be >= 1 or None; got num_threads=" + std::to_string(*n));
@@ -88,6 +121,11 @@ void register_sensor(py::module_& m) {
                  return py::make_tuple(to_numpy(std::move(ev)), to_numpy(std::move(trace), {T, n}));
              },
              py::arg("photon_rate"), py::arg("t_s"), py::arg("pixels"))
+        .def("run_pixels",
+             [](Sensor& s, py::array pixels, py::array rate, py::array t_s) {
+                 return to_numpy(run_pixels_any(s, pixels, rate, t_s));
+             },
+             py::arg("pixels"), py::arg("photon_rate"), py::arg("t_s"))
         .def("reset", &Sensor::reset)
         .def("thresholds",
              [](const Sensor& s, bool on) { return to_numpy(s.thresholds(on), {s.height(), s.width()}); },

@@ -98,6 +98,17 @@ class Sensor:
         events, trace = self._core.run_probe(_as_array(photon_rate), _as_array(t_s, "t_s"), index)
         return events, trace
 
+    def run_pixels(self, pixels: npt.ArrayLike, photon_rate: npt.ArrayLike, t_s: npt.ArrayLike) -> np.ndarray:
+        """Advance only some pixels through their own, finer sample times.
+
+        pixels: row-major indices ``y * width + x`` (no repeats); photon_rate: (T, len(pixels))
+        photons/s; t_s: T times [s] after every listed pixel's last sample. A later ``run``
+        skips, for these pixels, the samples they have already passed, so a pixel near a fast
+        source can be sub-sampled while the rest of the array keeps the base rate. Each
+        pixel's random numbers follow its own sample counter. Returns the events, sorted.
+        """
+        return self._core.run_pixels(_as_array(pixels, "pixels"), _as_array(photon_rate), _as_array(t_s, "t_s"))
+
     def reset(self) -> None:
         """Forget the past (the next sample is a first sample); mismatch is kept."""
         self._core.reset()

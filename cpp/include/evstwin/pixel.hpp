@@ -124,6 +124,8 @@ struct PixelState {
     double refr_until = -std::numeric_limits<double>::infinity();  ///< refractory end [s]
     double theta_on = 0.0;     ///< this pixel's thresholds, mismatch included
     double theta_off = 0.0;
+    double t = -std::numeric_limits<double>::infinity();  ///< time of the last sample [s]
+    std::uint64_t n = 0;                          ///< samples consumed: the RNG's sample counter
     std::uint64_t spare_words = 0;                ///< Philox words 2-3 of the last even sample
     std::uint64_t spare_sample = ~std::uint64_t{0};  ///< the odd sample they belong to
 };
@@ -131,7 +133,6 @@ struct PixelState {
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
 struct SampleConstants {
     double t0 = 0.0, t1 = 0.0, dt = 0.0;
-    std::uint64_t index = 0;   ///< global sample index since reset (the RNG counter)
     double e_over_dt = 0;      ///< e / dt: the current of one electron per interval [A]
     double log_e_over_dt = 0;  ///< ln(e / dt)
     double sf_decay = 0;       ///< exact: exp(-2 pi fc dt); euler: 1 - 2 pi fc dt
@@ -164,6 +165,27 @@ struct PixelModel {
         shot_slope_per_a = (p.shot_noise_factor - 1.0) * p.shot_noise_rate_hz / p.shot_noise_i_max_a;
     }
 
+    /// The numbers of one sample interval (t0, t1] that do not depend on the pixel.
+    SampleConstants constants(double t0, double t1) const {
+        SampleConstants c;
+        c.t0 = t0;
+        c.t1 = t1;
+        c.dt = t1 - t0;
+        c.e_over_dt = ELEMENTARY_CHARGE_C / c.dt;
+        c.log_e_over_dt = std::log(c.e_over_dt);
+        if (has_filter) {
+            const double u = 2.0 * PI * *p.cutoff_hz * c.dt;
+            if (euler) {
+                c.sf_ramp = u;
+                c.sf_decay = 1.0 - u;
+            } else {
+                c.sf_decay = std::exp(-u);
+                c.sf_ramp = u > 1e-12 ? -std::expm1(-u) / u : 1.0;
+            }
+        }
+        return c;
+    }
+
     /// Mean electron rate of a pixel receiving `photon_rate` photons/s.
     double mean_electron_rate(double photon_rate) const { return e_per_photon * photon_rate + dark_mean_e_per_s; }
 
@@ -175,14 +197,39 @@ struct PixelModel {
 
     /// The first sample of a run: everything starts at the steady state of the mean input
     /// and no event fires.
-    void init_state(PixelState& s, double photon_rate) const {
+    void init_state(PixelState& s, double photon_rate, double t) const {
         s.x = std::log(ELEMENTARY_CHARGE_C * mean_electron_rate(photon_rate));
         s.z = s.y = s.ref = s.x;
         s.refr_until = -std::numeric_limits<double>::infinity();
+        s.t = t;
+        s.n = 1;
+    }
+
+    /// Advance a pixel to the sample (t1, photon_rate), whatever its last sample time: the
+    /// first sample initialises it; a sample at or before its last one is skipped (the
+    /// pixel was already advanced further by a finer, pixel-local sampling).
+    template <class Emit>
+    EVSTWIN_ALWAYS_INLINE void advance(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key,
+                                       std::uint32_t pixel, PoissonSampler& poisson, Emit&& emit,
+                                       TraceSample* trace = nullptr) const {
+        if (s.n == 0) {
+            init_state(s, photon_rate, c.t1);
+            if (trace) *trace = {std::exp(s.x), s.x, s.y, s.ref};
+            return;
+        }
+        if (c.t1 <= s.t) return;
+        if (s.t == c.t0) {
+            step(s, photon_rate, c, key, pixel, poisson, emit, trace);
+        } else {
+            step(s, photon_rate, constants(s.t, c.t1), key, pixel, poisson, emit, trace);
+        }
+        s.t = c.t1;
+        ++s.n;
     }
 
     /// Advance one pixel over (c.t0, c.t1] to the sample `photon_rate` and emit its events
-    /// through emit(t_s, polarity), in time order.
+    /// through emit(t_s, polarity), in time order. Its random numbers are keyed by the
+    /// pixel's own sample counter s.n. (advance() also keeps s.t and s.n.)
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void step(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
               PoissonSampler& poisson, Emit&& emit, TraceSample* trace = nullptr) const {
@@ -191,18 +238,18 @@ struct PixelModel {
         // even sample was not seen (a fresh start), so the draws stay a pure function of
         // (seed, pixel, sample).
         std::uint32_t w[2];
-        if ((c.index & 1u) && s.spare_sample == c.index) {
+        if ((s.n & 1u) && s.spare_sample == s.n) {
             w[0] = static_cast<std::uint32_t>(s.spare_words);
             w[1] = static_cast<std::uint32_t>(s.spare_words >> 32);
         } else {
-            const std::uint64_t pair = c.index >> 1;
+            const std::uint64_t pair = s.n >> 1;
             const Philox4x32Counter r = philox4x32(
                 {static_cast<std::uint32_t>(pair), static_cast<std::uint32_t>(pair >> 32), pixel, PURPOSE_SAMPLE}, key);
-            const int off = (c.index & 1u) ? 2 : 0;
+            const int off = (s.n & 1u) ? 2 : 0;
             w[0] = r[off];
             w[1] = r[off + 1];
             s.spare_words = static_cast<std::uint64_t>(r[2]) | (static_cast<std::uint64_t>(r[3]) << 32);
-            s.spare_sample = c.index | 1u;
+            s.spare_sample = s.n | 1u;
         }
 
         // Photodiode current over the interval, eq. 1-2 and 4. Poisson counts are pooled into
@@ -211,7 +258,7 @@ struct PixelModel {
         double x;          // ln(I / 1 A)
         double current_a;  // I
         if (p.photon_shot_noise && p.dark_model != DarkModel::Paper) {
-            const auto more = [&] { return CounterStream(key, pixel, c.index, PURPOSE_POISSON_EXTRA); };
+            const auto more = [&] { return CounterStream(key, pixel, s.n, PURPOSE_POISSON_EXTRA); };
             const double n = static_cast<double>(
                 poisson((signal_e_per_s + dark_mean_e_per_s) * c.dt, uniform_open(w[0]), more));
             // A log photoreceptor cannot represent zero current: an empty interval counts as
@@ -221,16 +268,16 @@ struct PixelModel {
         } else {
             double e_per_s = p.photon_shot_noise ? 0.0 : signal_e_per_s;
             if (p.photon_shot_noise) {
-                const auto more = [&] { return CounterStream(key, pixel, c.index, PURPOSE_POISSON_EXTRA); };
+                const auto more = [&] { return CounterStream(key, pixel, s.n, PURPOSE_POISSON_EXTRA); };
                 e_per_s += static_cast<double>(poisson(signal_e_per_s * c.dt, uniform_open(w[0]), more)) / c.dt;
             }
             if (p.dark_model == DarkModel::Poisson) {
-                const auto more = [&] { return CounterStream(key, pixel, c.index, PURPOSE_POISSON_EXTRA); };
+                const auto more = [&] { return CounterStream(key, pixel, s.n, PURPOSE_POISSON_EXTRA); };
                 e_per_s += static_cast<double>(poisson(dark_mean_e_per_s * c.dt, uniform_open(w[0]), more)) / c.dt;
             } else if (p.dark_model == DarkModel::Paper) {
                 // eq. 4 literally: Poisson(lambda_dark) electrons "per sample", read as e/s,
                 // so the fluctuation does not shrink with longer samples.
-                const auto paper = [&] { return CounterStream(key, pixel, c.index, PURPOSE_PAPER_DARK); };
+                const auto paper = [&] { return CounterStream(key, pixel, s.n, PURPOSE_PAPER_DARK); };
                 e_per_s += static_cast<double>(poisson(dark_mean_e_per_s, paper().uniform(), paper));
             }
             if (e_per_s <= 0.0) e_per_s = 0.5 / c.dt;  // the half-electron rule above

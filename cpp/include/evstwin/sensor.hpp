@@ -116,7 +116,6 @@ public:
         const std::size_t nblocks = (npix + BLOCK - 1) / BLOCK;
         block_events_.resize(nblocks);
         for (auto& b : block_events_) b.clear();
-        const bool fresh = samples_ == 0;
 
         std::exception_ptr error;
         const std::int64_t nb = static_cast<std::int64_t>(nblocks);
@@ -130,7 +129,7 @@ public:
 #endif
             for (std::int64_t b = 0; b < nb; ++b) {
                 try {
-                    run_block(static_cast<std::size_t>(b), photon_rate, n_samples, consts, fresh, poisson,
+                    run_block(static_cast<std::size_t>(b), photon_rate, n_samples, consts, poisson,
                               probe_slot.empty() ? nullptr : probe_slot.data(), n_probe,
                               trace ? trace->data() : nullptr);
                 } catch (...) {
@@ -145,6 +144,84 @@ public:
 
         samples_ += n_samples;
         last_t_ = t_s[n_samples - 1];
+        return collect();
+    }
+
+    /// Advance only the listed pixels through their own sample times: the sparse second
+    /// input for the pixels near a fast source, which need finer sampling than the rest.
+    /// photon_rate is C-ordered (n_samples, n_pixels): column j belongs to pixels[j]
+    /// (row-major indices, no repeats). t_s must start after every listed pixel's last
+    /// sample. A later run() skips, for these pixels, the samples at or before the time they
+    /// have reached; so sub-sampling a pixel and then running the whole array gives that
+    /// pixel the union of the two time grids, with its own sample counter keying its random
+    /// numbers. Throws std::invalid_argument, before any state changes, on a bad input.
+    template <class Real>
+    std::vector<Event> run_pixels(const std::uint32_t* pixels, std::size_t n_pixels, const Real* photon_rate,
+                                  const double* t_s, std::size_t n_samples) {
+        if (n_pixels == 0 || n_samples == 0) return {};
+        const std::size_t npix = state_.size();
+        std::vector<char> seen(npix, 0);
+        double latest = -std::numeric_limits<double>::infinity();
+        std::size_t latest_j = 0;
+        for (std::size_t j = 0; j < n_pixels; ++j) {
+            if (pixels[j] >= npix)
+                throw std::invalid_argument("pixels[" + std::to_string(j) + "]=" + std::to_string(pixels[j]) +
+                                            " is outside the " + std::to_string(npix) + "-pixel sensor");
+            if (seen[pixels[j]])
+                throw std::invalid_argument("pixels must not repeat; got pixel " + std::to_string(pixels[j]) + " twice");
+            seen[pixels[j]] = 1;
+            if (state_[pixels[j]].t > latest) {
+                latest = state_[pixels[j]].t;
+                latest_j = j;
+            }
+        }
+        for (std::size_t k = 0; k < n_samples; ++k) {
+            if (!std::isfinite(t_s[k]))
+                throw std::invalid_argument("t_s must be finite; got t_s[" + std::to_string(k) + "]=" + detail::fmt(t_s[k]));
+            const double prev = k == 0 ? latest : t_s[k - 1];
+            if (!(t_s[k] > prev)) {
+                if (k == 0)
+                    throw std::invalid_argument("t_s must start after the last sample of every listed pixel; pixels[" +
+                                                std::to_string(latest_j) + "] is at " + detail::fmt(latest) +
+                                                " s; got t_s[0]=" + detail::fmt(t_s[0]));
+                throw std::invalid_argument("t_s must be strictly increasing; got t_s[" + std::to_string(k - 1) +
+                                            "]=" + detail::fmt(prev) + " and t_s[" + std::to_string(k) +
+                                            "]=" + detail::fmt(t_s[k]));
+            }
+            if (k > 0) check_dt(t_s[k] - prev, k);
+        }
+        for (std::size_t j = 0; j < n_pixels; ++j)
+            if (state_[pixels[j]].n > 0) check_dt(t_s[0] - state_[pixels[j]].t, 0);
+        const std::size_t bad = first_bad_rate(photon_rate, n_samples * n_pixels);
+        if (bad < n_samples * n_pixels)
+            throw_bad_rate("photon_rate[" + std::to_string(bad / n_pixels) + ", " + std::to_string(bad % n_pixels) + "]",
+                           static_cast<double>(photon_rate[bad]));
+
+        const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
+        block_events_.resize(std::max(block_events_.size(), nblocks));
+        for (auto& b : block_events_) b.clear();
+        std::exception_ptr error;
+        const std::int64_t nb = static_cast<std::int64_t>(nblocks);
+#if EVSTWIN_HAS_OPENMP
+#pragma omp parallel num_threads(num_threads_)
+#endif
+        {
+            PoissonSampler poisson;
+#if EVSTWIN_HAS_OPENMP
+#pragma omp for schedule(dynamic, 1)
+#endif
+            for (std::int64_t b = 0; b < nb; ++b) {
+                try {
+                    run_pixel_block(static_cast<std::size_t>(b), pixels, n_pixels, photon_rate, t_s, n_samples, poisson);
+                } catch (...) {
+#if EVSTWIN_HAS_OPENMP
+#pragma omp critical(evstwin_error)
+#endif
+                    if (!error) error = std::current_exception();
+                }
+            }
+        }
+        if (error) std::rethrow_exception(error);
         return collect();
     }
 
@@ -171,30 +248,42 @@ private:
             if (t_s[k] > 9.2e12)
                 throw std::invalid_argument("t_s must be below 9.2e12 s (int64 microseconds); got t_s[" +
                                             std::to_string(k) + "]=" + detail::fmt(t_s[k]));
-            if (k > 0 || samples_ > 0) {
-                const double dt = t_s[k] - prev;
-                if (model_.has_filter && model_.euler && 2.0 * PI * *model_.p.cutoff_hz * dt > 2.0)
-                    throw std::invalid_argument(
-                        "lowpass='euler' (eq. 7) is unstable when 2 pi cutoff_hz dt > 2; got cutoff_hz=" +
-                        detail::fmt(*model_.p.cutoff_hz) + " and dt=" + detail::fmt(dt) +
-                        " s at t_s[" + std::to_string(k) + "]: use lowpass='exact' or shorter samples");
-                if (model_.p.shot_noise_rate_hz * dt > 0.5)
-                    throw std::invalid_argument(
-                        "shot_noise_rate_hz * dt must be <= 0.5 (eq. 13-15 draw at most one event per sample); got "
-                        "shot_noise_rate_hz=" + detail::fmt(model_.p.shot_noise_rate_hz) + " and dt=" + detail::fmt(dt) + " s");
-            }
+            if (k > 0 || samples_ > 0) check_dt(t_s[k] - prev, k);
         }
+    }
+
+    /// The limits that depend on the sample interval dt (k names the sample in messages).
+    void check_dt(double dt, std::size_t k) const {
+        if (model_.has_filter && model_.euler && 2.0 * PI * *model_.p.cutoff_hz * dt > 2.0)
+            throw std::invalid_argument("lowpass='euler' (eq. 7) is unstable when 2 pi cutoff_hz dt > 2; got cutoff_hz=" +
+                                        detail::fmt(*model_.p.cutoff_hz) + " and dt=" + detail::fmt(dt) + " s at t_s[" +
+                                        std::to_string(k) + "]: use lowpass='exact' or shorter samples");
+        if (model_.p.shot_noise_rate_hz * dt > 0.5)
+            throw std::invalid_argument(
+                "shot_noise_rate_hz * dt must be <= 0.5 (eq. 13-15 draw at most one event per sample); got "
+                "shot_noise_rate_hz=" + detail::fmt(model_.p.shot_noise_rate_hz) + " and dt=" + detail::fmt(dt) + " s");
     }
 
     template <class Real>
     void check_rates(const Real* rate, std::size_t n_samples) const {
         const std::size_t npix = state_.size();
-        const std::int64_t total = static_cast<std::int64_t>(n_samples * npix);
+        const std::size_t bad = first_bad_rate(rate, n_samples * npix);
+        if (bad < n_samples * npix) {
+            const std::size_t k = bad / npix, pix = bad % npix;
+            throw_bad_rate("photon_rate[" + std::to_string(k) + ", " + std::to_string(pix / width_) + ", " +
+                               std::to_string(pix % width_) + "]",
+                           static_cast<double>(rate[bad]));
+        }
+    }
+
+    /// Index of the first rate that is NaN, infinite, negative, or zero without dark
+    /// current; `total` if none. A vectorisable pass answers "is anything bad?" first.
+    template <class Real>
+    std::size_t first_bad_rate(const Real* rate, std::size_t total_size) const {
+        const std::int64_t total = static_cast<std::int64_t>(total_size);
         const bool zero_is_bad = model_.dark_mean_e_per_s <= 0.0;
-        // A vectorisable pass answers "is anything bad?"; only then a second pass finds the
-        // first bad index (the smallest, so the message does not depend on the thread count).
-        int any_bad = 0;
         const double top = std::numeric_limits<double>::max();
+        int any_bad = 0;
 #if EVSTWIN_HAS_OPENMP
 #pragma omp parallel for num_threads(num_threads_) reduction(| : any_bad) schedule(static)
 #endif
@@ -203,52 +292,27 @@ private:
             // !(v >= 0) catches NaN and negatives, v > max catches +inf.
             any_bad |= static_cast<int>(!(v >= 0.0)) | static_cast<int>(v > top) | static_cast<int>(zero_is_bad && v == 0.0);
         }
-        std::int64_t first_bad = total;
-        if (any_bad) {
-            for (std::int64_t i = 0; i < total; ++i) {
-                const double v = static_cast<double>(rate[i]);
-                if (!(v >= 0.0) || v > top || (zero_is_bad && v == 0.0)) {
-                    first_bad = i;
-                    break;
-                }
-            }
+        if (!any_bad) return total_size;
+        for (std::size_t i = 0; i < total_size; ++i) {
+            const double v = static_cast<double>(rate[i]);
+            if (!(v >= 0.0) || v > top || (zero_is_bad && v == 0.0)) return i;
         }
-        if (first_bad < total) {
-            const std::size_t k = static_cast<std::size_t>(first_bad) / npix, pix = static_cast<std::size_t>(first_bad) % npix;
-            const double v = static_cast<double>(rate[first_bad]);
-            const std::string where = "photon_rate[" + std::to_string(k) + ", " + std::to_string(pix / width_) + ", " +
-                                      std::to_string(pix % width_) + "]=" + detail::fmt(v);
-            if (v == 0.0)
-                throw std::invalid_argument(
-                    "photon_rate must be > 0 where there is no dark current (dark_model='none' or "
-                    "dark_rate_e_per_s=0): the log photoreceptor needs a positive current; got " + where);
-            throw std::invalid_argument("photon_rate must be finite and >= 0 photons/s; got " + where);
-        }
+        return total_size;
+    }
+
+    [[noreturn]] static void throw_bad_rate(const std::string& where, double v) {
+        if (v == 0.0)
+            throw std::invalid_argument(
+                "photon_rate must be > 0 where there is no dark current (dark_model='none' or "
+                "dark_rate_e_per_s=0): the log photoreceptor needs a positive current; got " + where + "=" + detail::fmt(v));
+        throw std::invalid_argument("photon_rate must be finite and >= 0 photons/s; got " + where + "=" + detail::fmt(v));
     }
 
     std::vector<SampleConstants> sample_constants(const double* t_s, std::size_t n) const {
         std::vector<SampleConstants> out(n);
         double prev = last_t_;
         for (std::size_t k = 0; k < n; ++k) {
-            SampleConstants& c = out[k];
-            c.t0 = prev;
-            c.t1 = t_s[k];
-            c.dt = c.t1 - c.t0;
-            c.index = samples_ + k;
-            if (c.index > 0) {
-                c.e_over_dt = ELEMENTARY_CHARGE_C / c.dt;
-                c.log_e_over_dt = std::log(c.e_over_dt);
-                if (model_.has_filter) {
-                    const double u = 2.0 * PI * *model_.p.cutoff_hz * c.dt;
-                    if (model_.euler) {
-                        c.sf_ramp = u;
-                        c.sf_decay = 1.0 - u;
-                    } else {
-                        c.sf_decay = std::exp(-u);
-                        c.sf_ramp = u > 1e-12 ? -std::expm1(-u) / u : 1.0;
-                    }
-                }
-            }
+            out[k] = model_.constants(prev, t_s[k]);
             prev = t_s[k];
         }
         return out;
@@ -256,39 +320,45 @@ private:
 
     template <class Real>
     void run_block(std::size_t b, const Real* rate, std::size_t n_samples, const std::vector<SampleConstants>& consts,
-                   bool fresh, PoissonSampler& poisson, const std::int32_t* probe_slot, std::size_t n_probe,
-                   TraceSample* trace) {
+                   PoissonSampler& poisson, const std::int32_t* probe_slot, std::size_t n_probe, TraceSample* trace) {
         const std::size_t npix = state_.size();
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
         auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
-        std::size_t k0 = 0;
-        if (fresh) {
-            for (std::size_t i = lo; i < hi; ++i) model_.init_state(state_[i], static_cast<double>(rate[i]));
-            if (probe_slot) {
-                for (std::size_t i = lo; i < hi; ++i) {
-                    if (probe_slot[i] < 0) continue;
-                    const PixelState& s = state_[i];
-                    trace[probe_slot[i]] = {std::exp(s.x), s.x, s.y, s.ref};
-                }
-            }
-            k0 = 1;
-        }
-        for (std::size_t k = k0; k < n_samples; ++k) {
+        for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * npix;
             if (!probe_slot) {
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
-                    model_.step(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit);
+                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit);
                 }
             } else {
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
                     TraceSample* tr = probe_slot[i] >= 0 ? trace + k * n_probe + probe_slot[i] : nullptr;
-                    model_.step(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit, tr);
+                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit, tr);
                 }
+            }
+        }
+    }
+
+    /// The sparse counterpart of run_block: entries [lo, hi) of a pixel list, each with its
+    /// own column of rates.
+    template <class Real>
+    void run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
+                         const double* t_s, std::size_t n_samples, PoissonSampler& poisson) {
+        const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
+        std::vector<RawEvent>& out = block_events_[b];
+        std::uint32_t pixel = 0;
+        auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
+        for (std::size_t j = lo; j < hi; ++j) {
+            pixel = pixels[j];
+            PixelState& s = state_[pixel];
+            for (std::size_t k = 0; k < n_samples; ++k) {
+                const SampleConstants c = model_.constants(s.t, t_s[k]);
+                model_.advance(s, static_cast<double>(rate[k * n_pixels + j]), c, key_, pixel, poisson, emit);
             }
         }
     }
