@@ -1,0 +1,368 @@
+"""Optics and photometry: from a star's magnitude (or a lab source) to photons/s on the sensor.
+
+The output of this module is what the PSF (``psf.py``) spreads over the pixels: the photon
+flux of a point source at the focal plane [photons/s], its position in pixel coordinates and
+the width of its image [px].
+
+Conventions
+-----------
+* Pixel coordinates: pixel centres at integers, pixel ``(i, j)`` (row ``i``, column ``j``)
+  covers ``x`` in ``[j - 0.5, j + 0.5]`` and ``y`` in ``[i - 0.5, i + 0.5]``; ``x`` grows to
+  the right (columns), ``y`` downwards (rows). The principal point is the sensor centre,
+  ``((width - 1) / 2, (height - 1) / 2)``.
+* Camera frame for finite-distance sources: ``z`` along the optical axis (away from the
+  camera), ``x`` along the pixel ``x`` axis, ``y`` along the pixel ``y`` axis, in metres.
+* Fluxes here are photons/s *arriving at the focal plane*; the sensor engine applies the
+  pixel fill factor and the photodiode quantum efficiency (paper eq. 1-2) itself.
+
+Photometric zero point
+----------------------
+A V = 0 star gives ``ZERO_POINT_V_PH_S_M2`` = 8.79e9 photons/s/m^2 inside the Johnson V
+band: f_nu = 3640 Jy (Bessell 1979, PASP 91, 589; 3636 Jy in Bessell, Castelli & Plez 1998,
+A&A 333, 231, Table A2) over d(lambda)/lambda = 0.16, i.e. N = f_nu / h * 0.16 photons per
+second per m^2 (the tabulation of J. Huchra's "Magnitudes" notes, Harvard CfA Ay145).
+An unfiltered silicon sensor sees more than the V band: for an A0V (colour 0) star
+``broadband_zero_point_ph_s_m2(0.4e-6, 1.0e-6)`` gives about 4.4e10 photons/s/m^2 (5x, 1.7 mag
+brighter), but the real figure depends on the star's spectrum and on the sensor's QE curve,
+which the engine treats as flat. Pick the zero point that matches how your magnitudes were
+measured: it is a field of ``Optics``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, Union
+
+import numpy as np
+import numpy.typing as npt
+
+PLANCK_J_S = 6.62607015e-34
+"""Planck constant h [J s] (exact, SI 2019)."""
+SPEED_OF_LIGHT_M_S = 299792458.0
+"""Speed of light c [m/s] (exact)."""
+JANSKY_W_M2_HZ = 1e-26
+"""1 Jy in W m^-2 Hz^-1."""
+ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
+"""Arcseconds per radian (206264.806...)."""
+
+V_BAND_ZERO_FLUX_JY = 3640.0
+"""Spectral flux density f_nu of a V = 0 star [Jy]. Bessell (1979); 3636 Jy in Bessell,
+Castelli & Plez (1998) Table A2 (the 0.1 % difference is far below any other uncertainty)."""
+V_BAND_FRACTIONAL_WIDTH = 0.16
+"""Johnson V band width d(lambda)/lambda (0.088 um at 0.55 um), as tabulated with the
+zero point above."""
+ZERO_POINT_V_PH_S_M2 = V_BAND_ZERO_FLUX_JY * JANSKY_W_M2_HZ / PLANCK_J_S * V_BAND_FRACTIONAL_WIDTH
+"""Photons/s/m^2 from a V = 0 star inside the V band: f_nu / h * d(lambda)/lambda = 8.79e9."""
+
+# f_nu of a zero-magnitude (A0V, all colours 0) star at the band centres [um, Jy]:
+# U B V R I from Bessell (1979), J H K from Campins, Rieke & Lebofsky (1985), as tabulated in
+# Huchra's Ay145 notes. Used only by broadband_zero_point_ph_s_m2 for a broadband estimate.
+_A0V_LAMBDA_M = np.array([0.36, 0.44, 0.55, 0.64, 0.79, 1.26, 1.60, 2.22]) * 1e-6
+_A0V_FNU_JY = np.array([1810.0, 4260.0, 3640.0, 3080.0, 2550.0, 1600.0, 1080.0, 670.0])
+
+DAVIS346_MEAN_WAVELENGTH_M = 0.7e-6
+"""Mean wavelength Lambda of the DAVIS346 sensitivity range [m] used in the PSF width
+(paper eq. 17). Assumption: the middle of the ~0.4-1.0 um response of a front-illuminated
+silicon photodiode; iniVation does not give a spectral curve in the sources at hand."""
+DAVIS346_PIXEL_PITCH_M = 18.5e-6
+"""DAVIS346 pixel pitch [m] (paper sec. 3.1)."""
+DARK_SKY_V_MAG_PER_ARCSEC2 = 21.9
+"""Zenith V-band brightness of a dark moonless site [mag/arcsec^2] (La Palma, Benn & Ellison
+1998, 21.9 V). Suburban skies are 19-20; the full Moon brightens V by ~3 mag."""
+
+ArrayLike = npt.ArrayLike
+FloatOrArray = Union[float, np.ndarray]
+
+
+# ---------------------------------------------------------------------------------------------
+# validation helpers (shared by psf, targets, presets)
+
+
+def _finite(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a real number; got {name}={value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(v):
+        raise ValueError(f"{name} must be a finite number; got {name}={value!r}")
+    return v
+
+
+def _positive(name: str, value: Any) -> float:
+    v = _finite(name, value)
+    if v <= 0.0:
+        raise ValueError(f"{name} must be > 0; got {name}={value!r}")
+    return v
+
+
+def _non_negative(name: str, value: Any) -> float:
+    v = _finite(name, value)
+    if v < 0.0:
+        raise ValueError(f"{name} must be >= 0; got {name}={value!r}")
+    return v
+
+
+def _array(
+    name: str, value: ArrayLike, *, min_value: float | None = None, strict: bool = False
+) -> np.ndarray:
+    """float64 array, all finite; optionally all >= min_value (> if strict)."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a real number or array of them; got {name}={value!r}") from None
+    if not np.all(np.isfinite(a)):
+        bad = a[~np.isfinite(a)].ravel()[0]
+        raise ValueError(f"{name} must be finite; got {name} containing {bad}")
+    if min_value is not None:
+        bad_mask = a <= min_value if strict else a < min_value
+        if np.any(bad_mask):
+            bad = a[bad_mask].ravel()[0]
+            op = ">" if strict else ">="
+            raise ValueError(f"{name} must be {op} {min_value:g}; got {name} containing {bad:g}")
+    return a
+
+
+def _scalar_or_array(a: np.ndarray) -> FloatOrArray:
+    return float(a) if a.ndim == 0 else a
+
+
+# ---------------------------------------------------------------------------------------------
+# photometry without optics
+
+
+def broadband_zero_point_ph_s_m2(lambda_min_m: float, lambda_max_m: float) -> float:
+    """Photons/s/m^2 from a zero-magnitude A0V star (all colours 0) between two wavelengths.
+
+    Integrates N = integral f_nu / (h lambda) d(lambda), with f_nu interpolated linearly
+    between the U..K band centres (0.36-2.22 um; Bessell 1979, Campins et al. 1985). A coarse
+    estimate for unfiltered sensors: e.g. 0.4-1.0 um gives ~4.4e10, against 8.79e9 in V.
+    """
+    lo = _positive("lambda_min_m", lambda_min_m)
+    hi = _positive("lambda_max_m", lambda_max_m)
+    if not lo < hi:
+        raise ValueError(f"need lambda_min_m < lambda_max_m; got {lo:g} and {hi:g}")
+    if lo < _A0V_LAMBDA_M[0] or hi > _A0V_LAMBDA_M[-1]:
+        raise ValueError(
+            f"wavelengths must lie in [{_A0V_LAMBDA_M[0]:g}, {_A0V_LAMBDA_M[-1]:g}] m; "
+            f"got lambda_min_m={lo:g}, lambda_max_m={hi:g}"
+        )
+    lam = np.linspace(lo, hi, 4001)
+    integrand = np.interp(lam, _A0V_LAMBDA_M, _A0V_FNU_JY) * JANSKY_W_M2_HZ / (PLANCK_J_S * lam)
+    return float(np.sum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(lam)))
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Optics:
+    """A lens or telescope in front of a sensor: PSF width, plate scale, photometry, projection.
+
+    Defaults: the paper's lab setup (sec. 3.1), a 41 mm f/1.8 lens on a DAVIS346.
+    """
+
+    focal_length_m: float = 0.041
+    """Focal length f [m]. Paper sec. 3.1: 41 mm (Fujinon 7-70 mm zoom)."""
+    f_number: float = 1.8
+    """Focal ratio N (sets the diffraction PSF, eq. 17). Paper: f/1.8."""
+    pixel_pitch_m: float = DAVIS346_PIXEL_PITCH_M
+    """Pixel pitch [m]. DAVIS346: 18.5 um."""
+    mean_wavelength_m: float = DAVIS346_MEAN_WAVELENGTH_M
+    """Mean wavelength Lambda of the sensitivity range [m] (eq. 17); 0.7 um, an assumption."""
+    extra_blur_sigma_px: float = 0.0
+    """Extra Gaussian blur [px] added in quadrature (defocus, seeing, aberrations, jitter).
+    The diffraction sigma alone is 0.03 px for the paper's setup: real images are wider."""
+    transmission: float = 1.0
+    """Optics throughput in [0, 1] (lens/mirror losses, filters). Not the photodiode's
+    transmission coefficient tau of eq. 2 (Table 3: 0.68), which the engine applies."""
+    aperture_diameter_m: float | None = None
+    """Entrance pupil diameter D [m]; None = focal_length_m / f_number. Used for the
+    collecting area only (the PSF uses f_number)."""
+    obstruction_ratio: float = 0.0
+    """Central obstruction as a fraction of D (telescope secondary mirror), in [0, 1)."""
+    focus_distance_m: float = math.inf
+    """Distance the lens is focused on [m]; inf for the sky. Sets the lens-sensor distance
+    (thin lens), hence the scale of finite-distance scenes and the defocus of other depths."""
+    width_px: int = 346
+    """Sensor width [px] (principal point and field of view). DAVIS346: 346."""
+    height_px: int = 260
+    """Sensor height [px]. DAVIS346: 260."""
+    zero_point_ph_s_m2: float = ZERO_POINT_V_PH_S_M2
+    """Photons/s/m^2 from a magnitude-0 star (default: V band, 8.79e9; see module doc)."""
+
+    def __post_init__(self) -> None:
+        f = _positive("focal_length_m", self.focal_length_m)
+        _positive("f_number", self.f_number)
+        _positive("pixel_pitch_m", self.pixel_pitch_m)
+        _positive("mean_wavelength_m", self.mean_wavelength_m)
+        _non_negative("extra_blur_sigma_px", self.extra_blur_sigma_px)
+        t = _finite("transmission", self.transmission)
+        if not 0.0 < t <= 1.0:
+            raise ValueError(f"transmission must be in (0, 1]; got transmission={self.transmission!r}")
+        eps = _finite("obstruction_ratio", self.obstruction_ratio)
+        if not 0.0 <= eps < 1.0:
+            raise ValueError(
+                f"obstruction_ratio must be in [0, 1); got obstruction_ratio={self.obstruction_ratio!r}"
+            )
+        s = float(self.focus_distance_m)
+        if math.isnan(s) or s <= f:
+            raise ValueError(
+                f"focus_distance_m must exceed focal_length_m={f:g} (or be inf); got focus_distance_m={self.focus_distance_m!r}"
+            )
+        for name in ("width_px", "height_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
+                raise ValueError(f"{name} must be a positive integer; got {name}={v!r}")
+        _positive("zero_point_ph_s_m2", self.zero_point_ph_s_m2)
+        if self.aperture_diameter_m is None:
+            object.__setattr__(self, "aperture_diameter_m", f / float(self.f_number))
+        else:
+            _positive("aperture_diameter_m", self.aperture_diameter_m)
+
+    def replace(self, **changes: Any) -> Optics:
+        """A copy with some fields changed. A derived aperture is derived again unless given."""
+        derived = math.isclose(float(self.aperture_diameter_m), self.focal_length_m / self.f_number)  # type: ignore[arg-type]
+        lens_changed = "focal_length_m" in changes or "f_number" in changes
+        if derived and lens_changed and "aperture_diameter_m" not in changes:
+            changes["aperture_diameter_m"] = None
+        return dataclasses.replace(self, **changes)
+
+    # -- geometry -----------------------------------------------------------------------------
+
+    @property
+    def image_distance_m(self) -> float:
+        """Lens-to-sensor distance v [m]: f when focused at infinity, else f s / (s - f)."""
+        s = self.focus_distance_m
+        f = self.focal_length_m
+        return f if math.isinf(s) else f * s / (s - f)
+
+    @property
+    def plate_scale_rad_per_px(self) -> float:
+        """Angle subtended by one pixel [rad/px]: pitch / v (pitch / f for the sky)."""
+        return self.pixel_pitch_m / self.image_distance_m
+
+    @property
+    def plate_scale_arcsec_per_px(self) -> float:
+        """Plate scale [arcsec/px]."""
+        return self.plate_scale_rad_per_px * ARCSEC_PER_RAD
+
+    @property
+    def field_of_view_rad(self) -> tuple[float, float]:
+        """Full field of view (horizontal, vertical) [rad] of the width_px x height_px sensor."""
+        v = self.image_distance_m
+        return (
+            2.0 * math.atan(0.5 * self.width_px * self.pixel_pitch_m / v),
+            2.0 * math.atan(0.5 * self.height_px * self.pixel_pitch_m / v),
+        )
+
+    @property
+    def principal_point_px(self) -> tuple[float, float]:
+        """Where the optical axis meets the sensor (x, y) [px]: the sensor centre."""
+        return (0.5 * (self.width_px - 1), 0.5 * (self.height_px - 1))
+
+    def project_to_px(
+        self, x_m: ArrayLike, y_m: ArrayLike, z_m: ArrayLike
+    ) -> tuple[FloatOrArray, FloatOrArray]:
+        """Pinhole projection of camera-frame points [m] to pixel coordinates [px].
+
+        ``x_px = cx + v / pitch * x / z`` (and likewise y), with v the lens-sensor distance
+        (``image_distance_m``) and (cx, cy) the sensor centre. z must be > 0 (in front).
+        A point at a depth other than ``focus_distance_m`` is blurred: see ``defocus_sigma_px``.
+        """
+        x = _array("x_m", x_m)
+        y = _array("y_m", y_m)
+        z = _array("z_m", z_m, min_value=0.0, strict=True)
+        k = self.image_distance_m / self.pixel_pitch_m
+        cx, cy = self.principal_point_px
+        return _scalar_or_array(cx + k * x / z), _scalar_or_array(cy + k * y / z)
+
+    def length_to_px(self, length_m: ArrayLike, distance_m: ArrayLike) -> FloatOrArray:
+        """Image size [px] of a length [m] seen face-on at a distance [m] (e.g. a radius)."""
+        length = _array("length_m", length_m)
+        d = _array("distance_m", distance_m, min_value=0.0, strict=True)
+        return _scalar_or_array(length * self.image_distance_m / (d * self.pixel_pitch_m))
+
+    # -- PSF ----------------------------------------------------------------------------------
+
+    @property
+    def diffraction_sigma_px(self) -> float:
+        """Gaussian sigma of the diffraction PSF [px]: 0.45 Lambda N / pitch (paper eq. 17)."""
+        return 0.45 * self.mean_wavelength_m * self.f_number / self.pixel_pitch_m
+
+    @property
+    def psf_sigma_px(self) -> float:
+        """PSF sigma [px]: sqrt(diffraction_sigma_px^2 + extra_blur_sigma_px^2)."""
+        return math.hypot(self.diffraction_sigma_px, self.extra_blur_sigma_px)
+
+    def defocus_sigma_px(self, object_distance_m: ArrayLike) -> FloatOrArray:
+        """Geometric defocus blur of a point at this distance [m], as a Gaussian sigma [px].
+
+        Thin lens: the point focuses at v_o = f d / (d - f) while the sensor sits at v; the
+        blur circle on the sensor has diameter c = D |v_o - v| / v_o, and a uniform disc of
+        diameter c has a per-axis sigma of c / 4. Add it in quadrature to the PSF through
+        ``extra_blur_sigma_px`` if it matters (0 at the focus distance).
+        """
+        d = _array("object_distance_m", object_distance_m)
+        f = self.focal_length_m
+        if np.any(d <= f):
+            raise ValueError(f"object_distance_m must exceed focal_length_m={f:g}; got {object_distance_m!r}")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v_o = np.where(np.isinf(d), f, f * d / (d - f))
+        c = float(self.aperture_diameter_m) * np.abs(v_o - self.image_distance_m) / v_o  # type: ignore[arg-type]
+        return _scalar_or_array(c / 4.0 / self.pixel_pitch_m)
+
+    # -- photometry ---------------------------------------------------------------------------
+
+    @property
+    def collecting_area_m2(self) -> float:
+        """Entrance pupil area [m^2]: pi D^2 / 4 (1 - obstruction_ratio^2)."""
+        d = float(self.aperture_diameter_m)  # type: ignore[arg-type]
+        return math.pi * d * d / 4.0 * (1.0 - self.obstruction_ratio**2)
+
+    @property
+    def _throughput_m2(self) -> float:
+        return self.collecting_area_m2 * self.transmission
+
+    def flux_from_magnitude(self, mag: ArrayLike) -> FloatOrArray:
+        """Photons/s at the focal plane from a star of this magnitude (array-able).
+
+        ``zero_point_ph_s_m2 * 10**(-0.4 mag) * collecting_area_m2 * transmission``; no
+        atmosphere (space-based, or fold the extinction into ``mag``).
+        """
+        m = _array("mag", mag)
+        return _scalar_or_array(self.zero_point_ph_s_m2 * 10.0 ** (-0.4 * m) * self._throughput_m2)
+
+    def magnitude_from_flux(self, flux_ph_s: ArrayLike) -> FloatOrArray:
+        """The inverse of ``flux_from_magnitude``: magnitude of a source giving this flux [ph/s]."""
+        flux = _array("flux_ph_s", flux_ph_s, min_value=0.0, strict=True)
+        return _scalar_or_array(-2.5 * np.log10(flux / (self.zero_point_ph_s_m2 * self._throughput_m2)))
+
+    def flux_from_intensity(self, intensity_ph_s_sr: ArrayLike, distance_m: ArrayLike) -> FloatOrArray:
+        """Photons/s at the focal plane from a small source at a finite distance (a lab LED).
+
+        ``I * A / d^2 * transmission``: radiant intensity I [photons/s/sr] times the solid angle
+        of the entrance pupil seen from the source (valid for D << d: 22.8 mm at 63 cm).
+        """
+        i = _array("intensity_ph_s_sr", intensity_ph_s_sr, min_value=0.0)
+        d = _array("distance_m", distance_m, min_value=0.0, strict=True)
+        return _scalar_or_array(i * self._throughput_m2 / (d * d))
+
+    def background_ph_s_per_px(
+        self, sky_mag_per_arcsec2: ArrayLike = DARK_SKY_V_MAG_PER_ARCSEC2
+    ) -> FloatOrArray:
+        """Uniform sky background [photons/s per pixel] from a surface brightness [mag/arcsec^2].
+
+        ``zero_point * 10**(-0.4 mu) * (plate scale in arcsec)^2 * area * transmission``.
+        Default 21.9 mag/arcsec^2, a dark site in V (Benn & Ellison 1998). For a lab or a
+        measured background give the photons/s per pixel directly to the renderer instead.
+        """
+        mu = _array("sky_mag_per_arcsec2", sky_mag_per_arcsec2)
+        pixel_arcsec2 = self.plate_scale_arcsec_per_px**2
+        return _scalar_or_array(
+            self.zero_point_ph_s_m2 * 10.0 ** (-0.4 * mu) * pixel_arcsec2 * self._throughput_m2
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)

@@ -1,0 +1,482 @@
+"""Targets: where point sources are on the sensor [px] and how bright they are [photons/s].
+
+Every target answers, for an array of times ``t_s`` [s]:
+
+* ``position_px(t_s) -> (x, y)``: arrays shaped like ``t_s``, pixel coordinates (centres at
+  integers, x right, y down: see ``optics``);
+* ``velocity_px_s(t_s) -> (vx, vy)`` [px/s];
+* ``flux_ph_s(t_s)``: photons/s at the focal plane (before fill factor and QE);
+* ``max_speed_px_s(t0_s, t1_s)``: the largest speed on [t0, t1] [px/s], to choose the sample
+  rate so that no target moves more than a fraction of a pixel between samples
+  (DESIGN.md point 10).
+
+Brightness is a constant flux [photons/s] or a ``LightCurve`` (a table of times and fluxes,
+or of magnitudes through an ``Optics``: a tumbling satellite). For a constant magnitude use
+``optics.flux_from_magnitude(mag)``.
+
+Positions are unbounded: a target may leave the sensor (the renderer then skips it).
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal, Union
+
+import numpy as np
+import numpy.typing as npt
+
+from .optics import Optics, _array, _finite, _non_negative, _positive
+
+Outside = Literal["raise", "hold"]
+
+
+def _times(t_s: npt.ArrayLike) -> np.ndarray:
+    return _array("t_s", t_s)
+
+
+def _table(name: str, t_name: str, t: np.ndarray, values: npt.ArrayLike) -> np.ndarray:
+    v = _array(name, values)
+    if v.shape != t.shape:
+        raise ValueError(f"{name} must have the shape of {t_name} {t.shape}; got {v.shape}")
+    return v
+
+
+def _table_times(name: str, t_s: npt.ArrayLike) -> np.ndarray:
+    t = np.array(_array(name, t_s))  # own copy, made read-only below
+    if t.ndim != 1 or t.size < 1:
+        raise ValueError(f"{name} must be a non-empty 1-D array; got shape {t.shape}")
+    if t.size > 1:
+        d = np.diff(t)
+        if np.any(d <= 0.0):
+            k = int(np.flatnonzero(d <= 0.0)[0])
+            raise ValueError(
+                f"{name} must be strictly increasing; got {name}[{k}]={t[k]!r} then {name}[{k + 1}]={t[k + 1]!r}"
+            )
+    t.setflags(write=False)
+    return t
+
+
+def _check_int(name: str, value: object, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {name}={value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True, eq=False)
+class LightCurve:
+    """Flux versus time, interpolated linearly between table points.
+
+    t_s: strictly increasing times [s]; flux_ph_s: photons/s at each, >= 0 (> 0 if
+    ``log_interp``). Outside the table the end values are held; with ``periodic=True`` the
+    table repeats with period ``t_s[-1] - t_s[0]`` (give the closing point: a curve whose
+    last flux differs from its first jumps at each period).
+    log_interp: interpolate ln(flux), i.e. linearly in magnitude (``from_magnitudes``).
+    """
+
+    t_s: np.ndarray
+    flux_ph_s: np.ndarray
+    log_interp: bool = False
+    periodic: bool = False
+
+    def __post_init__(self) -> None:
+        t = _table_times("t_s", self.t_s)
+        flux = np.array(_table("flux_ph_s", "t_s", t, self.flux_ph_s))
+        _array("flux_ph_s", flux, min_value=0.0, strict=self.log_interp)
+        if self.periodic and t.size < 2:
+            raise ValueError(f"a periodic light curve needs at least 2 points; got t_s of size {t.size}")
+        flux.setflags(write=False)
+        object.__setattr__(self, "t_s", t)
+        object.__setattr__(self, "flux_ph_s", flux)
+
+    @classmethod
+    def from_magnitudes(
+        cls, t_s: npt.ArrayLike, magnitude: npt.ArrayLike, optics: Optics, periodic: bool = False
+    ) -> LightCurve:
+        """A light curve given in magnitudes, converted with ``optics.flux_from_magnitude``
+        and interpolated linearly in magnitude."""
+        t = _table_times("t_s", t_s)
+        mag = _table("magnitude", "t_s", t, magnitude)
+        flux = np.asarray(optics.flux_from_magnitude(mag), np.float64).reshape(t.shape)
+        return cls(t, flux, True, periodic)
+
+    def __call__(self, t_s: npt.ArrayLike) -> np.ndarray:
+        """Flux [photons/s] at the times t_s [s] (shape of t_s)."""
+        t = _times(t_s)
+        if self.periodic:
+            t0 = self.t_s[0]
+            t = t0 + np.mod(t - t0, self.t_s[-1] - t0)
+        if self.log_interp:
+            return np.exp(np.interp(t, self.t_s, np.log(self.flux_ph_s)))
+        return np.interp(t, self.t_s, self.flux_ph_s)
+
+
+Brightness = Union[float, LightCurve]
+"""A constant flux [photons/s] or a LightCurve."""
+
+
+def _check_brightness(value: object) -> Brightness:
+    if isinstance(value, LightCurve):
+        return value
+    return _non_negative("brightness", value)
+
+
+def _interval(t0_s: float, t1_s: float) -> tuple[float, float]:
+    t0 = _finite("t0_s", t0_s)
+    t1 = _finite("t1_s", t1_s)
+    if t1 < t0:
+        raise ValueError(f"need t0_s <= t1_s; got t0_s={t0_s!r}, t1_s={t1_s!r}")
+    return t0, t1
+
+
+class Target(abc.ABC):
+    """Common interface of all targets (see the module docstring)."""
+
+    brightness: Brightness
+    label: str
+
+    @abc.abstractmethod
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) [px] at the times t_s [s], each shaped like t_s."""
+
+    @abc.abstractmethod
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """(vx, vy) [px/s] at the times t_s [s]."""
+
+    @abc.abstractmethod
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        """The largest speed [px/s] over [t0_s, t1_s]."""
+
+    def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
+        """Flux [photons/s] at the focal plane at the times t_s [s]."""
+        t = _times(t_s)
+        b = self.brightness
+        if isinstance(b, LightCurve):
+            return b(t)
+        return np.full(t.shape, float(b))
+
+
+@dataclass(frozen=True, eq=False)
+class StaticTarget(Target):
+    """A source fixed on the sensor (a star seen by a tracking mount, a lab LED at rest)."""
+
+    x_px: float
+    y_px: float
+    brightness: Brightness
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        _finite("x_px", self.x_px)
+        _finite("y_px", self.y_px)
+        object.__setattr__(self, "brightness", _check_brightness(self.brightness))
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        t = _times(t_s)
+        return np.full(t.shape, float(self.x_px)), np.full(t.shape, float(self.y_px))
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        t = _times(t_s)
+        return np.zeros(t.shape), np.zeros(t.shape)
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        _interval(t0_s, t1_s)
+        return 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class LinearTarget(Target):
+    """Constant velocity: ``x = x0 + vx (t - t0)``, ``y = y0 + vy (t - t0)`` [px]."""
+
+    x0_px: float
+    y0_px: float
+    vx_px_s: float
+    vy_px_s: float
+    brightness: Brightness
+    t0_s: float = 0.0
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("x0_px", "y0_px", "vx_px_s", "vy_px_s", "t0_s"):
+            _finite(name, getattr(self, name))
+        object.__setattr__(self, "brightness", _check_brightness(self.brightness))
+
+    @classmethod
+    def from_angular_velocity(
+        cls,
+        x0_px: float,
+        y0_px: float,
+        wx_rad_s: float,
+        wy_rad_s: float,
+        optics: Optics,
+        brightness: Brightness,
+        t0_s: float = 0.0,
+        label: str = "",
+    ) -> LinearTarget:
+        """From an angular rate across the sky [rad/s] through the plate scale. Small-angle:
+        pixel velocity = angular rate / ``optics.plate_scale_rad_per_px``; the tangent-plane
+        stretch (1 + tan^2 of the off-axis angle, ~1 % in the corners of a DAVIS346 behind 41 mm)
+        is neglected."""
+        k = optics.plate_scale_rad_per_px
+        wx = _finite("wx_rad_s", wx_rad_s)
+        wy = _finite("wy_rad_s", wy_rad_s)
+        return cls(x0_px, y0_px, wx / k, wy / k, brightness, t0_s, label)
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        dt = _times(t_s) - self.t0_s
+        return self.x0_px + self.vx_px_s * dt, self.y0_px + self.vy_px_s * dt
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        t = _times(t_s)
+        return np.full(t.shape, float(self.vx_px_s)), np.full(t.shape, float(self.vy_px_s))
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        _interval(t0_s, t1_s)
+        return math.hypot(self.vx_px_s, self.vy_px_s)
+
+
+@dataclass(frozen=True, eq=False)
+class CircularTarget(Target):
+    """Uniform circular motion (the paper's rotating lab sources, sec. 3.1):
+
+    ``x = cx + r cos(w t + phase)``, ``y = cy + r sin(w t + phase)`` [px]. w > 0 turns from
+    +x towards +y, i.e. clockwise on a displayed image (whose y axis points down).
+    """
+
+    centre_x_px: float
+    centre_y_px: float
+    radius_px: float
+    angular_rate_rad_s: float
+    brightness: Brightness
+    phase_rad: float = 0.0
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        _finite("centre_x_px", self.centre_x_px)
+        _finite("centre_y_px", self.centre_y_px)
+        _positive("radius_px", self.radius_px)
+        _finite("angular_rate_rad_s", self.angular_rate_rad_s)
+        _finite("phase_rad", self.phase_rad)
+        object.__setattr__(self, "brightness", _check_brightness(self.brightness))
+
+    @classmethod
+    def with_period(
+        cls,
+        centre_x_px: float,
+        centre_y_px: float,
+        radius_px: float,
+        period_s: float,
+        brightness: Brightness,
+        phase_rad: float = 0.0,
+        reverse: bool = False,
+        label: str = "",
+    ) -> CircularTarget:
+        """From the period of one turn [s] (> 0); ``reverse=True`` turns the other way."""
+        w = 2.0 * math.pi / _positive("period_s", period_s)
+        return cls(centre_x_px, centre_y_px, radius_px, -w if reverse else w, brightness, phase_rad, label)
+
+    @property
+    def period_s(self) -> float:
+        """Time of one turn [s] (inf when not turning)."""
+        w = abs(self.angular_rate_rad_s)
+        return math.inf if w == 0.0 else 2.0 * math.pi / w
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        a = self.angular_rate_rad_s * _times(t_s) + self.phase_rad
+        return self.centre_x_px + self.radius_px * np.cos(a), self.centre_y_px + self.radius_px * np.sin(a)
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        a = self.angular_rate_rad_s * _times(t_s) + self.phase_rad
+        v = self.radius_px * self.angular_rate_rad_s
+        return -v * np.sin(a), v * np.cos(a)
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        _interval(t0_s, t1_s)
+        return abs(self.angular_rate_rad_s) * self.radius_px
+
+
+def aligned_rotating_targets(
+    centre_x_px: float,
+    centre_y_px: float,
+    radii_px: Sequence[float],
+    angular_rate_rad_s: float,
+    brightness: Brightness | Sequence[Brightness],
+    phase_rad: float = 0.0,
+) -> list[CircularTarget]:
+    """Sources on one rotating bar (the paper's lab scene: aligned rotating light sources).
+
+    radii_px: signed distances along the bar [px], non-zero; a negative radius puts the source
+    on the other side of the centre (phase + pi). brightness: one for all or one per source.
+    """
+    radii = [_finite(f"radii_px[{k}]", r) for k, r in enumerate(radii_px)]
+    if isinstance(brightness, (LightCurve, int, float, np.floating, np.integer)):
+        levels: list[Brightness] = [brightness] * len(radii)  # type: ignore[list-item]
+    else:
+        levels = list(brightness)
+        if len(levels) != len(radii):
+            raise ValueError(
+                f"brightness must be one value or one per radius ({len(radii)}); got {len(levels)}"
+            )
+    out = []
+    for k, (r, b) in enumerate(zip(radii, levels)):
+        if r == 0.0:
+            raise ValueError(f"radii_px[{k}] must be non-zero (a source on the axis does not move); got 0")
+        phase = phase_rad if r > 0 else phase_rad + math.pi
+        out.append(
+            CircularTarget(centre_x_px, centre_y_px, abs(r), angular_rate_rad_s, b, phase, label=f"bar[{k}]")
+        )
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class TabulatedTarget(Target):
+    """A trajectory given as a table (t_s, x_px, y_px), interpolated linearly.
+
+    outside: times outside [t_s[0], t_s[-1]] either ``"raise"`` (default: a ValueError naming
+    the time, so a simulation longer than its ephemeris fails loudly) or ``"hold"`` (the end
+    positions, at rest).
+    """
+
+    t_s: np.ndarray
+    x_px: np.ndarray
+    y_px: np.ndarray
+    brightness: Brightness
+    outside: Outside = "raise"
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        t = _table_times("t_s", self.t_s)
+        x = np.array(_table("x_px", "t_s", t, self.x_px))
+        y = np.array(_table("y_px", "t_s", t, self.y_px))
+        if self.outside not in ("raise", "hold"):
+            raise ValueError(f"outside must be 'raise' or 'hold'; got outside={self.outside!r}")
+        x.setflags(write=False)
+        y.setflags(write=False)
+        object.__setattr__(self, "t_s", t)
+        object.__setattr__(self, "x_px", x)
+        object.__setattr__(self, "y_px", y)
+        object.__setattr__(self, "brightness", _check_brightness(self.brightness))
+
+    def _check_range(self, t: np.ndarray, name: str = "t_s") -> None:
+        if self.outside == "raise" and t.size:
+            lo, hi = float(t.min()), float(t.max())
+            if lo < self.t_s[0] or hi > self.t_s[-1]:
+                bad = lo if lo < self.t_s[0] else hi
+                what = f"TabulatedTarget {self.label!r}" if self.label else "TabulatedTarget"
+                raise ValueError(
+                    f"{name}={bad!r} is outside the table [{self.t_s[0]!r}, {self.t_s[-1]!r}] s of {what} (outside='raise')"
+                )
+
+    def _segment_velocity(self) -> tuple[np.ndarray, np.ndarray]:
+        dt = np.diff(self.t_s)
+        return np.diff(self.x_px) / dt, np.diff(self.y_px) / dt
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        t = _times(t_s)
+        self._check_range(t)
+        return np.interp(t, self.t_s, self.x_px), np.interp(t, self.t_s, self.y_px)
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity of the segment containing each time (the later one at an inner table
+        point, the last one at the last point; 0 outside the table with outside='hold')."""
+        t = _times(t_s)
+        self._check_range(t)
+        if self.t_s.size < 2:
+            return np.zeros(t.shape), np.zeros(t.shape)
+        vx, vy = self._segment_velocity()
+        k = np.clip(np.searchsorted(self.t_s, t, side="right") - 1, 0, self.t_s.size - 2)
+        inside = (t >= self.t_s[0]) & (t <= self.t_s[-1])
+        return np.where(inside, vx[k], 0.0), np.where(inside, vy[k], 0.0)
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        t0, t1 = _interval(t0_s, t1_s)
+        self._check_range(np.array([t0, t1]), "t0_s/t1_s")
+        if self.t_s.size < 2:
+            return 0.0
+        vx, vy = self._segment_velocity()
+        speed = np.hypot(vx, vy)
+        touch = (self.t_s[1:] >= t0) & (self.t_s[:-1] <= t1)
+        return float(speed[touch].max()) if np.any(touch) else 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def random_star_field(
+    width: int,
+    height: int,
+    optics: Optics,
+    n_stars: int | None = None,
+    density_per_deg2: float | None = None,
+    mag_min: float = 6.0,
+    mag_max: float = 12.0,
+    counts_slope: float = 0.4,
+    seed: int = 0,
+) -> list[StaticTarget]:
+    """Random stars, uniform over the sensor, with power-law magnitude counts.
+
+    Give exactly one of ``n_stars`` or ``density_per_deg2`` (stars per square degree between
+    mag_min and mag_max; the count is then Poisson over the ``width x height`` pixel field at
+    ``optics.plate_scale_rad_per_px``). Magnitudes follow dN/dm ~ 10^(counts_slope m) on
+    [mag_min, mag_max]: 0.6 is a uniform Euclidean population; all-sky star counts grow by
+    roughly 0.4-0.5 dex per magnitude for 6 < V < 15 (an approximation: the slope flattens
+    towards faint magnitudes and depends on galactic latitude). Fluxes come from
+    ``optics.flux_from_magnitude``; each star's label is ``"star <k> mag=<m>"``.
+    Positions cover the whole sensor area, x in [-0.5, width - 0.5), y likewise.
+    The same arguments and seed give the same stars (numpy ``default_rng(seed)``, PCG64).
+    """
+    width = _check_int("width", width, 1)
+    height = _check_int("height", height, 1)
+    lo = _finite("mag_min", mag_min)
+    hi = _finite("mag_max", mag_max)
+    if not lo <= hi:
+        raise ValueError(f"need mag_min <= mag_max; got mag_min={mag_min!r}, mag_max={mag_max!r}")
+    alpha = _non_negative("counts_slope", counts_slope)
+    seed = _check_int("seed", seed, 0)
+    if (n_stars is None) == (density_per_deg2 is None):
+        raise ValueError(
+            f"give exactly one of n_stars and density_per_deg2; got n_stars={n_stars!r}, density_per_deg2={density_per_deg2!r}"
+        )
+    rng = np.random.default_rng(seed)
+    if n_stars is not None:
+        n = _check_int("n_stars", n_stars, 0)
+    else:
+        density = _non_negative("density_per_deg2", density_per_deg2)
+        px_deg = math.degrees(optics.plate_scale_rad_per_px)
+        n = int(rng.poisson(density * width * height * px_deg * px_deg))
+    x = rng.uniform(-0.5, width - 0.5, n)
+    y = rng.uniform(-0.5, height - 0.5, n)
+    u = rng.uniform(0.0, 1.0, n)
+    if alpha == 0.0 or hi == lo:
+        mag = lo + (hi - lo) * u
+    else:
+        # inverse CDF of dN/dm ~ 10^(alpha m) on [lo, hi], relative to lo (no overflow)
+        mag = lo + np.log10(1.0 + u * (10.0 ** (alpha * (hi - lo)) - 1.0)) / alpha
+    flux = np.asarray(optics.flux_from_magnitude(mag), np.float64).reshape(-1)
+    return [
+        StaticTarget(float(x[k]), float(y[k]), float(flux[k]), label=f"star {k} mag={mag[k]:.3f}")
+        for k in range(n)
+    ]
+
+
+def sample_targets(
+    targets: Sequence[Target], t_s: npt.ArrayLike
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions [px] and fluxes [photons/s] of all targets at the times t_s [s]: (x, y, flux),
+    each (T, S), ready for ``psf.render_frames``."""
+    t = _times(t_s).reshape(-1)
+    n = len(targets)
+    x = np.empty((t.size, n))
+    y = np.empty((t.size, n))
+    f = np.empty((t.size, n))
+    for k, target in enumerate(targets):
+        x[:, k], y[:, k] = target.position_px(t)
+        f[:, k] = target.flux_ph_s(t)
+    return x, y, f
+
+
+def max_speed_px_s(targets: Sequence[Target], t0_s: float, t1_s: float) -> float:
+    """The largest speed of any of the targets over [t0_s, t1_s] [px/s] (0 for none)."""
+    _interval(t0_s, t1_s)
+    return max((target.max_speed_px_s(t0_s, t1_s) for target in targets), default=0.0)
