@@ -1,0 +1,255 @@
+"""Statistics of an event recording (NumPy only, vectorised): the quantities of the paper's
+section 3.3 -- total, ON and OFF counts and their ratio (Table 4), the event rate over time,
+and the per-pixel event counts with their histograms (Fig. 7).
+
+Events are arrays of :data:`evstwin.EVENT_DTYPE` (``t`` [us, int64], ``x``, ``y`` [px],
+``p`` [1 = ON, 0 = OFF]), sorted by ``t``. Nothing here loops over events in Python.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+KINDS: tuple[str, str, str] = ("total", "on", "off")
+"""The three event populations every per-pixel statistic is given for."""
+
+
+@dataclass(frozen=True)
+class RecordingStats:
+    """Summary numbers of one recording (the columns of the paper's Table 4, and a few more).
+
+    ``on_off_ratio`` is ON / OFF. When OFF = 0 it is ``inf`` if ON > 0 and ``nan`` if the
+    recording has no events at all (``to_dict`` keeps them as floats; JSON writers turn them
+    into ``null``).
+    ``duration_s`` is the recording length [s]: given by the caller (a file's header) or, by
+    default, last minus first event time. ``mean_rate_hz`` = total / duration_s [events/s]
+    (``nan`` when the duration is 0).
+    """
+
+    total: int
+    on: int
+    off: int
+    on_off_ratio: float
+    duration_s: float
+    t_start_us: int
+    t_end_us: int
+    width: int
+    height: int
+    mean_rate_hz: float
+
+    @property
+    def pixel_count(self) -> int:
+        return self.width * self.height
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def _check_events(events: np.ndarray) -> np.ndarray:
+    events = np.asarray(events)
+    names = events.dtype.names or ()
+    missing = [f for f in ("t", "x", "y", "p") if f not in names]
+    if events.ndim != 1 or missing:
+        raise ValueError(
+            f"events must be a 1-D structured array with fields t, x, y, p; got shape "
+            f"{events.shape}, dtype {events.dtype} (missing {missing})"
+        )
+    return events
+
+
+def _check_size(width: int, height: int) -> tuple[int, int]:
+    width, height = int(width), int(height)
+    if width <= 0 or height <= 0:
+        raise ValueError(f"sensor size must be positive; got width={width}, height={height}")
+    return width, height
+
+
+def ratio(on: float, off: float) -> float:
+    """ON / OFF with the policy of :class:`RecordingStats` (inf if only ON, nan if empty)."""
+    if off == 0:
+        return math.inf if on > 0 else math.nan
+    return float(on) / float(off)
+
+
+def stats(events: np.ndarray, width: int, height: int, duration_s: float | None = None) -> RecordingStats:
+    """Total, ON, OFF, ON/OFF ratio, time span and mean rate of a recording.
+
+    duration_s: recording length [s]; default: (last - first event time), 0 for fewer than
+        two events.
+    """
+    events = _check_events(events)
+    width, height = _check_size(width, height)
+    total = int(events.size)
+    on = int(np.count_nonzero(events["p"])) if total else 0
+    off = total - on
+    t_start = int(events["t"][0]) if total else 0
+    t_end = int(events["t"][-1]) if total else 0
+    if duration_s is None:
+        duration_s = (t_end - t_start) * 1e-6
+    duration_s = float(duration_s)
+    if duration_s < 0:
+        raise ValueError(f"duration_s must be >= 0; got {duration_s}")
+    rate = total / duration_s if duration_s > 0 else math.nan
+    return RecordingStats(
+        total=total,
+        on=on,
+        off=off,
+        on_off_ratio=ratio(on, off),
+        duration_s=duration_s,
+        t_start_us=t_start,
+        t_end_us=t_end,
+        width=width,
+        height=height,
+        mean_rate_hz=rate,
+    )
+
+
+def event_rate(
+    events: np.ndarray, bin_s: float, t_start_us: int | None = None, t_end_us: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ON and OFF event rates in consecutive time bins.
+
+    Bins are ``bin_s`` [s] wide, the first starting at ``t_start_us`` (default: the first
+    event). Only whole bins are kept: the bins end at or before ``t_end_us`` (default: the
+    last event + 1 us), and a tail shorter than one bin is left out, so a partial last bin
+    never reads as a drop of the rate. If the recording is shorter than one bin, the single
+    bin's rate is its count / the recording's span.
+
+    Returns (t_centres_s, on_rate_hz, off_rate_hz): bin centres [s] relative to the start,
+    and rates [events/s]. Empty arrays for an empty recording.
+    """
+    events = _check_events(events)
+    if not bin_s > 0:
+        raise ValueError(f"bin_s must be > 0; got {bin_s}")
+    if events.size == 0:
+        empty = np.zeros(0)
+        return empty, empty.copy(), empty.copy()
+    t = events["t"].astype(np.int64)
+    t0 = int(t[0]) if t_start_us is None else int(t_start_us)
+    t1 = int(t[-1]) + 1 if t_end_us is None else int(t_end_us)
+    if t0 > int(t[0]):
+        raise ValueError(f"t_start_us={t0} is after the first event (t={int(t[0])} us)")
+    if t1 <= t0:
+        raise ValueError(f"t_end_us={t1} must be after t_start_us={t0}")
+    bin_us = bin_s * 1e6
+    n = int(np.floor((t1 - t0) / bin_us))
+    width_s = bin_s
+    if n == 0:
+        n, width_s = 1, (t1 - t0) * 1e-6
+    idx = np.floor((t - t0) / bin_us).astype(np.int64)
+    keep = idx < n
+    is_on = events["p"] != 0
+    on = np.bincount(idx[keep & is_on], minlength=n)
+    off = np.bincount(idx[keep & ~is_on], minlength=n)
+    centres = (np.arange(n) + 0.5) * bin_s if width_s == bin_s else np.array([0.5 * width_s])
+    return centres, on / width_s, off / width_s
+
+
+def pixel_counts(events: np.ndarray, width: int, height: int) -> dict[str, np.ndarray]:
+    """Number of events of each pixel: {'total', 'on', 'off'} -> (height, width) int64 arrays.
+
+    Raises ValueError if an event lies outside the width x height sensor.
+    """
+    events = _check_events(events)
+    width, height = _check_size(width, height)
+    x = events["x"].astype(np.int64)
+    y = events["y"].astype(np.int64)
+    if events.size and (x.max() >= width or y.max() >= height):
+        raise ValueError(
+            f"events reach pixel (x={int(x.max())}, y={int(y.max())}) outside the {width}x{height} sensor"
+        )
+    flat = y * width + x
+    is_on = events["p"] != 0
+    n = width * height
+    on = np.bincount(flat[is_on], minlength=n).reshape(height, width)
+    off = np.bincount(flat[~is_on], minlength=n).reshape(height, width)
+    return {"total": on + off, "on": on, "off": off}
+
+
+def histogram_edges(bin_width: float, max_value: float) -> np.ndarray:
+    """Bin edges 0, w, 2w, ... with the last bin [k w, (k+1) w) holding ``max_value``."""
+    if not bin_width > 0:
+        raise ValueError(f"bin_width must be > 0; got {bin_width}")
+    if not max_value >= 0:
+        raise ValueError(f"max_value must be >= 0; got {max_value}")
+    nbins = int(np.floor(max_value / bin_width)) + 1
+    return np.arange(nbins + 1) * float(bin_width)
+
+
+def count_histogram(
+    counts: npt.ArrayLike,
+    bin_width: float = 2,
+    max_count: float | None = None,
+    normalise: bool = True,
+    per_second: bool = False,
+    duration_s: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distribution over pixels of the per-pixel event count (the paper's Fig. 7).
+
+    counts: per-pixel counts (any shape; every pixel is one sample, pixels with no event
+        included -- they fill the first bin).
+    bin_width: bin width; bins are [0, w), [w, 2w), ... (the paper uses w = 2 events).
+    max_count: value the last bin must hold (default: the largest count); larger values are
+        counted in the last bin, so the frequencies always cover every pixel. Give the same
+        ``max_count`` to recordings that are to be compared bin by bin.
+    normalise: if True the frequencies are fractions of the pixels (they sum to 1, not a
+        density: no division by the bin width), so recordings compare by shape and the
+        difference of two is directly a share of the sensor's pixel count (Fig. 9). If False
+        they are numbers of pixels.
+    per_second: if True the counts are first divided by ``duration_s`` (required), i.e. the
+        histogram is of per-pixel event rates [events/s] and ``bin_width`` and ``max_count``
+        are in events/s too; recordings of different lengths then compare by rate.
+
+    Returns (edges, frequencies): ``len(edges) == len(frequencies) + 1``.
+    """
+    values = np.asarray(counts, dtype=np.float64).ravel()
+    if per_second:
+        if duration_s is None or not duration_s > 0:
+            raise ValueError(f"per_second=True needs duration_s > 0; got {duration_s}")
+        values = values / float(duration_s)
+    if values.size and values.min() < 0:
+        raise ValueError("counts must be >= 0")
+    if max_count is None:
+        max_count = float(values.max()) if values.size else 0.0
+    edges = histogram_edges(bin_width, float(max_count))
+    nbins = edges.size - 1
+    idx = np.minimum(np.floor(values / float(bin_width)).astype(np.int64), nbins - 1)
+    freq = np.bincount(idx, minlength=nbins).astype(np.float64)
+    if normalise and values.size:
+        freq /= values.size
+    return edges, freq
+
+
+def wasserstein_1(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
+    """1-Wasserstein distance between the distributions of two equal-size samples
+    (mean |sorted(a) - sorted(b)|), in the samples' unit: for two per-pixel count maps of the
+    same sensor, the mean number of events one pixel has to gain or lose to turn one
+    distribution into the other. Unbinned, so smooth in the counts (a tuner's friend)."""
+    a = np.sort(np.asarray(a, dtype=np.float64).ravel())
+    b = np.sort(np.asarray(b, dtype=np.float64).ravel())
+    if a.size != b.size:
+        raise ValueError(f"samples must have equal sizes; got {a.size} and {b.size}")
+    if a.size == 0:
+        return 0.0
+    return float(np.mean(np.abs(a - b)))
+
+
+def accumulate_frame(
+    events: np.ndarray, width: int, height: int, t_start_us: int, t_end_us: int
+) -> dict[str, np.ndarray]:
+    """Per-pixel ON/OFF/total counts of the events with t_start_us <= t < t_end_us
+    (an accumulated "frame", the paper's Fig. 5)."""
+    events = _check_events(events)
+    lo, hi = np.searchsorted(events["t"], [t_start_us, t_end_us], side="left")
+    return pixel_counts(events[lo:hi], width, height)
+
+
+def time_slice(events: np.ndarray, t_start_us: int, t_end_us: int) -> np.ndarray:
+    """The events with t_start_us <= t < t_end_us (a view; events are sorted by t)."""
+    events = _check_events(events)
+    lo, hi = np.searchsorted(events["t"], [t_start_us, t_end_us], side="left")
+    return events[lo:hi]
