@@ -1,0 +1,471 @@
+"""Scenarios: a scene, a sensor with its biases, and how to sample it, as TOML.
+
+The tables mirror the Python objects:
+
+``[sensor]``      ``preset`` (``davis346`` | ``imx636``), optional ``width``/``height`` (a
+                  smaller window of the sensor), ``bias_set`` (a name from
+                  ``evstwin.presets.BIAS_SETS``), ``k`` (eq. 8-9 factor).
+``[biases]``      bias currents in amperes (``i_on_a`` ... ``i_refr_a``), overriding the set.
+``[pixel]``       any ``PixelParams`` field by name; overrides what biases and preset derive.
+``[optics]``      ``Optics`` fields (``focal_length_m``, ``f_number``, ``extra_blur_sigma_px``...).
+``[sampling]``    ``rate_hz`` (the floor rate of the whole array), ``max_shift_px`` (default
+                  0.25: no target moves further between samples), ``sparse`` (sub-sample only
+                  the pixels near moving targets; default true), ``chunk_samples``.
+``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
+``[[targets]]``   ``kind`` = ``static`` | ``linear`` | ``circular`` | ``rotating_bar`` |
+                  ``tabulated``, its geometry, and one brightness: ``flux_ph_s``,
+                  ``magnitude`` or ``light_curve = {t_s = [...], flux_ph_s|magnitude = [...]}``.
+``[star_field]``  a random star field (``n_stars`` or ``density_per_deg2``, magnitudes, seed).
+
+Top level: ``name``, ``description``, ``duration_s``, ``seed``, and ``base`` (a built-in
+scenario this one starts from; its tables are merged key by key).
+
+A scenario stays a plain nested dict until ``build`` turns it into objects, so the resolved
+dict can be written beside the events and read back; ``set_value`` applies the CLI's
+``--set key=value``. Every error is one line naming the key and what it accepts.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import sys
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Optional, Union
+
+import numpy as np
+
+from .optics import Optics
+from .pixel import PixelParams
+from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
+from .targets import (
+    CircularTarget,
+    LightCurve,
+    LinearTarget,
+    StaticTarget,
+    TabulatedTarget,
+    Target,
+    aligned_rotating_targets,
+    random_star_field,
+)
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+ARCSEC_RAD = math.pi / (180.0 * 3600.0)
+
+
+class ScenarioError(ValueError):
+    """A scenario key with a bad value: the message names the key and what it accepts."""
+
+
+_BIAS_KEYS = ("i_on_a", "i_off_a", "i_diff_a", "i_pr_a", "i_sf_a", "i_refr_a")
+_OPTICS_KEYS = tuple(
+    f.name for f in dataclasses.fields(Optics) if f.name not in ("width_px", "height_px", "pixel_pitch_m")
+)
+_BRIGHTNESS_KEYS = ("flux_ph_s", "magnitude", "light_curve")
+_TARGET_KEYS: dict[str, tuple[str, ...]] = {
+    "static": ("x_px", "y_px"),
+    "linear": ("x0_px", "y0_px", "vx_px_s", "vy_px_s", "wx_arcsec_s", "wy_arcsec_s", "t0_s"),
+    "circular": ("centre_x_px", "centre_y_px", "radius_px", "radius_m", "distance_m", "period_s",
+                 "angular_rate_rad_s", "phase_rad"),
+    "rotating_bar": ("centre_x_px", "centre_y_px", "radii_px", "radii_m", "distance_m", "period_s",
+                     "angular_rate_rad_s", "phase_rad"),
+    "tabulated": ("t_s", "x_px", "y_px", "outside"),
+}
+SCHEMA: dict[str, Any] = {
+    "name": str,
+    "description": str,
+    "base": str,
+    "duration_s": float,
+    "seed": int,
+    "sensor": {"preset": str, "width": int, "height": int, "bias_set": str, "k": float},
+    "biases": {k: float for k in _BIAS_KEYS},
+    "pixel": {name: Any for name in PixelParams.field_names()},
+    "optics": {k: Any for k in _OPTICS_KEYS},
+    "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int},
+    "background": {"photon_rate_ph_s": float, "sky_mag_per_arcsec2": float},
+    "targets": list,
+    "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
+                   "counts_slope": float, "seed": int},
+}
+DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50}
+
+
+# -- loading ------------------------------------------------------------------------------------
+
+
+def builtin_names() -> list[str]:
+    """Names of the built-in scenarios (``evstwin scenarios``)."""
+    folder = resources.files("evstwin") / "scenarios"
+    return sorted(p.name[: -len(".toml")] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load(source: Union[str, Path, dict]) -> dict[str, Any]:
+    """A resolved scenario dict from a built-in name, a TOML path or a dict (validated)."""
+    if isinstance(source, dict):
+        raw = copy.deepcopy(source)
+    else:
+        raw = _read_toml(source)
+    return resolve(raw)
+
+
+def _read_toml(source: Union[str, Path]) -> dict[str, Any]:
+    text_source = str(source)
+    path = Path(text_source)
+    if text_source in builtin_names():
+        text = (resources.files("evstwin") / "scenarios" / f"{text_source}.toml").read_text()
+        where = f"built-in scenario {text_source!r}"
+    elif path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ScenarioError(f"scenario file {text_source!r} does not exist")
+        text = path.read_text()
+        where = str(path)
+    else:
+        raise ScenarioError(
+            f"scenario must be a built-in name ({', '.join(builtin_names())}) or a .toml path; got {text_source!r}"
+        )
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{where}: invalid TOML: {exc}") from None
+
+
+def resolve(raw: dict[str, Any]) -> dict[str, Any]:
+    """Merge ``base`` chains, fill defaults and check every key (raises ScenarioError)."""
+    seen: list[str] = []
+    while "base" in raw:
+        base_name = raw.pop("base")
+        if not isinstance(base_name, str) or base_name not in builtin_names():
+            raise ScenarioError(f"base must name a built-in scenario ({', '.join(builtin_names())}); got {base_name!r}")
+        if base_name in seen:
+            raise ScenarioError(f"base scenarios form a cycle: {' -> '.join(seen + [base_name])}")
+        seen.append(base_name)
+        raw = _merge(_read_toml(base_name), raw)
+    _check_keys(raw)
+    out = copy.deepcopy(raw)
+    out.setdefault("name", "scenario")
+    out.setdefault("duration_s", 1.0)
+    out.setdefault("seed", 0)
+    out.setdefault("sensor", {}).setdefault("preset", "davis346")
+    sampling = dict(DEFAULT_SAMPLING)
+    sampling.update(out.get("sampling", {}))
+    out["sampling"] = sampling
+    out.setdefault("targets", [])
+    _check_values(out)
+    return out
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def _check_keys(raw: dict[str, Any]) -> None:
+    for key, value in raw.items():
+        if key not in SCHEMA:
+            raise ScenarioError(f"unknown scenario key {key!r}; allowed: {', '.join(SCHEMA)}")
+        spec = SCHEMA[key]
+        if isinstance(spec, dict):
+            if not isinstance(value, dict):
+                raise ScenarioError(f"{key} must be a table; got {value!r}")
+            for sub in value:
+                if sub not in spec:
+                    raise ScenarioError(f"unknown scenario key '{key}.{sub}'; allowed: {', '.join(spec)}")
+        elif spec is list:
+            if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+                raise ScenarioError(f"{key} must be an array of tables ([[{key}]]); got {value!r}")
+            for i, target in enumerate(value):
+                _check_target_keys(i, target)
+
+
+def _check_target_keys(i: int, target: dict[str, Any]) -> None:
+    kind = target.get("kind")
+    if kind not in _TARGET_KEYS:
+        raise ScenarioError(f"targets[{i}].kind must be one of {', '.join(_TARGET_KEYS)}; got {kind!r}")
+    allowed = ("kind", "label") + _TARGET_KEYS[kind] + _BRIGHTNESS_KEYS
+    for key in target:
+        if key not in allowed:
+            raise ScenarioError(f"unknown scenario key 'targets[{i}].{key}' for kind {kind!r}; allowed: {', '.join(allowed)}")
+    given = [k for k in _BRIGHTNESS_KEYS if k in target]
+    if len(given) != 1:
+        raise ScenarioError(
+            f"targets[{i}] needs exactly one of {', '.join(_BRIGHTNESS_KEYS)}; got {', '.join(given) or 'none'}"
+        )
+
+
+def _check_values(s: dict[str, Any]) -> None:
+    def number(key: str, value: Any, lo: float = -math.inf, hi: float = math.inf, lo_open: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(f"{key} must be a number; got {value!r}")
+        v = float(value)
+        if not (v > lo if lo_open else v >= lo) or not v <= hi or math.isnan(v):
+            bound = f"> {lo:g}" if lo_open else f">= {lo:g}"
+            extra = f" and <= {hi:g}" if hi < math.inf else ""
+            raise ScenarioError(f"{key} must be {bound}{extra}; got {value!r}")
+        return v
+
+    number("duration_s", s["duration_s"], 0.0, 1e7, lo_open=True)
+    if isinstance(s["seed"], bool) or not isinstance(s["seed"], int) or not 0 <= s["seed"] < 2**64:
+        raise ScenarioError(f"seed must be an integer in [0, 2**64); got {s['seed']!r}")
+    preset = s["sensor"]["preset"]
+    if not isinstance(preset, str) or preset.lower() not in PRESETS:
+        raise ScenarioError(f"sensor.preset must be one of {', '.join(sorted(PRESETS))}; got {preset!r}")
+    sp = s["sampling"]
+    number("sampling.rate_hz", sp["rate_hz"], 0.0, 1e7, lo_open=True)
+    number("sampling.max_shift_px", sp["max_shift_px"], 0.0, 1e6, lo_open=True)  # large = no adaptation
+    if not isinstance(sp["sparse"], bool):
+        raise ScenarioError(f"sampling.sparse must be true or false; got {sp['sparse']!r}")
+    if isinstance(sp["chunk_samples"], bool) or not isinstance(sp["chunk_samples"], int) or sp["chunk_samples"] < 1:
+        raise ScenarioError(f"sampling.chunk_samples must be an integer >= 1; got {sp['chunk_samples']!r}")
+    bg = s.get("background", {})
+    if len(bg) > 1:
+        raise ScenarioError("background takes one of photon_rate_ph_s or sky_mag_per_arcsec2, not both")
+    if "photon_rate_ph_s" in bg:
+        number("background.photon_rate_ph_s", bg["photon_rate_ph_s"], 0.0, 1e20)
+    if "sky_mag_per_arcsec2" in bg:
+        number("background.sky_mag_per_arcsec2", bg["sky_mag_per_arcsec2"], -30.0, 40.0)
+    for i, t in enumerate(s["targets"]):
+        if "flux_ph_s" in t:
+            number(f"targets[{i}].flux_ph_s", t["flux_ph_s"], 0.0, 1e25)
+        if "magnitude" in t:
+            number(f"targets[{i}].magnitude", t["magnitude"], -30.0, 40.0)
+
+
+# -- --set ----------------------------------------------------------------------------------------
+
+
+def parse_assignment(text: str) -> tuple[str, Any]:
+    """``'pixel.theta_on=0.25'`` -> ``('pixel.theta_on', 0.25)``; the value is read as a TOML
+    value (numbers, booleans, strings in quotes, arrays), else taken as a bare string."""
+    if "=" not in text:
+        raise ScenarioError(f"--set takes key=value (e.g. pixel.theta_on=0.25); got {text!r}")
+    key, _, value_text = text.partition("=")
+    key = key.strip()
+    try:
+        value = tomllib.loads(f"v = {value_text.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = value_text.strip()
+    return key, value
+
+
+def set_value(scenario: dict[str, Any], key: str, value: Any) -> dict[str, Any]:
+    """A copy of the (resolved) scenario with one dotted key set, re-validated.
+    ``targets.0.flux_ph_s`` addresses the first target."""
+    out = copy.deepcopy(scenario)
+    parts = key.split(".")
+    node: Any = out
+    for depth, part in enumerate(parts[:-1]):
+        path = ".".join(parts[: depth + 1])
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise ScenarioError(f"{path}: index must be 0..{len(node) - 1}; got {part!r}")
+            node = node[int(part)]
+        else:
+            if part not in node:
+                if depth == 0 and part in SCHEMA and isinstance(SCHEMA[part], dict):
+                    node[part] = {}
+                else:
+                    allowed = SCHEMA if depth == 0 else node
+                    raise ScenarioError(f"unknown scenario key {path!r}; allowed: {', '.join(allowed)}")
+            node = node[part]
+    last = parts[-1]
+    if isinstance(node, list):
+        raise ScenarioError(f"{key}: give a field of one element, e.g. {key}.0.<field>")
+    if last == "cutoff_hz" and parts[0] == "pixel" and value in ("none", "None", "off"):
+        value = None
+    if node is out and last not in SCHEMA:
+        raise ScenarioError(f"unknown scenario key {key!r}; allowed: {', '.join(SCHEMA)}")
+    node[last] = value
+    if out.get("pixel", {}).get("cutoff_hz", 0) is None:
+        # TOML has no null: a cutoff of None is written as the string "none" in the dict.
+        out["pixel"]["cutoff_hz"] = "none"
+    return resolve(out)
+
+
+# -- building ----------------------------------------------------------------------------------
+
+
+@dataclass
+class Scene:
+    """A scenario turned into objects, ready to simulate."""
+
+    scenario: dict[str, Any]
+    preset: SensorPreset
+    width: int
+    height: int
+    params: PixelParams
+    optics: Optics
+    targets: list[Target]
+    background_ph_s: float
+    duration_s: float
+    seed: int
+    rate_hz: float
+    max_shift_px: float
+    sparse: bool
+    chunk_samples: int
+
+    @property
+    def psf_sigma_px(self) -> float:
+        return float(self.optics.psf_sigma_px)
+
+
+def _wrap(key: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
+    try:
+        return fn(*args, **kwargs)
+    except (ValueError, TypeError) as exc:
+        raise ScenarioError(f"{key}: {exc}") from None
+
+
+def build(scenario: Union[str, Path, dict], duration_s: Optional[float] = None, seed: Optional[int] = None) -> Scene:
+    """Objects for a scenario (name, path or dict); duration_s and seed override the file's."""
+    s = load(scenario)
+    if duration_s is not None:
+        s = set_value(s, "duration_s", float(duration_s))
+    if seed is not None:
+        s = set_value(s, "seed", int(seed))
+    preset = get_preset(s["sensor"]["preset"])
+    width = int(s["sensor"].get("width", preset.width))
+    height = int(s["sensor"].get("height", preset.height))
+    for name, value, full in (("width", width, preset.width), ("height", height, preset.height)):
+        if not 1 <= value <= full:
+            raise ScenarioError(f"sensor.{name} must be in [1, {full}] for preset {preset.name!r}; got {value}")
+
+    # Pixel: preset defaults <- biases (a set, then single currents) <- [pixel] overrides.
+    params = preset.pixel
+    bias_table = s.get("biases", {})
+    set_name = s["sensor"].get("bias_set")
+    k = s["sensor"].get("k")
+    if set_name or bias_table:
+        base_set = _wrap("sensor.bias_set", get_bias_set, set_name) if set_name else None
+        fields = {} if base_set is None else {f: getattr(base_set, f) for f in _BIAS_KEYS}
+        fields.update(bias_table)
+        missing = [f for f in ("i_on_a", "i_off_a", "i_diff_a") if fields.get(f) is None]
+        if missing:
+            raise ScenarioError(f"biases needs {', '.join(missing)} (or sensor.bias_set); got {sorted(bias_table)}")
+        biases = _wrap("biases", BiasSet, **fields, name=set_name or "custom")
+        derived = _wrap("sensor.k", biases.derived, *(() if k is None else (k,)))
+        params = _wrap("biases", params.replace, **derived)
+    pixel = dict(s.get("pixel", {}))
+    if pixel.get("cutoff_hz") in ("none", "None", "off"):
+        pixel["cutoff_hz"] = None
+    for key, value in pixel.items():
+        if isinstance(value, int) and not isinstance(value, bool):
+            pixel[key] = float(value)
+        params = _wrap(f"pixel.{key}", params.replace, **{key: pixel[key]})
+
+    optics_kw = dict(s.get("optics", {}))
+    optics = _wrap(
+        "optics", preset.optics, optics_kw.pop("focal_length_m", 0.041), optics_kw.pop("f_number", 1.8), **optics_kw
+    )
+    optics = optics.replace(width_px=width, height_px=height)
+
+    targets: list[Target] = []
+    for i, table in enumerate(s["targets"]):
+        targets.extend(_wrap(f"targets[{i}]", _target, table, optics, width, height))
+    if "star_field" in s:
+        sf = dict(s["star_field"])
+        targets.extend(_wrap("star_field", random_star_field, width, height, optics, **sf))
+
+    bg = s.get("background", {})
+    if "sky_mag_per_arcsec2" in bg:
+        background = float(_wrap("background", optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
+    else:
+        background = float(bg.get("photon_rate_ph_s", 0.0))
+    sp = s["sampling"]
+    return Scene(
+        scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
+        background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
+        rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
+        chunk_samples=int(sp["chunk_samples"]),
+    )
+
+
+def _brightness(table: dict[str, Any], optics: Optics) -> Any:
+    if "flux_ph_s" in table:
+        return float(table["flux_ph_s"])
+    if "magnitude" in table:
+        return float(optics.flux_from_magnitude(float(table["magnitude"])))
+    lc = table["light_curve"]
+    if not isinstance(lc, dict) or "t_s" not in lc or len({"flux_ph_s", "magnitude"} & set(lc)) != 1:
+        raise ValueError("light_curve must be a table with t_s and one of flux_ph_s or magnitude")
+    extra = {k: v for k, v in lc.items() if k not in ("t_s", "flux_ph_s", "magnitude")}
+    if "magnitude" in lc:
+        return LightCurve.from_magnitudes(np.asarray(lc["t_s"], float), np.asarray(lc["magnitude"], float), optics, **extra)
+    return LightCurve(np.asarray(lc["t_s"], float), np.asarray(lc["flux_ph_s"], float), **extra)
+
+
+def _length_px(table: dict[str, Any], px_key: str, m_key: str, optics: Optics) -> Any:
+    if px_key in table:
+        return table[px_key]
+    if m_key in table:
+        if "distance_m" not in table:
+            raise ValueError(f"{m_key} needs distance_m (the object distance) to become pixels")
+        return optics.length_to_px(np.asarray(table[m_key], float), float(table["distance_m"]))
+    raise ValueError(f"needs {px_key} or {m_key}")
+
+
+def _rate(table: dict[str, Any]) -> float:
+    if "angular_rate_rad_s" in table:
+        return float(table["angular_rate_rad_s"])
+    if "period_s" in table:
+        period = float(table["period_s"])
+        if not period > 0 or math.isinf(period):
+            raise ValueError(f"period_s must be > 0 and finite; got period_s={table['period_s']!r}")
+        return 2 * math.pi / period
+    raise ValueError("needs period_s or angular_rate_rad_s")
+
+
+def _target(table: dict[str, Any], optics: Optics, width: int, height: int) -> list[Target]:
+    kind = table["kind"]
+    b = _brightness(table, optics)
+    label = str(table.get("label", kind))
+    cx = float(table.get("centre_x_px", (width - 1) / 2))
+    cy = float(table.get("centre_y_px", (height - 1) / 2))
+    if kind == "static":
+        return [StaticTarget(float(table["x_px"]), float(table["y_px"]), b, label=label)]
+    if kind == "linear":
+        if "wx_arcsec_s" in table or "wy_arcsec_s" in table:
+            return [LinearTarget.from_angular_velocity(
+                float(table["x0_px"]), float(table["y0_px"]), float(table.get("wx_arcsec_s", 0.0)) * ARCSEC_RAD,
+                float(table.get("wy_arcsec_s", 0.0)) * ARCSEC_RAD, optics, b, float(table.get("t0_s", 0.0)), label)]
+        return [LinearTarget(float(table["x0_px"]), float(table["y0_px"]), float(table.get("vx_px_s", 0.0)),
+                             float(table.get("vy_px_s", 0.0)), b, float(table.get("t0_s", 0.0)), label)]
+    if kind == "circular":
+        radius = float(_length_px(table, "radius_px", "radius_m", optics))
+        return [CircularTarget(cx, cy, radius, _rate(table), b, float(table.get("phase_rad", 0.0)), label)]
+    if kind == "rotating_bar":
+        radii = [float(r) for r in np.atleast_1d(_length_px(table, "radii_px", "radii_m", optics))]
+        bar = aligned_rotating_targets(cx, cy, radii, _rate(table), b, float(table.get("phase_rad", 0.0)))
+        return [dataclasses.replace(t, label=f"{label}[{j}]") for j, t in enumerate(bar)]
+    return [TabulatedTarget(np.asarray(table["t_s"], float), np.asarray(table["x_px"], float),
+                            np.asarray(table["y_px"], float), b, outside=table.get("outside", "raise"), label=label)]
+
+
+def to_toml(scenario: dict[str, Any]) -> str:
+    """The scenario as TOML text (what ``evstwin simulate`` takes back)."""
+    import tomli_w
+
+    return tomli_w.dumps(_plain(scenario))
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value

@@ -1,0 +1,176 @@
+"""Scenarios and the end-to-end simulation: adaptive and sparse sampling, determinism."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from evstwin.scenario import ScenarioError, build, builtin_names, load, parse_assignment, set_value
+from evstwin.simulate import simulate
+
+NOISE_FREE = {
+    "photon_shot_noise": False,
+    "dark_model": "none",
+    "leak_rate_hz": 0.0,
+    "shot_noise_rate_hz": 0.0,
+    "refractory_s": 0.0,
+}
+
+
+def spinning(rate_hz: float, max_shift_px: float = 0.25, sparse: bool = True, noise: bool = False, **pixel):
+    """A 64 x 48 window with one bright source on a 15 px circle, two turns per second
+    (188 px/s): 250 Hz sampling would move it 0.75 px per sample."""
+    pix = {} if noise else dict(NOISE_FREE)
+    pix.update(pixel)
+    # Noise-free runs have no dark current, so a dim room light keeps the log finite.
+    return {
+        "background": {"photon_rate_ph_s": 3.5e7},
+        "name": "spin",
+        "duration_s": 0.5,
+        "sensor": {"preset": "davis346", "width": 64, "height": 48},
+        "pixel": pix,
+        "optics": {"extra_blur_sigma_px": 0.6},
+        "sampling": {"rate_hz": rate_hz, "max_shift_px": max_shift_px, "sparse": sparse, "chunk_samples": 20},
+        "targets": [{"kind": "circular", "centre_x_px": 32.0, "centre_y_px": 24.0, "radius_px": 15.0,
+                     "period_s": 0.5, "flux_ph_s": 1e9, "label": "led"}],
+    }
+
+
+def test_builtin_scenarios_build() -> None:
+    names = builtin_names()
+    for required in ("mcreynolds", "mcreynolds-run1", "mcreynolds-run2", "mcreynolds-run3", "geo-stare"):
+        assert required in names
+    run3 = build("mcreynolds-run3")
+    assert (round(run3.params.theta_on, 4), round(run3.params.theta_off, 4)) == (0.2577, 0.218)
+    assert run3.params.dark_rate_e_per_s == 290.0 and run3.params.leak_rate_hz == 0.0
+    base = build("mcreynolds")
+    assert len(base.targets) == 5 and base.width == 346 and base.height == 260
+    assert math.isclose(base.params.theta_on, 0.2061, rel_tol=1e-3)
+    geo = build("geo-stare")
+    assert geo.targets[0].label == "geo" and len(geo.targets) == 41
+
+
+def test_set_overrides_one_value_and_names_bad_keys() -> None:
+    s = load("mcreynolds")
+    assert parse_assignment("pixel.theta_on=0.25") == ("pixel.theta_on", 0.25)
+    assert parse_assignment("sensor.bias_set=paper_run_3") == ("sensor.bias_set", "paper_run_3")
+    s2 = set_value(s, "pixel.dark_rate_e_per_s", 290)
+    assert build(s2).params.dark_rate_e_per_s == 290.0
+    assert build(set_value(s, "pixel.theta_on", 0.25)).params.theta_on == 0.25
+    assert build(set_value(s, "targets.0.flux_ph_s", 5e8)).targets[0].flux_ph_s(0.0) == 5e8
+    assert build(set_value(s, "pixel.cutoff_hz", "none")).params.cutoff_hz is None
+    with pytest.raises(ScenarioError, match=r"unknown scenario key 'pixel.theta'; allowed: theta_on"):
+        set_value(s, "pixel.theta", 0.3)
+    with pytest.raises(ScenarioError, match=r"unknown scenario key 'sensr'"):
+        set_value(s, "sensr.preset", "x")
+    with pytest.raises(ScenarioError, match=r"targets.7: index must be 0..0"):
+        set_value(s, "targets.7.flux_ph_s", 1.0)
+
+
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"pixel": {"theta_on": -0.1}}, r"pixel.theta_on: theta_on must be in \[0.001, 10\].*got theta_on=-0.1"),
+        ({"pixel": {"dark_model": "thermal"}}, r"pixel.dark_model: dark_model must be one of 'poisson', 'paper', 'none'"),
+        ({"pixel": {"theta": 0.2}}, r"unknown scenario key 'pixel.theta'"),
+        ({"targets": [{"kind": "circular", "radius_px": 5, "period_s": 1, "flux_ph_s": -1.0}]},
+         r"targets\[0\].flux_ph_s must be >= 0 and <= 1e\+25; got -1.0"),
+        ({"targets": [{"kind": "circular", "radius_px": -5, "period_s": 1, "flux_ph_s": 1.0}]},
+         r"targets\[0\]: radius_px must be > 0"),
+        ({"targets": [{"kind": "comet", "flux_ph_s": 1.0}]}, r"targets\[0\].kind must be one of static, linear"),
+        ({"targets": [{"kind": "static", "x_px": 1, "y_px": 1}]}, r"targets\[0\] needs exactly one of flux_ph_s"),
+        ({"sampling": {"rate_hz": 0}}, r"sampling.rate_hz must be > 0"),
+        ({"sensor": {"preset": "davis240"}}, r"sensor.preset must be one of davis346, imx636; got 'davis240'"),
+        ({"sensor": {"width": 400}}, r"sensor.width must be in \[1, 346\] for preset 'davis346'; got 400"),
+        ({"duration_s": -1}, r"duration_s must be > 0"),
+        ({"biases": {"i_on_a": 1e-9, "i_off_a": 2e-9, "i_diff_a": 5e-9}}, r"biases"),
+    ],
+)
+def test_bad_scenarios_get_one_clear_line(change: dict, message: str) -> None:
+    s = {"name": "bad", "sensor": {"preset": "davis346", "width": 32, "height": 24}}
+    for key, value in change.items():
+        if isinstance(value, dict) and key in s:
+            s[key] = {**s[key], **value}
+        else:
+            s[key] = value
+    with pytest.raises(ScenarioError, match=message) as info:
+        build(s)
+    assert "\n" not in str(info.value)
+
+
+def test_scenario_file_and_base_merge(tmp_path) -> None:
+    path = tmp_path / "mine.toml"
+    path.write_text('base = "mcreynolds"\nname = "mine"\n[pixel]\ntheta_on = 0.3\n[sensor]\nwidth = 100\n')
+    scene = build(path)
+    assert scene.params.theta_on == 0.3 and scene.width == 100 and scene.height == 260
+    assert scene.params.theta_off == pytest.approx(0.093, rel=1e-3)  # from the base's biases
+    (tmp_path / "broken.toml").write_text("name = \n")
+    with pytest.raises(ScenarioError, match="invalid TOML"):
+        build(tmp_path / "broken.toml")
+    with pytest.raises(ScenarioError, match="does not exist"):
+        build(tmp_path / "missing.toml")
+
+
+def track_pixels(result) -> set[tuple[int, int]]:
+    truth = next(iter(result.meta["truth"].values()))
+    # Pixel centres the source centre passes within 0.3 px of.
+    pts = set()
+    for x, y in zip(truth["x_px"], truth["y_px"]):
+        if abs(x - round(x)) < 0.3 and abs(y - round(y)) < 0.3:
+            pts.add((int(round(x)), int(round(y))))
+    return pts
+
+
+def test_adaptive_sampling_leaves_no_track_pixel_without_events() -> None:
+    coarse = simulate(spinning(50.0, max_shift_px=1e3))  # adaptation off: 3.8 px per sample
+    adaptive = simulate(spinning(50.0))
+    assert adaptive.sub_sampled_chunks > 0 and coarse.sub_sampled_chunks == 0
+    on_track = track_pixels(adaptive)
+    assert len(on_track) > 40
+
+    def fired(result) -> set[tuple[int, int]]:
+        return set(zip(result.events["x"].tolist(), result.events["y"].tolist()))
+
+    assert on_track <= fired(adaptive)
+    assert len(on_track - fired(coarse)) > 5  # the coarse run skips pixels of the track
+
+
+def test_event_count_converges_as_the_floor_rate_rises() -> None:
+    counts = {r: len(simulate(spinning(r, max_shift_px=1e3)).events) for r in (100.0, 400.0, 1600.0, 6400.0)}
+    steps = [abs(counts[b] - counts[a]) for a, b in [(100.0, 400.0), (400.0, 1600.0), (1600.0, 6400.0)]]
+    assert steps[0] > steps[1] > steps[2]
+    assert steps[2] < 0.02 * counts[6400.0]
+    # The adaptive run at a low floor lands near the converged count.
+    adaptive = len(simulate(spinning(100.0)).events)
+    assert abs(adaptive - counts[6400.0]) < 0.05 * counts[6400.0]
+
+
+def test_sparse_sub_sampling_gives_the_dense_events_without_noise() -> None:
+    sparse = simulate(spinning(100.0, sparse=True, cutoff_hz=40.0))
+    dense = simulate(spinning(100.0, sparse=False, cutoff_hz=40.0))
+    assert sparse.sub_sampled_chunks > 0 and len(dense.events) > 500
+    assert sparse.events.tobytes() == dense.events.tobytes()
+    assert sparse.pixel_updates < 0.5 * dense.pixel_updates
+
+
+def test_sparse_sub_sampling_keeps_the_statistics_with_noise() -> None:
+    kw = dict(shot_noise_rate_hz=5.0, leak_rate_hz=2.0)
+    sparse = [simulate(spinning(100.0, sparse=True, noise=True, **kw), seed=s).events for s in range(3)]
+    dense = [simulate(spinning(100.0, sparse=False, noise=True, **kw), seed=s).events for s in range(3)]
+    for pol in (0, 1):
+        a = sum(int(np.sum(e["p"] == pol)) for e in sparse)
+        b = sum(int(np.sum(e["p"] == pol)) for e in dense)
+        assert abs(a - b) < 0.05 * (a + b) / 2 + 5 * math.sqrt(a + b), (pol, a, b)
+
+
+def test_same_seed_same_events_whatever_the_threads() -> None:
+    s = spinning(100.0, noise=True, threshold_sigma=0.05)
+    one = simulate(s, seed=3, num_threads=1)
+    two = simulate(s, seed=3, num_threads=2)
+    assert len(one.events) > 0 and one.events.tobytes() == two.events.tobytes()
+    assert simulate(s, seed=4).events.tobytes() != one.events.tobytes()
+    truth = one.meta["truth"]["led"]
+    assert np.all(np.diff(truth["t_s"]) > 0)
+    np.testing.assert_allclose(np.hypot(truth["x_px"] - 32, truth["y_px"] - 24), 15.0)
