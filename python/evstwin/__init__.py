@@ -1,9 +1,30 @@
-"""evstwin: a physics-based digital twin of event-based vision sensors, for SSA."""
+"""evstwin: a physics-based digital twin of event-based vision sensors, for SSA.
+
+The engine (C++, ``Sensor``) turns photons/s on each pixel into events; around it:
+optics and PSF (``evstwin.optics``, ``evstwin.psf``), targets and scenarios
+(``evstwin.targets``, ``evstwin.scenario``), the end-to-end ``simulate``, event files
+(``read_events``, ``write_events``), the paper's validation (``evstwin.validation``) and
+tuning (``evstwin.tune``).
+"""
 
 from __future__ import annotations
 
 from ._core import __version__
+from .io import read_events, write_events
 from .pixel import PixelParams
+from .presets import thresholds_from_biases
 from .sensor import EVENT_DTYPE, TRACE_DTYPE, Sensor
+from .simulate import simulate, simulate_to_file
 
-__all__ = ["EVENT_DTYPE", "TRACE_DTYPE", "PixelParams", "Sensor", "__version__"]
+__all__ = [
+    "EVENT_DTYPE",
+    "TRACE_DTYPE",
+    "PixelParams",
+    "Sensor",
+    "__version__",
+    "read_events",
+    "simulate",
+    "simulate_to_file",
+    "thresholds_from_biases",
+    "write_events",
+]
