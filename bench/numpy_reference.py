@@ -110,7 +110,7 @@ class NumpySensor:
     def _compare(self, y1, t0, t1, dt, noise_pol, t_noise) -> np.ndarray:
         p = self.p
         th_on, th_off = self.th_on, self.th_off
-        g = (y1 - self.y) / dt + p.leak_rate_hz * th_on
+        g = (y1 - self.y) * (1.0 / dt) + p.leak_rate_hz * th_on
         db = self.y - self.ref
         d1 = db + g * dt
         quiet = (noise_pol < 0) & (self.refr_until <= t0) & (db < th_on) & (db > -th_off) & (d1 < th_on) & (d1 > -th_off)

@@ -133,6 +133,7 @@ struct PixelState {
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
 struct SampleConstants {
     double t0 = 0.0, t1 = 0.0, dt = 0.0;
+    double inv_dt = 0.0;       ///< 1 / dt: a multiply in the hot loop instead of a divide
     double e_over_dt = 0;      ///< e / dt: the current of one electron per interval [A]
     double log_e_over_dt = 0;  ///< ln(e / dt)
     double sf_decay = 0;       ///< exact: exp(-2 pi fc dt); euler: 1 - 2 pi fc dt
@@ -171,6 +172,7 @@ struct PixelModel {
         c.t0 = t0;
         c.t1 = t1;
         c.dt = t1 - t0;
+        c.inv_dt = 1.0 / c.dt;
         c.e_over_dt = ELEMENTARY_CHARGE_C / c.dt;
         c.log_e_over_dt = std::log(c.e_over_dt);
         if (has_filter) {
@@ -227,17 +229,12 @@ struct PixelModel {
         ++s.n;
     }
 
-    /// Advance one pixel over (c.t0, c.t1] to the sample `photon_rate` and emit its events
-    /// through emit(t_s, polarity), in time order. Its random numbers are keyed by the
-    /// pixel's own sample counter s.n. (advance() also keeps s.t and s.n.)
-    template <class Emit>
-    EVSTWIN_ALWAYS_INLINE void step(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
-              PoissonSampler& poisson, Emit&& emit, TraceSample* trace = nullptr) const {
-        // One Philox call serves two consecutive samples (words 0-1 for the even one, 2-3 for
-        // the odd one); the odd sample's pair is kept in the state, and recomputed when the
-        // even sample was not seen (a fresh start), so the draws stay a pure function of
-        // (seed, pixel, sample).
-        std::uint32_t w[2];
+    /// The two 32-bit random words of the pixel's current sample (s.n): one Philox call
+    /// serves two consecutive samples (words 0-1 for the even one, 2-3 for the odd one); the
+    /// odd sample's pair is kept in the state, and recomputed when the even sample was not
+    /// seen (a fresh start), so the draws stay a pure function of (seed, pixel, sample).
+    EVSTWIN_ALWAYS_INLINE static void sample_words(PixelState& s, Philox4x32Key key, std::uint32_t pixel,
+                                                   std::uint32_t* w) {
         if ((s.n & 1u) && s.spare_sample == s.n) {
             w[0] = static_cast<std::uint32_t>(s.spare_words);
             w[1] = static_cast<std::uint32_t>(s.spare_words >> 32);
@@ -251,6 +248,146 @@ struct PixelModel {
             s.spare_words = static_cast<std::uint64_t>(r[2]) | (static_cast<std::uint64_t>(r[3]) << 32);
             s.spare_sample = s.n | 1u;
         }
+    }
+
+    /// Eq. 12-15: one uniform u decides OFF (u < p), ON (u > 1 - p) or nothing, and, given
+    /// an event, its time inside the interval (u / p is uniform). Returns the polarity or -1.
+    EVSTWIN_ALWAYS_INLINE int shot_noise(double u, double current_a, const SampleConstants& c, double& t_noise) const {
+        // r = ((F - 1) min(I / I_max, 1) + 1) R_n, with I / I_max saturating at the top of
+        // the dynamic range (beyond it eq. 12 would turn negative).
+        const double prob = (shot_slope_per_a * std::min(current_a, p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
+        if (u < prob) {
+            t_noise = c.t0 + c.dt * (u / prob);
+            return OFF;
+        }
+        if (u > 1.0 - prob) {
+            t_noise = c.t0 + c.dt * ((1.0 - u) / prob);
+            return ON;
+        }
+        return -1;
+    }
+
+    /// Whether the block kernel below handles this configuration (the common ones).
+    bool has_block_kernel() const {
+        const bool pooled = p.photon_shot_noise && p.dark_model != DarkModel::Paper;
+        const bool deterministic = !p.photon_shot_noise && p.dark_model == DarkModel::None;
+        return !p.pr_pole && (pooled || deterministic);
+    }
+
+    /// Scratch space of the block kernel (one per thread).
+    struct BlockScratch {
+        std::vector<double> u_noise, x, current, y;
+        std::vector<std::uint8_t> busy;
+        std::vector<std::uint32_t> count_word;
+        double cached_rate = -1.0, cached_x = 0.0;
+        void resize(std::size_t n) {
+            if (x.size() < n) {
+                u_noise.resize(n); x.resize(n); current.resize(n); y.resize(n); busy.resize(n); count_word.resize(n);
+            }
+        }
+    };
+
+    /// advance() for n consecutive pixels that all stand at c.t0 with n > 0, as separate
+    /// passes (random words; currents; filter, noise and the quiet test; the comparator for
+    /// the few busy pixels; the commit), so each pass is a short loop the processor can
+    /// overlap across pixels. Same arithmetic in the same order as step(): the same events.
+    template <class Real, class Emit>
+    void step_block(PixelState* s, std::size_t n, std::uint32_t first_pixel, const Real* rate, const SampleConstants& c,
+                    Philox4x32Key key, PoissonSampler& poisson, BlockScratch& scratch, Emit&& emit,
+                    std::uint32_t& pixel) const {
+        scratch.resize(n);
+        double* u_noise = scratch.u_noise.data();
+        double* x = scratch.x.data();
+        double* cur = scratch.current.data();
+        double* y = scratch.y.data();
+        std::uint8_t* busy = scratch.busy.data();
+        const bool noisy = p.photon_shot_noise;
+        if (noisy) {
+            std::uint32_t* count_word = scratch.count_word.data();
+            for (std::size_t i = 0; i < n; ++i) {
+                std::uint32_t w[2];
+                sample_words(s[i], key, first_pixel + static_cast<std::uint32_t>(i), w);
+                u_noise[i] = uniform_open(w[1]);
+                count_word[i] = w[0];
+            }
+            for (std::size_t i = 0; i < n; ++i) {
+                const std::uint32_t px = first_pixel + static_cast<std::uint32_t>(i);
+                const std::uint64_t sample = s[i].n;
+                const auto more = [&] { return CounterStream(key, px, sample, PURPOSE_POISSON_EXTRA); };
+                const double mu = (e_per_photon * static_cast<double>(rate[i]) + dark_mean_e_per_s) * c.dt;
+                const double k = static_cast<double>(poisson.from_word(mu, count_word[i], more));
+                x[i] = log_count(k) + c.log_e_over_dt;
+                cur[i] = (k > 0.0 ? k : 0.5) * c.e_over_dt;
+            }
+        } else {
+            const bool shot = p.shot_noise_rate_hz > 0.0;
+            for (std::size_t i = 0; i < n; ++i) {
+                if (shot) {
+                    std::uint32_t w[2];
+                    sample_words(s[i], key, first_pixel + static_cast<std::uint32_t>(i), w);
+                    u_noise[i] = uniform_open(w[1]);
+                }
+                const double r = static_cast<double>(rate[i]);
+                cur[i] = ELEMENTARY_CHARGE_C * (e_per_photon * r);
+                if (r != scratch.cached_rate) {  // most pixels share the background's rate
+                    scratch.cached_rate = r;
+                    scratch.cached_x = std::log(cur[i]);
+                }
+                x[i] = scratch.cached_x;
+            }
+        }
+        // Filter, noise decision and the quiet test: branch-free arithmetic.
+        const bool shot = p.shot_noise_rate_hz > 0.0;
+        for (std::size_t i = 0; i < n; ++i) {
+            const PixelState& si = s[i];
+            double yi;
+            if (!has_filter) {
+                yi = x[i];
+            } else if (euler) {
+                yi = c.sf_ramp * si.z + c.sf_decay * si.y;
+            } else {
+                yi = x[i] + (si.y - si.z) * c.sf_decay - (x[i] - si.z) * c.sf_ramp;
+            }
+            y[i] = yi;
+            bool noise = false;
+            if (shot) {
+                const double prob =
+                    (shot_slope_per_a * std::min(cur[i], p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
+                noise = (u_noise[i] < prob) | (u_noise[i] > 1.0 - prob);
+            }
+            const double th_on = si.theta_on, th_off = si.theta_off;
+            const double g = (yi - si.y) * c.inv_dt + p.leak_rate_hz * th_on;
+            const double db = si.y - si.ref;
+            const double d1 = db + g * c.dt;
+            const bool quiet = !noise & (si.refr_until <= c.t0) & (db < th_on) & (db > -th_off) & (d1 < th_on) &
+                               (d1 > -th_off);
+            busy[i] = !quiet;
+            if (quiet) s[i].ref = yi - d1;
+        }
+        for (std::size_t i = 0; i < n; ++i) {
+            if (busy[i]) {
+                pixel = first_pixel + static_cast<std::uint32_t>(i);
+                double t_noise = 0.0;
+                const int pol = shot ? shot_noise(u_noise[i], cur[i], c, t_noise) : -1;
+                compare(s[i], y[i], c, pol, t_noise, emit);
+            }
+            s[i].x = x[i];
+            s[i].z = x[i];
+            s[i].y = y[i];
+            s[i].t = c.t1;
+            ++s[i].n;
+        }
+    }
+
+    /// Advance one pixel over (c.t0, c.t1] to the sample `photon_rate` and emit its events
+    /// through emit(t_s, polarity), in time order. Its random numbers are keyed by the
+    /// pixel's own sample counter s.n. (advance() also keeps s.t and s.n.)
+    template <class Emit>
+    EVSTWIN_ALWAYS_INLINE void step(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
+              PoissonSampler& poisson, Emit&& emit, TraceSample* trace = nullptr) const {
+        std::uint32_t w[2] = {0, 0};
+        if (p.photon_shot_noise || p.dark_model != DarkModel::None || p.shot_noise_rate_hz > 0.0)
+            sample_words(s, key, pixel, w);
 
         // Photodiode current over the interval, eq. 1-2 and 4. Poisson counts are pooled into
         // one draw where signal and dark are both Poisson over dt (their sum is Poisson).
@@ -259,8 +396,7 @@ struct PixelModel {
         double current_a;  // I
         if (p.photon_shot_noise && p.dark_model != DarkModel::Paper) {
             const auto more = [&] { return CounterStream(key, pixel, s.n, PURPOSE_POISSON_EXTRA); };
-            const double n = static_cast<double>(
-                poisson((signal_e_per_s + dark_mean_e_per_s) * c.dt, uniform_open(w[0]), more));
+            const double n = static_cast<double>(poisson.from_word((signal_e_per_s + dark_mean_e_per_s) * c.dt, w[0], more));
             // A log photoreceptor cannot represent zero current: an empty interval counts as
             // half an electron (the usual continuity correction), documented in the README.
             x = log_count(n) + c.log_e_over_dt;
@@ -301,23 +437,9 @@ struct PixelModel {
             y = z + (s.y - s.z) * c.sf_decay - (z - s.z) * c.sf_ramp;
         }
 
-        // Statistical shot noise, eq. 12-15: one uniform decides OFF (u < p), ON (u > 1 - p)
-        // or nothing, and, given an event, its time inside the interval (u / p is uniform).
-        int noise_pol = -1;
+        // Statistical shot noise, eq. 12-15.
         double t_noise = 0.0;
-        if (p.shot_noise_rate_hz > 0.0) {
-            // r = ((F - 1) min(I / I_max, 1) + 1) R_n, with I / I_max saturating at the top of
-            // the dynamic range (beyond it eq. 12 would turn negative).
-            const double prob = (shot_slope_per_a * std::min(current_a, p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
-            const double u = uniform_open(w[1]);
-            if (u < prob) {
-                noise_pol = OFF;
-                t_noise = c.t0 + c.dt * (u / prob);
-            } else if (u > 1.0 - prob) {
-                noise_pol = ON;
-                t_noise = c.t0 + c.dt * ((1.0 - u) / prob);
-            }
-        }
+        const int noise_pol = p.shot_noise_rate_hz > 0.0 ? shot_noise(uniform_open(w[1]), current_a, c, t_noise) : -1;
 
         compare(s, y, c, noise_pol, t_noise, emit);
         if (trace) *trace = {current_a, x, y, s.ref};
@@ -326,7 +448,6 @@ struct PixelModel {
         s.y = y;
     }
 
-private:
     /// y(t1) of tau y' = in - y for an input linear from in0 to in1 over u = dt / tau.
     static double first_order_exact(double y0, double in0, double in1, double u) {
         const double decay = std::exp(-u);
@@ -334,15 +455,18 @@ private:
         return in1 + (y0 - in0) * decay - (in1 - in0) * ramp;
     }
 
-    static double log_count(double n) {
-        static const std::vector<double> table = [] {
-            std::vector<double> t(1024);
-            t[0] = std::log(0.5);
-            for (int i = 1; i < 1024; ++i) t[i] = std::log(static_cast<double>(i));
-            return t;
-        }();
-        return n < 1024.0 ? table[static_cast<std::size_t>(n)] : std::log(n);
+    /// ln(n) of an electron count, ln(0.5) for zero (the half-electron rule); a table for
+    /// the small counts of the hot loop.
+    EVSTWIN_ALWAYS_INLINE double log_count(double n) const {
+        return n < static_cast<double>(LOG_TABLE_SIZE) ? log_table_[static_cast<std::size_t>(n)] : std::log(n);
     }
+    static constexpr std::size_t LOG_TABLE_SIZE = 1024;
+    std::vector<double> log_table_ = [] {
+        std::vector<double> t(LOG_TABLE_SIZE);
+        t[0] = std::log(0.5);
+        for (std::size_t i = 1; i < LOG_TABLE_SIZE; ++i) t[i] = std::log(static_cast<double>(i));
+        return t;
+    }();
 
     /// theta (1 + sigma z), redrawn below 1 % of nominal; once per pixel, not in the hot loop.
     double theta_with_sigma(double theta, Philox4x32Key key, std::uint32_t pixel, std::uint32_t purpose) const;
@@ -358,12 +482,15 @@ private:
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, const SampleConstants& c, int noise_pol, double t_noise, Emit& emit) const {
         const double th_on = s.theta_on, th_off = s.theta_off, refr = p.refractory_s;
-        const double g = (y1 - s.y) / c.dt + p.leak_rate_hz * th_on;  // d(d)/dt
+        const double g = (y1 - s.y) * c.inv_dt + p.leak_rate_hz * th_on;  // d(d)/dt
         double tb = c.t0;
         double db = s.y - s.ref;  // d(tb)
         // Fast path: no noise event, not refractory, and the line stays inside both thresholds.
         const double d1 = db + g * c.dt;
-        if (noise_pol < 0 && s.refr_until <= tb && db < th_on && db > -th_off && d1 < th_on && d1 > -th_off) {
+        // Evaluated without short-circuits: one well-predicted branch instead of six.
+        const bool quiet = (noise_pol < 0) & (s.refr_until <= tb) & (db < th_on) & (db > -th_off) & (d1 < th_on) &
+                           (d1 > -th_off);
+        if (quiet) {
             s.ref = y1 - d1;
             return;
         }

@@ -137,6 +137,27 @@ public:
         return k;  // == cdf_.size() only in the tail beyond 1 - 2^-33, where F was cut.
     }
 
+    /// invert(mu, uniform_open(w)) without leaving the integers: u = (w + 1/2) / 2^32 <= F(k)
+    /// exactly when w <= floor(F(k) 2^32 - 1/2), and floor(w m / 2^32) never exceeds the
+    /// bucket of u, so the guide's start is still at or below the answer. Same results.
+    EVSTWIN_ALWAYS_INLINE std::uint64_t invert_word(double mu, std::uint32_t w) {
+        if (mu != table_mean_) build(mu);
+        std::size_t k = guide_[static_cast<std::size_t>((static_cast<std::uint64_t>(w) * guide_.size()) >> 32)];
+        const std::size_t n = word_cdf_.size();
+        const std::int64_t wi = w;
+        while (k < n && word_cdf_[k] < wi) ++k;
+        return k;
+    }
+
+    /// As operator(), from a 32-bit word instead of its uniform.
+    template <class MakeStream>
+    EVSTWIN_ALWAYS_INLINE std::uint64_t from_word(double mu, std::uint32_t w, MakeStream&& more) {
+        if (mu <= 0.0) return 0;
+        if (mu < POISSON_TABLE_MAX_MEAN) return invert_word(mu, w);
+        auto stream = more();
+        return ptrs(mu, stream);
+    }
+
 private:
     void build(double mu) {
         cdf_.clear();
@@ -148,6 +169,10 @@ private:
             c += p;
             cdf_.push_back(c);
         }
+        // word_cdf_[k] = floor(F(k) 2^32 - 1/2), exact in double; -1 when no word qualifies.
+        word_cdf_.resize(cdf_.size());
+        for (std::size_t i = 0; i < cdf_.size(); ++i)
+            word_cdf_[i] = static_cast<std::int64_t>(std::floor(cdf_[i] * 0x1p32 - 0.5));
         // guide_[j] = first k with F(k) >= j / m: no k below it can be the answer for a u in
         // bucket j, since u >= j / m there.
         const std::size_t m = cdf_.size();
@@ -183,6 +208,7 @@ private:
 
     double table_mean_ = -1.0;
     std::vector<double> cdf_;
+    std::vector<std::int64_t> word_cdf_;
     std::vector<std::size_t> guide_;
 };
 

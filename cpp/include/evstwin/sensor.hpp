@@ -123,13 +123,14 @@ public:
 #pragma omp parallel num_threads(num_threads_)
 #endif
         {
-            PoissonSampler poisson;  // per thread: its table cache never changes results
+            PoissonSampler poisson;  // per thread: its caches never change results
+            PixelModel::BlockScratch scratch;
 #if EVSTWIN_HAS_OPENMP
 #pragma omp for schedule(dynamic, 4)
 #endif
             for (std::int64_t b = 0; b < nb; ++b) {
                 try {
-                    run_block(static_cast<std::size_t>(b), photon_rate, n_samples, consts, poisson,
+                    run_block(static_cast<std::size_t>(b), photon_rate, n_samples, consts, poisson, scratch,
                               probe_slot.empty() ? nullptr : probe_slot.data(), n_probe,
                               trace ? trace->data() : nullptr);
                 } catch (...) {
@@ -281,21 +282,22 @@ private:
     template <class Real>
     std::size_t first_bad_rate(const Real* rate, std::size_t total_size) const {
         const std::int64_t total = static_cast<std::int64_t>(total_size);
-        const bool zero_is_bad = model_.dark_mean_e_per_s <= 0.0;
-        const double top = std::numeric_limits<double>::max();
-        int any_bad = 0;
+        // Compared in the input's own type, counted rather than OR-ed, so the loop vectorises.
+        const Real top = std::numeric_limits<Real>::max();
+        const Real lowest = model_.dark_mean_e_per_s <= 0.0 ? std::numeric_limits<Real>::denorm_min() : Real(0);
+        std::int64_t n_bad = 0;
 #if EVSTWIN_HAS_OPENMP
-#pragma omp parallel for num_threads(num_threads_) reduction(| : any_bad) schedule(static)
+#pragma omp parallel for simd num_threads(num_threads_) reduction(+ : n_bad) schedule(static)
 #endif
         for (std::int64_t i = 0; i < total; ++i) {
-            const double v = static_cast<double>(rate[i]);
-            // !(v >= 0) catches NaN and negatives, v > max catches +inf.
-            any_bad |= static_cast<int>(!(v >= 0.0)) | static_cast<int>(v > top) | static_cast<int>(zero_is_bad && v == 0.0);
+            const Real v = rate[i];
+            // Fails for NaN, negatives, +inf, and zero where there is no dark current.
+            n_bad += static_cast<std::int64_t>(!((v >= lowest) & (v <= top)));
         }
-        if (!any_bad) return total_size;
+        if (n_bad == 0) return total_size;
         for (std::size_t i = 0; i < total_size; ++i) {
-            const double v = static_cast<double>(rate[i]);
-            if (!(v >= 0.0) || v > top || (zero_is_bad && v == 0.0)) return i;
+            const Real v = rate[i];
+            if (!(v >= lowest && v <= top)) return i;
         }
         return total_size;
     }
@@ -318,18 +320,32 @@ private:
         return out;
     }
 
+    /// Every pixel of [lo, hi) has been started and stands at t0: the block kernel applies.
+    bool block_synced(std::size_t lo, std::size_t hi, double t0) const {
+        bool ok = true;
+        for (std::size_t i = lo; i < hi; ++i) ok &= (state_[i].t == t0) & (state_[i].n > 0);
+        return ok;
+    }
+
     template <class Real>
     void run_block(std::size_t b, const Real* rate, std::size_t n_samples, const std::vector<SampleConstants>& consts,
-                   PoissonSampler& poisson, const std::int32_t* probe_slot, std::size_t n_probe, TraceSample* trace) {
+                   PoissonSampler& poisson, PixelModel::BlockScratch& scratch, const std::int32_t* probe_slot,
+                   std::size_t n_probe, TraceSample* trace) {
         const std::size_t npix = state_.size();
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
         auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
+        const bool kernel = !probe_slot && model_.has_block_kernel();
+        bool synced = false;  // after one kernel step every pixel stands at the next t0
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * npix;
-            if (!probe_slot) {
+            if (kernel && (synced || block_synced(lo, hi, c.t0))) {
+                model_.step_block(state_.data() + lo, hi - lo, static_cast<std::uint32_t>(lo), row + lo, c, key_, poisson,
+                                  scratch, emit, pixel);
+                synced = true;
+            } else if (!probe_slot) {
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
                     model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit);
