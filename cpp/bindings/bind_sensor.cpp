@@ -29,6 +29,14 @@ py::array checked_rates(const Sensor& s, py::array rate) {
     return rate;
 }
 
+/// A (T, height, width) view that repeats one C-contiguous frame (np.broadcast_to of a
+/// static scene): read as that one frame, without a copy.
+bool is_static_frames(const py::array& rate) {
+    if (rate.ndim() != 3 || rate.shape(0) < 1 || rate.strides(0) != 0) return false;
+    const auto item = rate.itemsize();
+    return rate.strides(2) == item && rate.strides(1) == item * rate.shape(2);
+}
+
 py::array_t<double> checked_times(py::array t_s, py::ssize_t n) {
     if (t_s.dtype().kind() != 'f' && t_s.dtype().kind() != 'i' && t_s.dtype().kind() != 'u')
         throw py::type_error("t_s must be an array of real times in seconds; got dtype " +
@@ -42,20 +50,24 @@ py::array_t<double> checked_times(py::array t_s, py::ssize_t n) {
 
 template <class Real>
 std::vector<evstwin::Event> run_typed(Sensor& s, const py::array& rate, const py::array_t<double>& t,
-                                      const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace) {
+                                      const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace,
+                                      bool static_frame) {
     const Real* data = static_cast<const Real*>(rate.data());
     const double* times = t.data();
     const std::size_t n = static_cast<std::size_t>(rate.shape(0));
     py::gil_scoped_release release;
-    return s.run(data, times, n, probe, trace);
+    return s.run(data, times, n, probe, trace, static_frame);
 }
 
 std::vector<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, const std::vector<std::uint32_t>* probe,
                                     std::vector<evstwin::TraceSample>* trace) {
-    rate = checked_rates(s, rate);
+    const bool static_frame = rate.dtype().kind() == 'f' && rate.ndim() == 3 && rate.shape(1) == s.height() &&
+                              rate.shape(2) == s.width() && is_static_frames(rate);
+    if (!static_frame) rate = checked_rates(s, rate);
+    else if (rate.itemsize() != 4 && rate.itemsize() != 8) rate = checked_rates(s, rate);
     auto t = checked_times(t_s, rate.shape(0));
-    if (rate.itemsize() == 4) return run_typed<float>(s, rate, t, probe, trace);
-    return run_typed<double>(s, rate, t, probe, trace);
+    if (rate.itemsize() == 4) return run_typed<float>(s, rate, t, probe, trace, static_frame);
+    return run_typed<double>(s, rate, t, probe, trace, static_frame);
 }
 
 std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::array rate, py::array t_s) {

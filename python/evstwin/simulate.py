@@ -169,6 +169,7 @@ class _Runner:
                 poles.append(p.pr_cutoff_ref_hz * i_min / p.pr_ref_current_a)
         self.settle_s = 5.0 / (2.0 * math.pi * min(poles)) if poles else 0.0
         self.hot_until = np.full(scene.width * scene.height, -np.inf)
+        self._column = np.zeros(scene.width * scene.height, np.int64)  # pixel -> column of the hot list
 
     # -- the loop --------------------------------------------------------------------------------
 
@@ -247,16 +248,20 @@ class _Runner:
             val = np.concatenate([c[1] for c in contributions])
         else:
             idx, val = np.zeros(0, np.int64), np.zeros(0)
-        pixel = idx % npix
-        lit = np.unique(pixel)
-        settling = np.flatnonzero(self.hot_until > t_fine[0])
-        hot = np.union1d(lit, settling)
-        self.hot_until[lit] = t_fine[-1] + self.settle_s
+        sample_of = idx // npix
+        pixel = idx - sample_of * npix
+        # Hot: lit by a moving window in this chunk, or still settling from an earlier one.
+        # Marked on a flat mask (linear in the contributions, no sort).
+        mask = self.hot_until > t_fine[0]
+        mask[pixel] = True
+        self.hot_until[pixel] = t_fine[-1] + self.settle_s
+        hot = np.flatnonzero(mask)
+        column = self._column
+        column[hot] = np.arange(hot.size)
         # The rates of the hot pixels at the fine times: static light plus the moving sources.
         rates = np.repeat(self.static_map.reshape(-1)[hot][None, :], n_t, axis=0)
-        if hot.size:
-            col = np.searchsorted(hot, pixel)
-            rates += np.bincount((idx // npix) * hot.size + col, weights=val, minlength=n_t * hot.size).reshape(
+        if hot.size and idx.size:
+            rates += np.bincount(sample_of * hot.size + column[pixel], weights=val, minlength=n_t * hot.size).reshape(
                 n_t, hot.size
             )
         # Base frames for everyone else: their light is static in this chunk (hot pixels

@@ -287,73 +287,82 @@ struct PixelModel {
         }
     };
 
-    /// advance() for n consecutive pixels that all stand at c.t0 with n > 0, as separate
-    /// passes (random words; currents; filter, noise and the quiet test; the comparator for
-    /// the few busy pixels; the commit), so each pass is a short loop the processor can
-    /// overlap across pixels. Same arithmetic in the same order as step(): the same events.
+    /// Which pixels of a block the kernel advances now: `active` lists their positions
+    /// (local indices into the block's state, rates and ids).
+    struct BlockView {
+        PixelState* state;           ///< the block's pixel states
+        const std::uint32_t* ids;    ///< global pixel index of each local index
+        const std::uint32_t* active; ///< local indices to advance, in increasing order
+        std::size_t n_active;
+    };
+
+    /// advance() for pixels that all stand at c.t0 with n > 0, as separate passes (random
+    /// words; currents; filter, noise and the quiet test; the comparator for the few busy
+    /// pixels; the commit), so each pass is a short loop the processor can overlap across
+    /// pixels. Same arithmetic in the same order as step(): the same events.
     template <class Real, class Emit>
-    void step_block(PixelState* s, std::size_t n, std::uint32_t first_pixel, const Real* rate, const SampleConstants& c,
-                    Philox4x32Key key, PoissonSampler& poisson, BlockScratch& scratch, Emit&& emit,
-                    std::uint32_t& pixel) const {
+    void step_block(const BlockView& v, const Real* rate, const SampleConstants& c, Philox4x32Key key,
+                    PoissonSampler& poisson, BlockScratch& scratch, Emit&& emit, std::uint32_t& pixel) const {
+        const std::size_t n = v.n_active;
         scratch.resize(n);
         double* u_noise = scratch.u_noise.data();
         double* x = scratch.x.data();
         double* cur = scratch.current.data();
         double* y = scratch.y.data();
         std::uint8_t* busy = scratch.busy.data();
-        const bool noisy = p.photon_shot_noise;
-        if (noisy) {
+        PixelState* st = v.state;
+        const std::uint32_t* at = v.active;
+        const bool shot = p.shot_noise_rate_hz > 0.0;
+        if (p.photon_shot_noise) {
             std::uint32_t* count_word = scratch.count_word.data();
-            for (std::size_t i = 0; i < n; ++i) {
+            for (std::size_t j = 0; j < n; ++j) {
                 std::uint32_t w[2];
-                sample_words(s[i], key, first_pixel + static_cast<std::uint32_t>(i), w);
-                u_noise[i] = uniform_open(w[1]);
-                count_word[i] = w[0];
+                sample_words(st[at[j]], key, v.ids[at[j]], w);
+                u_noise[j] = uniform_open(w[1]);
+                count_word[j] = w[0];
             }
-            for (std::size_t i = 0; i < n; ++i) {
-                const std::uint32_t px = first_pixel + static_cast<std::uint32_t>(i);
-                const std::uint64_t sample = s[i].n;
+            for (std::size_t j = 0; j < n; ++j) {
+                const std::uint32_t px = v.ids[at[j]];
+                const std::uint64_t sample = st[at[j]].n;
                 const auto more = [&] { return CounterStream(key, px, sample, PURPOSE_POISSON_EXTRA); };
-                const double mu = (e_per_photon * static_cast<double>(rate[i]) + dark_mean_e_per_s) * c.dt;
-                const double k = static_cast<double>(poisson.from_word(mu, count_word[i], more));
-                x[i] = log_count(k) + c.log_e_over_dt;
-                cur[i] = (k > 0.0 ? k : 0.5) * c.e_over_dt;
+                const double mu = (e_per_photon * static_cast<double>(rate[at[j]]) + dark_mean_e_per_s) * c.dt;
+                const double k = static_cast<double>(poisson.from_word(mu, count_word[j], more));
+                x[j] = log_count(k) + c.log_e_over_dt;
+                cur[j] = (k > 0.0 ? k : 0.5) * c.e_over_dt;
             }
         } else {
-            const bool shot = p.shot_noise_rate_hz > 0.0;
-            for (std::size_t i = 0; i < n; ++i) {
+            for (std::size_t j = 0; j < n; ++j) {
                 if (shot) {
                     std::uint32_t w[2];
-                    sample_words(s[i], key, first_pixel + static_cast<std::uint32_t>(i), w);
-                    u_noise[i] = uniform_open(w[1]);
+                    sample_words(st[at[j]], key, v.ids[at[j]], w);
+                    u_noise[j] = uniform_open(w[1]);
                 }
-                const double r = static_cast<double>(rate[i]);
-                cur[i] = ELEMENTARY_CHARGE_C * (e_per_photon * r);
+                const double r = static_cast<double>(rate[at[j]]);
+                cur[j] = ELEMENTARY_CHARGE_C * (e_per_photon * r);
                 if (r != scratch.cached_rate) {  // most pixels share the background's rate
                     scratch.cached_rate = r;
-                    scratch.cached_x = std::log(cur[i]);
+                    scratch.cached_x = std::log(cur[j]);
                 }
-                x[i] = scratch.cached_x;
+                x[j] = scratch.cached_x;
             }
         }
         // Filter, noise decision and the quiet test: branch-free arithmetic.
-        const bool shot = p.shot_noise_rate_hz > 0.0;
-        for (std::size_t i = 0; i < n; ++i) {
-            const PixelState& si = s[i];
+        for (std::size_t j = 0; j < n; ++j) {
+            PixelState& si = st[at[j]];
             double yi;
             if (!has_filter) {
-                yi = x[i];
+                yi = x[j];
             } else if (euler) {
                 yi = c.sf_ramp * si.z + c.sf_decay * si.y;
             } else {
-                yi = x[i] + (si.y - si.z) * c.sf_decay - (x[i] - si.z) * c.sf_ramp;
+                yi = x[j] + (si.y - si.z) * c.sf_decay - (x[j] - si.z) * c.sf_ramp;
             }
-            y[i] = yi;
+            y[j] = yi;
             bool noise = false;
             if (shot) {
                 const double prob =
-                    (shot_slope_per_a * std::min(cur[i], p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
-                noise = (u_noise[i] < prob) | (u_noise[i] > 1.0 - prob);
+                    (shot_slope_per_a * std::min(cur[j], p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
+                noise = (u_noise[j] < prob) | (u_noise[j] > 1.0 - prob);
             }
             const double th_on = si.theta_on, th_off = si.theta_off;
             const double g = (yi - si.y) * c.inv_dt + p.leak_rate_hz * th_on;
@@ -361,21 +370,22 @@ struct PixelModel {
             const double d1 = db + g * c.dt;
             const bool quiet = !noise & (si.refr_until <= c.t0) & (db < th_on) & (db > -th_off) & (d1 < th_on) &
                                (d1 > -th_off);
-            busy[i] = !quiet;
-            if (quiet) s[i].ref = yi - d1;
+            busy[j] = !quiet;
+            if (quiet) si.ref = yi - d1;
         }
-        for (std::size_t i = 0; i < n; ++i) {
-            if (busy[i]) {
-                pixel = first_pixel + static_cast<std::uint32_t>(i);
+        for (std::size_t j = 0; j < n; ++j) {
+            PixelState& si = st[at[j]];
+            if (busy[j]) {
+                pixel = v.ids[at[j]];
                 double t_noise = 0.0;
-                const int pol = shot ? shot_noise(u_noise[i], cur[i], c, t_noise) : -1;
-                compare(s[i], y[i], c, pol, t_noise, emit);
+                const int pol = shot ? shot_noise(u_noise[j], cur[j], c, t_noise) : -1;
+                compare(si, y[j], c, pol, t_noise, emit);
             }
-            s[i].x = x[i];
-            s[i].z = x[i];
-            s[i].y = y[i];
-            s[i].t = c.t1;
-            ++s[i].n;
+            si.x = x[j];
+            si.z = x[j];
+            si.y = y[j];
+            si.t = c.t1;
+            ++si.n;
         }
     }
 

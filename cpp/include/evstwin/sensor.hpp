@@ -88,14 +88,19 @@ public:
     /// signals at every sample: trace is resized to n_samples * probe_pixels.size().
     ///
     /// Throws std::invalid_argument, before any state changes, on a bad input.
+    ///
+    /// sample_stride is the distance between two samples' frames in elements: the default
+    /// (0 = width * height) for a dense array; 0 samples of one static frame are given as
+    /// `static_frame = true`, which repeats the first frame for every sample time.
     template <class Real>
     std::vector<Event> run(const Real* photon_rate, const double* t_s, std::size_t n_samples,
                            const std::vector<std::uint32_t>* probe_pixels = nullptr,
-                           std::vector<TraceSample>* trace = nullptr) {
+                           std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
         const std::size_t npix = state_.size();
         if (n_samples == 0) return {};
         check_times(t_s, n_samples);
-        check_rates(photon_rate, n_samples);
+        check_rates(photon_rate, static_frame ? 1 : n_samples);
+        const std::size_t sample_stride = static_frame ? 0 : npix;
         const std::vector<SampleConstants> consts = sample_constants(t_s, n_samples);
 
         std::vector<std::int32_t> probe_slot;
@@ -130,7 +135,7 @@ public:
 #endif
             for (std::int64_t b = 0; b < nb; ++b) {
                 try {
-                    run_block(static_cast<std::size_t>(b), photon_rate, n_samples, consts, poisson, scratch,
+                    run_block(static_cast<std::size_t>(b), photon_rate, sample_stride, n_samples, consts, poisson, scratch,
                               probe_slot.empty() ? nullptr : probe_slot.data(), n_probe,
                               trace ? trace->data() : nullptr);
                 } catch (...) {
@@ -198,6 +203,8 @@ public:
             throw_bad_rate("photon_rate[" + std::to_string(bad / n_pixels) + ", " + std::to_string(bad % n_pixels) + "]",
                            static_cast<double>(photon_rate[bad]));
 
+        std::vector<SampleConstants> consts(n_samples);
+        for (std::size_t k = 1; k < n_samples; ++k) consts[k] = model_.constants(t_s[k - 1], t_s[k]);
         const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
         block_events_.resize(std::max(block_events_.size(), nblocks));
         for (auto& b : block_events_) b.clear();
@@ -208,12 +215,14 @@ public:
 #endif
         {
             PoissonSampler poisson;
+            PixelModel::BlockScratch scratch;
 #if EVSTWIN_HAS_OPENMP
 #pragma omp for schedule(dynamic, 1)
 #endif
             for (std::int64_t b = 0; b < nb; ++b) {
                 try {
-                    run_pixel_block(static_cast<std::size_t>(b), pixels, n_pixels, photon_rate, t_s, n_samples, poisson);
+                    run_pixel_block(static_cast<std::size_t>(b), pixels, n_pixels, photon_rate, t_s, n_samples, consts,
+                                    poisson, scratch);
                 } catch (...) {
 #if EVSTWIN_HAS_OPENMP
 #pragma omp critical(evstwin_error)
@@ -320,15 +329,9 @@ private:
         return out;
     }
 
-    /// Every pixel of [lo, hi) has been started and stands at t0: the block kernel applies.
-    bool block_synced(std::size_t lo, std::size_t hi, double t0) const {
-        bool ok = true;
-        for (std::size_t i = lo; i < hi; ++i) ok &= (state_[i].t == t0) & (state_[i].n > 0);
-        return ok;
-    }
-
     template <class Real>
-    void run_block(std::size_t b, const Real* rate, std::size_t n_samples, const std::vector<SampleConstants>& consts,
+    void run_block(std::size_t b, const Real* rate, std::size_t sample_stride, std::size_t n_samples,
+                   const std::vector<SampleConstants>& consts,
                    PoissonSampler& poisson, PixelModel::BlockScratch& scratch, const std::int32_t* probe_slot,
                    std::size_t n_probe, TraceSample* trace) {
         const std::size_t npix = state_.size();
@@ -337,14 +340,33 @@ private:
         std::uint32_t pixel = 0;
         auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
         const bool kernel = !probe_slot && model_.has_block_kernel();
-        bool synced = false;  // after one kernel step every pixel stands at the next t0
+        std::uint32_t ids[BLOCK], active[BLOCK];
+        for (std::size_t i = lo; i < hi; ++i) ids[i - lo] = static_cast<std::uint32_t>(i);
+        bool synced = false;  // after a kernel step that skipped nobody, all stand at the next t0
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
-            const Real* row = rate + k * npix;
-            if (kernel && (synced || block_synced(lo, hi, c.t0))) {
-                model_.step_block(state_.data() + lo, hi - lo, static_cast<std::uint32_t>(lo), row + lo, c, key_, poisson,
-                                  scratch, emit, pixel);
-                synced = true;
+            const Real* row = rate + k * sample_stride;
+            std::size_t n_active = hi - lo;
+            bool eligible = kernel && synced;
+            if (kernel && !synced) {
+                // Eligible when every pixel either stands at t0 or has already passed t1 (a
+                // pixel sub-sampled by run_pixels): the latter are skipped.
+                eligible = true;
+                n_active = 0;
+                for (std::size_t i = lo; i < hi; ++i) {
+                    const PixelState& s = state_[i];
+                    const bool at_t0 = (s.t == c.t0) & (s.n > 0);
+                    eligible &= at_t0 | (s.t >= c.t1);
+                    active[n_active] = static_cast<std::uint32_t>(i - lo);
+                    n_active += at_t0;
+                }
+            }
+            if (eligible) {
+                if (synced)
+                    for (std::size_t i = 0; i < n_active; ++i) active[i] = static_cast<std::uint32_t>(i);
+                model_.step_block(PixelModel::BlockView{state_.data() + lo, ids, active, n_active}, row + lo, c, key_,
+                                  poisson, scratch, emit, pixel);
+                synced = n_active == hi - lo;
             } else if (!probe_slot) {
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
@@ -364,19 +386,42 @@ private:
     /// own column of rates.
     template <class Real>
     void run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
-                         const double* t_s, std::size_t n_samples, PoissonSampler& poisson) {
+                         const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
+                         PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
         const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
         auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
-        for (std::size_t j = lo; j < hi; ++j) {
-            pixel = pixels[j];
-            PixelState& s = state_[pixel];
-            for (std::size_t k = 0; k < n_samples; ++k) {
-                const SampleConstants c = model_.constants(s.t, t_s[k]);
-                model_.advance(s, static_cast<double>(rate[k * n_pixels + j]), c, key_, pixel, poisson, emit);
+        // The listed pixels' states are gathered into a contiguous block, advanced sample-major
+        // (each sample reads one contiguous stretch of its row of rates) and scattered back.
+        // The first interval starts at each pixel's own last sample; after it, every pixel
+        // stands at the same time and the block kernel applies.
+        const std::size_t m = hi - lo;
+        std::vector<PixelState> local(m);
+        std::uint32_t active[BLOCK];
+        for (std::size_t j = 0; j < m; ++j) {
+            local[j] = state_[pixels[lo + j]];
+            active[j] = static_cast<std::uint32_t>(j);
+        }
+        for (std::size_t j = 0; j < m; ++j) {
+            pixel = pixels[lo + j];
+            PixelState& s = local[j];
+            model_.advance(s, static_cast<double>(rate[lo + j]), model_.constants(s.t, t_s[0]), key_, pixel, poisson, emit);
+        }
+        const bool kernel = model_.has_block_kernel();
+        for (std::size_t k = 1; k < n_samples; ++k) {
+            const Real* row = rate + k * n_pixels + lo;
+            if (kernel) {
+                model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, active, m}, row, consts[k], key_, poisson,
+                                  scratch, emit, pixel);
+            } else {
+                for (std::size_t j = 0; j < m; ++j) {
+                    pixel = pixels[lo + j];
+                    model_.advance(local[j], static_cast<double>(row[j]), consts[k], key_, pixel, poisson, emit);
+                }
             }
         }
+        for (std::size_t j = 0; j < m; ++j) state_[pixels[lo + j]] = local[j];
     }
 
     std::vector<Event> collect() {
