@@ -176,11 +176,18 @@ class _Runner:
     def run(self, bar: Any = None) -> np.ndarray:
         parts = [self._dense(np.array([0.0]))]
         chunk = self.scene.chunk_samples
-        for a in range(0, self.n_base, chunk):
+        a = 0
+        while a < self.n_base:
             b = min(a + chunk, self.n_base)
+            n_sub = self._n_sub(a * self.dt, b * self.dt)
+            if n_sub > 1 and self.scene.sparse:
+                # A pixel is hot for a whole chunk if a source passes it at any time in it: keep
+                # sub-sampled chunks short (about chunk_samples fine samples), so pixels are not
+                # sub-sampled long before or after the source is near them.
+                b = min(a + max(1, chunk // n_sub), self.n_base)
+                n_sub = self._n_sub(a * self.dt, b * self.dt)
             k = np.arange(a + 1, b + 1)
             t_base = k * self.dt
-            n_sub = self._n_sub(a * self.dt, b * self.dt)
             if n_sub == 1:
                 parts.append(self._dense(t_base))
             else:
@@ -196,6 +203,7 @@ class _Runner:
                         parts.append(self._dense(t_fine[j : j + chunk]))
             if bar is not None:
                 bar.update(round(min(b * self.dt, self.scene.duration_s) - bar.n, 6))
+            a = b
         events = np.concatenate(parts) if parts else np.zeros(0, EVENT_DTYPE)
         return events
 
@@ -259,7 +267,8 @@ class _Runner:
         column = self._column
         column[hot] = np.arange(hot.size)
         # The rates of the hot pixels at the fine times: static light plus the moving sources.
-        rates = np.repeat(self.static_map.reshape(-1)[hot][None, :], n_t, axis=0)
+        rates = np.empty((n_t, hot.size), np.float64)  # float32 halves the memory traffic
+        rates[:] = self.static_map.reshape(-1)[hot][None, :]
         if hot.size and idx.size:
             rates += np.bincount(sample_of * hot.size + column[pixel], weights=val, minlength=n_t * hot.size).reshape(
                 n_t, hot.size

@@ -465,3 +465,36 @@ def test_run_pixels_bad_input() -> None:
         sensor.run_pixels([1, 2], np.full((2, 3), 1e9), [1e-3, 2e-3])
     with pytest.raises(TypeError, match="pixels must be an integer array"):
         sensor.run_pixels([1.0, 2.0], ok, [1e-3, 2e-3])
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        NOISY,
+        NOISY.replace(pr_pole=True),
+        NOISY.replace(photon_shot_noise=False, dark_model="none", pr_pole=True),
+        NOISY.replace(cutoff_hz=None),
+        NOISY.replace(lowpass="euler", cutoff_hz=20.0),
+        NOISY.replace(dark_model="paper"),
+    ],
+    ids=["default", "pr_pole", "noise-free pr_pole", "no filter", "euler", "paper dark"],
+)
+def test_block_kernel_and_per_pixel_path_give_the_same_events(params: PixelParams) -> None:
+    # run_probe takes the per-pixel path (step()); run takes the block kernel where it applies.
+    rate, t = moving_spot(80, 37, 23)
+    fast = Sensor(37, 23, params, seed=9).run(rate, t)
+    slow, _ = Sensor(37, 23, params, seed=9).run_probe(rate, t, [(0, 0)])
+    assert len(fast) > 100
+    assert fast.tobytes() == slow.tobytes()
+
+
+def test_a_broadcast_static_frame_is_read_as_one_frame() -> None:
+    frame = np.random.default_rng(3).uniform(1e6, 1e9, size=(23, 37))
+    t = np.arange(40) * 1e-3
+    view = np.broadcast_to(frame, (40, 23, 37))
+    copy = np.ascontiguousarray(view)
+    assert Sensor(37, 23, NOISY, seed=2).run(view, t).tobytes() == Sensor(37, 23, NOISY, seed=2).run(copy, t).tobytes()
+    bad = frame.copy()
+    bad[4, 5] = -1.0
+    with pytest.raises(ValueError, match=r"photon_rate\[0, 4, 5\]=-1"):
+        Sensor(37, 23, NOISY).run(np.broadcast_to(bad, (3, 23, 37)), t[:3])

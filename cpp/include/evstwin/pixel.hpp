@@ -271,7 +271,7 @@ struct PixelModel {
     bool has_block_kernel() const {
         const bool pooled = p.photon_shot_noise && p.dark_model != DarkModel::Paper;
         const bool deterministic = !p.photon_shot_noise && p.dark_model == DarkModel::None;
-        return !p.pr_pole && (pooled || deterministic);
+        return pooled || deterministic;
     }
 
     /// Scratch space of the block kernel (one per thread).
@@ -279,10 +279,17 @@ struct PixelModel {
         std::vector<double> u_noise, x, current, y;
         std::vector<std::uint8_t> busy;
         std::vector<std::uint32_t> count_word;
+        std::vector<double> z, count;
         double cached_rate = -1.0, cached_x = 0.0;
+        // The photoreceptor pole's decay and ramp depend on the current only through the
+        // electron count of the interval: kept per count for the current dt.
+        std::vector<double> pr_decay, pr_ramp;
+        std::vector<std::uint8_t> pr_known;
+        double pr_dt = -1.0;
         void resize(std::size_t n) {
             if (x.size() < n) {
                 u_noise.resize(n); x.resize(n); current.resize(n); y.resize(n); busy.resize(n); count_word.resize(n);
+                z.resize(n); count.resize(n);
             }
         }
     };
@@ -329,6 +336,7 @@ struct PixelModel {
                 const double k = static_cast<double>(poisson.from_word(mu, count_word[j], more));
                 x[j] = log_count(k) + c.log_e_over_dt;
                 cur[j] = (k > 0.0 ? k : 0.5) * c.e_over_dt;
+                scratch.count[j] = k;
             }
         } else {
             for (std::size_t j = 0; j < n; ++j) {
@@ -346,16 +354,49 @@ struct PixelModel {
                 x[j] = scratch.cached_x;
             }
         }
+        double* z = scratch.z.data();
+        if (p.pr_pole) {
+            // The photoreceptor pole, cutoff proportional to the pixel's current (step()).
+            if (scratch.pr_dt != c.dt) {
+                scratch.pr_decay.assign(LOG_TABLE_SIZE, 0.0);
+                scratch.pr_ramp.assign(LOG_TABLE_SIZE, 0.0);
+                scratch.pr_known.assign(LOG_TABLE_SIZE, 0);
+                scratch.pr_dt = c.dt;
+            }
+            for (std::size_t j = 0; j < n; ++j) {
+                const PixelState& si = st[at[j]];
+                double decay, ramp;
+                const double k = p.photon_shot_noise ? scratch.count[j] : -1.0;
+                const bool tabled = k >= 0.0 && k < static_cast<double>(LOG_TABLE_SIZE);
+                const std::size_t slot = tabled ? static_cast<std::size_t>(k) : 0;
+                if (tabled && scratch.pr_known[slot]) {
+                    decay = scratch.pr_decay[slot];
+                    ramp = scratch.pr_ramp[slot];
+                } else {
+                    const double u = 2.0 * PI * p.pr_cutoff_ref_hz * (cur[j] / p.pr_ref_current_a) * c.dt;
+                    decay = std::exp(-u);
+                    ramp = u > 1e-12 ? -std::expm1(-u) / u : 1.0;
+                    if (tabled) {
+                        scratch.pr_decay[slot] = decay;
+                        scratch.pr_ramp[slot] = ramp;
+                        scratch.pr_known[slot] = 1;
+                    }
+                }
+                z[j] = x[j] + (si.z - si.x) * decay - (x[j] - si.x) * ramp;
+            }
+        } else {
+            for (std::size_t j = 0; j < n; ++j) z[j] = x[j];
+        }
         // Filter, noise decision and the quiet test: branch-free arithmetic.
         for (std::size_t j = 0; j < n; ++j) {
             PixelState& si = st[at[j]];
             double yi;
             if (!has_filter) {
-                yi = x[j];
+                yi = z[j];
             } else if (euler) {
                 yi = c.sf_ramp * si.z + c.sf_decay * si.y;
             } else {
-                yi = x[j] + (si.y - si.z) * c.sf_decay - (x[j] - si.z) * c.sf_ramp;
+                yi = z[j] + (si.y - si.z) * c.sf_decay - (z[j] - si.z) * c.sf_ramp;
             }
             y[j] = yi;
             bool noise = false;
@@ -382,7 +423,7 @@ struct PixelModel {
                 compare(si, y[j], c, pol, t_noise, emit);
             }
             si.x = x[j];
-            si.z = x[j];
+            si.z = z[j];
             si.y = y[j];
             si.t = c.t1;
             ++si.n;
