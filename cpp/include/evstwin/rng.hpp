@@ -113,7 +113,7 @@ inline double log_factorial(double k) {
 /// the algorithm NumPy uses, with further uniforms drawn from a CounterStream.
 class PoissonSampler {
 public:
-    static constexpr double POISSON_TABLE_MAX_MEAN = 64.0;
+    static constexpr double POISSON_TABLE_MAX_MEAN = 256.0;  // 18000 e-/s over 10 ms: still a table
 
     /// One variate of mean mu >= 0. u is a uniform in (0, 1) used by inversion; the
     /// rejection sampler draws further uniforms from `more`, a CounterStream it builds only
@@ -141,7 +141,16 @@ public:
     /// exactly when w <= floor(F(k) 2^32 - 1/2), and floor(w m / 2^32) never exceeds the
     /// bucket of u, so the guide's start is still at or below the answer. Same results.
     EVSTWIN_ALWAYS_INLINE std::uint64_t invert_word(double mu, std::uint32_t w) {
-        if (mu != table_mean_) build(mu);
+        if (mu != table_mean_) {
+            // A mean seen once (a pixel in a source's PSF) is searched from k = 0 without a
+            // table; a mean seen twice in a row (the background) gets one. Both walk the same
+            // partial sums, so they return the same k.
+            if (mu != last_miss_) {
+                last_miss_ = mu;
+                return invert_sequential(mu, w);
+            }
+            build(mu);
+        }
         std::size_t k = guide_[static_cast<std::size_t>((static_cast<std::uint64_t>(w) * guide_.size()) >> 32)];
         const std::size_t n = word_cdf_.size();
         const std::int64_t wi = w;
@@ -159,6 +168,21 @@ public:
     }
 
 private:
+    std::uint64_t invert_sequential(double mu, std::uint32_t w) const {
+        const std::int64_t wi = w;
+        double p = std::exp(-mu), c = p;
+        std::uint64_t idx = 0;
+        if (static_cast<std::int64_t>(std::floor(c * 0x1p32 - 0.5)) >= wi) return 0;
+        const double cap = mu + 40.0 * std::sqrt(mu) + 40.0;
+        for (double k = 1.0; c < 1.0 - 0x1p-33 && k < cap; k += 1.0) {
+            p *= mu / k;
+            c += p;
+            ++idx;
+            if (static_cast<std::int64_t>(std::floor(c * 0x1p32 - 0.5)) >= wi) return idx;
+        }
+        return idx + 1;
+    }
+
     void build(double mu) {
         cdf_.clear();
         double p = std::exp(-mu), c = p;
@@ -207,6 +231,7 @@ private:
     }
 
     double table_mean_ = -1.0;
+    double last_miss_ = -1.0;
     std::vector<double> cdf_;
     std::vector<std::int64_t> word_cdf_;
     std::vector<std::size_t> guide_;

@@ -403,12 +403,21 @@ private:
             local[j] = state_[pixels[lo + j]];
             active[j] = static_cast<std::uint32_t>(j);
         }
-        for (std::size_t j = 0; j < m; ++j) {
-            pixel = pixels[lo + j];
-            PixelState& s = local[j];
-            model_.advance(s, static_cast<double>(rate[lo + j]), model_.constants(s.t, t_s[0]), key_, pixel, poisson, emit);
-        }
         const bool kernel = model_.has_block_kernel();
+        // Usually every listed pixel stands at the same time (the previous base sample).
+        bool same_start = kernel;
+        for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
+        if (same_start) {
+            model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, active, m}, rate + lo,
+                              model_.constants(local[0].t, t_s[0]), key_, poisson, scratch, emit, pixel);
+        } else {
+            for (std::size_t j = 0; j < m; ++j) {
+                pixel = pixels[lo + j];
+                PixelState& s = local[j];
+                model_.advance(s, static_cast<double>(rate[lo + j]), model_.constants(s.t, t_s[0]), key_, pixel, poisson,
+                               emit);
+            }
+        }
         for (std::size_t k = 1; k < n_samples; ++k) {
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
