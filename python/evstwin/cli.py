@@ -62,7 +62,9 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("timing", help="event-timing bias against the ground truth of a simulated .h5/.npz")
     p.add_argument("file")
     p.add_argument("--out", required=True)
-    p.add_argument("--radius-px", type=float, default=1.0)
+    p.add_argument("--radius-px", type=float, default=1.0, help="attribute events within this distance of the track [px]")
+    p.add_argument("--max-delay-s", type=float, default=0.3,
+                   help="longest delay attributed to a crossing [s]; keep it below the time between two passes")
 
     from . import tune
 
@@ -193,7 +195,7 @@ def _timing(args: argparse.Namespace) -> int:
     truth = meta.get("truth") or {}
     if not truth:
         raise ValueError(f"{args.file} holds no ground truth (/truth): simulate to .h5 or .npz first")
-    table = timing_bias(events, truth, radius_px=args.radius_px)
+    table = timing_bias(events, truth, radius_px=args.radius_px, max_abs_delay_s=args.max_delay_s)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     png = plots.plot_timing_bias(table, out / "timing_bias.png")

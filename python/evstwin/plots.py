@@ -102,7 +102,7 @@ def fig_frames(
     (real first), each from ``t_offset_s`` after the recording's first event."""
     n = len(recordings)
     if figsize is None:
-        figsize = (4.2 * n + 0.4, 4.2 * height / width + 1.2)
+        figsize = (max(4.2 * n + 0.4, 5.6), 4.2 * height / width + 1.4)
     fig = Figure(figsize=figsize, layout="constrained")
     axes = fig.subplots(1, n, squeeze=False)[0]
     for ax, (label, events) in zip(axes, recordings):
@@ -117,10 +117,12 @@ def fig_frames(
         ax.set_title(f"{label}\n{c['on'].sum()} ON, {c['off'].sum()} OFF", fontsize=10)
         ax.set_xlabel("x [px]")
         ax.set_ylabel("y [px]")
+    # One line per panel width of text: wrap the title on narrow (single-panel) figures.
+    joiner = ", " if n > 1 else "\n"
     fig.suptitle(
-        f"{n_windows} successive {1e3 * window_s:g} ms frames overlaid, from t = {t_offset_s:g} s "
-        "after the first event  (ON red, OFF blue)",
-        fontsize=11,
+        f"{n_windows} successive {1e3 * window_s:g} ms frames overlaid{joiner}from t = {t_offset_s:g} s "
+        "after the first event (ON red, OFF blue)",
+        fontsize=10 if n == 1 else 11,
     )
     return fig
 
@@ -562,7 +564,7 @@ def fig_timing_bias(
                 linewidth=1.2,
                 label="median, 25-75 %",
             )
-        if log and v.size and v.min() > 0:
+        if log and v.size and v.min() > 0 and v.max() > v.min():  # one brightness: linear axis
             ax.set_xscale("log")
         ax.axhline(0.0, color="grey", linewidth=0.6)
         ax.set_xlabel(xlabel)
