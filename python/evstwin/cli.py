@@ -151,7 +151,9 @@ def _compare(args: argparse.Namespace) -> int:
     # Scenario SIMs are simulated (--runs seeds each, in parallel processes) and written
     # beside the figures, so every number in compare.json points at a file.
     runs: list[list[Path]] = [[] for _ in range(args.runs)]
+    labels: list[str] = []  # what each SIM is called in the Monte Carlo summary
     for sim in args.sims:
+        labels.append(sim if _is_event_file(sim) else f"{sim} ({args.runs} seeds)")
         if _is_event_file(sim):
             for r in runs:
                 r.append(Path(sim))
@@ -169,7 +171,8 @@ def _compare(args: argparse.Namespace) -> int:
     print(comparison.to_text())
     if args.runs > 1:
         comparisons = [compare(real_events, dict(real_meta, path=args.real),
-                               [_with_path(read_events(p), p) for p in paths], bin_width=args.bin_width)
+                               [_with_path(read_events(p), label) for p, label in zip(paths, labels)],
+                               bin_width=args.bin_width)
                        for paths in runs]
         summary = aggregate(comparisons)
         report["monte_carlo"] = summary.to_json_dict()
@@ -181,9 +184,9 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
-def _with_path(pair: Any, path: Path) -> Any:
+def _with_path(pair: Any, label: str) -> Any:
     events, meta = pair
-    return events, dict(meta, path=str(path))
+    return events, dict(meta, path=label)
 
 
 def _timing(args: argparse.Namespace) -> int:
