@@ -16,9 +16,10 @@ ground-truth tracks are kept (they grow with the recording, not with pixels x sa
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Optional, Sequence, Union
 
@@ -43,7 +44,8 @@ class SimulationResult:
     pixel_updates: int = 0
     samples: int = 0
     sub_sampled_chunks: int = 0
-    stats: dict[str, Any] = field(default_factory=dict)
+    process_id: int = 0
+    """The process that simulated it (run_many spreads seeds over processes)."""
 
     def summary(self) -> str:
         ev = self.events
@@ -108,7 +110,7 @@ def simulate(
     return SimulationResult(
         events=events, meta=meta, wall_s=time.perf_counter() - wall0, engine_s=runner.engine_s,
         scene_s=runner.scene_s, pixel_updates=runner.pixel_updates, samples=runner.n_base,
-        sub_sampled_chunks=runner.sub_sampled_chunks,
+        sub_sampled_chunks=runner.sub_sampled_chunks, process_id=os.getpid(),
     )
 
 

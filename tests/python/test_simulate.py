@@ -174,3 +174,15 @@ def test_same_seed_same_events_whatever_the_threads() -> None:
     truth = one.meta["truth"]["led"]
     assert np.all(np.diff(truth["t_s"]) > 0)
     np.testing.assert_allclose(np.hypot(truth["x_px"] - 32, truth["y_px"] - 24), 15.0)
+
+
+def test_monte_carlo_runs_are_reproducible_and_run_in_parallel_processes() -> None:
+    from evstwin.simulate import run_many
+
+    scenario = spinning(100.0, noise=True, threshold_sigma=0.05)
+    scenario["duration_s"] = 1.5  # long enough that both workers take a job
+    runs = run_many(scenario, seeds=[0, 1], processes=2)
+    assert len({r.process_id for r in runs}) == 2
+    for seed, r in zip([0, 1], runs):
+        assert r.events.tobytes() == simulate(scenario, seed=seed).events.tobytes()
+    assert runs[0].events.tobytes() != runs[1].events.tobytes()
