@@ -15,9 +15,9 @@ import math
 from typing import Optional
 
 import numpy as np
+from evstwin._core import ELEMENTARY_CHARGE_C as E
 
 from evstwin import EVENT_DTYPE, PixelParams
-from evstwin._core import ELEMENTARY_CHARGE_C as E
 
 
 class NumpySensor:

@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from ._core import ELEMENTARY_CHARGE_C  # one place for each constant
 from .optics import DAVIS346_MEAN_WAVELENGTH_M, Optics, _finite, _positive
 from .pixel import PixelParams
 
@@ -37,7 +38,6 @@ K_THRESHOLD_TEXT = 1.0 / 14.0
 """The paper's text approximation of the same factor (sec. 2.4, after its ref. [13])."""
 
 BOLTZMANN_J_K = 1.380649e-23
-from ._core import ELEMENTARY_CHARGE_C  # noqa: E402  (one place for each constant)
 THERMAL_VOLTAGE_V = BOLTZMANN_J_K * 300.0 / ELEMENTARY_CHARGE_C
 """U_T = k_B T / q at 300 K [V] (25.85 mV)."""
 

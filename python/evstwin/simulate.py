@@ -26,8 +26,8 @@ from typing import Any, Iterable, Optional, Sequence, Union
 import numpy as np
 
 from . import psf
-from ._core import ELEMENTARY_CHARGE_C, __version__
-from .scenario import Scene, ScenarioError, build, load, parse_assignment, set_value
+from ._core import __version__
+from .scenario import ScenarioError, Scene, build, load, parse_assignment, set_value
 from .sensor import EVENT_DTYPE, Sensor
 from .targets import LightCurve, Target
 

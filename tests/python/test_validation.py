@@ -262,9 +262,8 @@ def test_compare_files_writes_json_and_figures(tmp_path, npz_io):
 @pytest.mark.skipif(not HAVE_IO, reason="evstwin.io (read_events for AEDAT4) is not in this tree yet")
 @pytest.mark.skipif(not (DATA / "davis346_road.aedat4").exists(), reason="../shared/data is absent")
 def test_real_davis_recording_against_a_simulation(tmp_path):
-    from evstwin.io import read_events
-
     from evstwin import Sensor
+    from evstwin.io import read_events
 
     real, meta = read_events(DATA / "davis346_road.aedat4")
     assert (int(meta["width"]), int(meta["height"])) == (346, 260)
