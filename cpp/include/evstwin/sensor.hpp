@@ -122,31 +122,10 @@ public:
         block_events_.resize(nblocks);
         for (auto& b : block_events_) b.clear();
 
-        std::exception_ptr error;
-        const std::int64_t nb = static_cast<std::int64_t>(nblocks);
-#if EVSTWIN_HAS_OPENMP
-#pragma omp parallel num_threads(num_threads_)
-#endif
-        {
-            PoissonSampler poisson;  // per thread: its caches never change results
-            PixelModel::BlockScratch scratch;
-#if EVSTWIN_HAS_OPENMP
-#pragma omp for schedule(dynamic, 4)
-#endif
-            for (std::int64_t b = 0; b < nb; ++b) {
-                try {
-                    run_block(static_cast<std::size_t>(b), photon_rate, sample_stride, n_samples, consts, poisson, scratch,
-                              probe_slot.empty() ? nullptr : probe_slot.data(), n_probe,
-                              trace ? trace->data() : nullptr);
-                } catch (...) {
-#if EVSTWIN_HAS_OPENMP
-#pragma omp critical(evstwin_error)
-#endif
-                    if (!error) error = std::current_exception();
-                }
-            }
-        }
-        if (error) std::rethrow_exception(error);
+        for_each_block(nblocks, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+            run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
+                      probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
+        });
 
         samples_ += n_samples;
         last_t_ = t_s[n_samples - 1];
@@ -208,6 +187,19 @@ public:
         const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
         block_events_.resize(std::max(block_events_.size(), nblocks));
         for (auto& b : block_events_) b.clear();
+        for_each_block(nblocks, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+            run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
+        });
+        return collect();
+    }
+
+private:
+    /// fn(block, poisson, scratch) for every block, in parallel when OpenMP is on, with
+    /// per-thread sampler caches and scratch (neither changes results). Blocks are fixed, so
+    /// which thread runs one does not matter. An exception in a block is rethrown here,
+    /// after the parallel region (it must not escape it).
+    template <class Fn>
+    void for_each_block(std::size_t nblocks, Fn&& fn) {
         std::exception_ptr error;
         const std::int64_t nb = static_cast<std::int64_t>(nblocks);
 #if EVSTWIN_HAS_OPENMP
@@ -221,8 +213,7 @@ public:
 #endif
             for (std::int64_t b = 0; b < nb; ++b) {
                 try {
-                    run_pixel_block(static_cast<std::size_t>(b), pixels, n_pixels, photon_rate, t_s, n_samples, consts,
-                                    poisson, scratch);
+                    fn(static_cast<std::size_t>(b), poisson, scratch);
                 } catch (...) {
 #if EVSTWIN_HAS_OPENMP
 #pragma omp critical(evstwin_error)
@@ -232,10 +223,8 @@ public:
             }
         }
         if (error) std::rethrow_exception(error);
-        return collect();
     }
 
-private:
     struct RawEvent {
         double t;
         std::uint32_t pixel;
