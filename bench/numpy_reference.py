@@ -58,25 +58,34 @@ class NumpySensor:
         events = np.concatenate(chunks) if chunks else np.zeros(0, EVENT_DTYPE)
         return events
 
-    def _current(self, lam: np.ndarray, dt: float) -> np.ndarray:
+    def _current(self, lam: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(current [A], x = ln of what the log photoreceptor sees): counts N enter the log
+        as N + 1/2, as in the engine."""
         p, rng = self.p, self.rng
         signal = self.e_per_photon * lam
         if p.photon_shot_noise and p.dark_model != "paper":
-            e_per_s = rng.poisson((signal + self.dark) * dt) / dt
-        else:
-            e_per_s = rng.poisson(signal * dt) / dt if p.photon_shot_noise else signal.copy()
-            if p.dark_model == "poisson":
-                e_per_s += rng.poisson(np.full(self.n, self.dark * dt)) / dt
-            elif p.dark_model == "paper":
-                e_per_s += rng.poisson(np.full(self.n, self.dark))
-        e_per_s = np.where(e_per_s <= 0, 0.5 / dt, e_per_s)  # the half-electron rule
-        return E * e_per_s
+            n = rng.poisson((signal + self.dark) * dt).astype(np.float64)
+            return n * (E / dt), np.log(n + 0.5) + math.log(E / dt)
+        flow = np.zeros(self.n) if p.photon_shot_noise else signal.copy()
+        seen = flow.copy()
+        if p.photon_shot_noise:
+            n = rng.poisson(signal * dt).astype(np.float64)
+            flow += n * (1.0 / dt)
+            seen += (n + 0.5) * (1.0 / dt)
+        if p.dark_model == "poisson":
+            n = rng.poisson(np.full(self.n, self.dark * dt)).astype(np.float64)
+            flow += n * (1.0 / dt)
+            seen += (n + 0.5) * (1.0 / dt)
+        elif p.dark_model == "paper":
+            n = rng.poisson(np.full(self.n, self.dark)).astype(np.float64)
+            flow += n
+            seen += n
+        return E * flow, np.log(E * seen)
 
     def _step(self, lam: np.ndarray, t0: float, t1: float) -> np.ndarray:
         p = self.p
         dt = t1 - t0
-        current = self._current(lam, dt)
-        x = np.log(current)
+        current, x = self._current(lam, dt)
         z = x
         if p.pr_pole:
             u = 2 * math.pi * p.pr_cutoff_ref_hz * (current / p.pr_ref_current_a) * dt

@@ -335,7 +335,7 @@ struct PixelModel {
                 const double mu = (e_per_photon * static_cast<double>(rate[at[j]]) + dark_mean_e_per_s) * c.dt;
                 const double k = static_cast<double>(poisson.from_word(mu, count_word[j], more));
                 x[j] = log_count(k) + c.log_e_over_dt;
-                cur[j] = (k > 0.0 ? k : 0.5) * c.e_over_dt;
+                cur[j] = k * c.e_over_dt;
                 scratch.count[j] = k;
             }
         } else {
@@ -445,31 +445,39 @@ struct PixelModel {
         const double signal_e_per_s = e_per_photon * photon_rate;
         double x;          // ln(I / 1 A)
         double current_a;  // I
+        // The log photoreceptor sees ln(N + 1/2) of an electron count N, not ln N: the log of
+        // a Poisson count is biased by -1/(2 mu) and undefined at zero, so the baseline would
+        // sink as the samples get shorter; ln(N + 1/2) is unbiased to O(1/mu^2) and finite.
+        // The current reported (and used by eq. 12 and the photoreceptor pole) is N e / dt.
         if (p.photon_shot_noise && p.dark_model != DarkModel::Paper) {
             const auto more = [&] { return CounterStream(key, pixel, s.n, PURPOSE_POISSON_EXTRA); };
             const double n = static_cast<double>(poisson.from_word((signal_e_per_s + dark_mean_e_per_s) * c.dt, w[0], more));
-            // A log photoreceptor cannot represent zero current: an empty interval counts as
-            // half an electron (the usual continuity correction), documented in the README.
             x = log_count(n) + c.log_e_over_dt;
-            current_a = (n > 0.0 ? n : 0.5) * c.e_over_dt;
+            current_a = n * c.e_over_dt;
         } else {
-            double e_per_s = p.photon_shot_noise ? 0.0 : signal_e_per_s;
+            double e_per_s = p.photon_shot_noise ? 0.0 : signal_e_per_s;  // what flows [e-/s]
+            double seen = e_per_s;  // what the log sees: counts with their half electron
             if (p.photon_shot_noise) {
                 const auto more = [&] { return CounterStream(key, pixel, s.n, PURPOSE_POISSON_EXTRA); };
-                e_per_s += static_cast<double>(poisson(signal_e_per_s * c.dt, uniform_open(w[0]), more)) / c.dt;
+                const double n = static_cast<double>(poisson(signal_e_per_s * c.dt, uniform_open(w[0]), more));
+                e_per_s += n * c.inv_dt;
+                seen += (n + 0.5) * c.inv_dt;
             }
             if (p.dark_model == DarkModel::Poisson) {
                 const auto more = [&] { return CounterStream(key, pixel, s.n, PURPOSE_POISSON_EXTRA); };
-                e_per_s += static_cast<double>(poisson(dark_mean_e_per_s * c.dt, uniform_open(w[0]), more)) / c.dt;
+                const double n = static_cast<double>(poisson(dark_mean_e_per_s * c.dt, uniform_open(w[0]), more));
+                e_per_s += n * c.inv_dt;
+                seen += (n + 0.5) * c.inv_dt;
             } else if (p.dark_model == DarkModel::Paper) {
                 // eq. 4 literally: Poisson(lambda_dark) electrons "per sample", read as e/s,
                 // so the fluctuation does not shrink with longer samples.
                 const auto paper = [&] { return CounterStream(key, pixel, s.n, PURPOSE_PAPER_DARK); };
-                e_per_s += static_cast<double>(poisson(dark_mean_e_per_s, paper().uniform(), paper));
+                const double n = static_cast<double>(poisson(dark_mean_e_per_s, paper().uniform(), paper));
+                e_per_s += n;
+                seen += n;
             }
-            if (e_per_s <= 0.0) e_per_s = 0.5 / c.dt;  // the half-electron rule above
             current_a = ELEMENTARY_CHARGE_C * e_per_s;
-            x = std::log(current_a);
+            x = std::log(ELEMENTARY_CHARGE_C * seen);
         }
 
         // Photoreceptor pole (optional) and source follower, both exact for an input that is
@@ -506,16 +514,15 @@ struct PixelModel {
         return in1 + (y0 - in0) * decay - (in1 - in0) * ramp;
     }
 
-    /// ln(n) of an electron count, ln(0.5) for zero (the half-electron rule); a table for
-    /// the small counts of the hot loop.
+    /// ln(n + 1/2) of an electron count n (see step()); a table for the small counts of the
+    /// hot loop.
     EVSTWIN_ALWAYS_INLINE double log_count(double n) const {
-        return n < static_cast<double>(LOG_TABLE_SIZE) ? log_table_[static_cast<std::size_t>(n)] : std::log(n);
+        return n < static_cast<double>(LOG_TABLE_SIZE) ? log_table_[static_cast<std::size_t>(n)] : std::log(n + 0.5);
     }
     static constexpr std::size_t LOG_TABLE_SIZE = 1024;
     std::vector<double> log_table_ = [] {
         std::vector<double> t(LOG_TABLE_SIZE);
-        t[0] = std::log(0.5);
-        for (std::size_t i = 1; i < LOG_TABLE_SIZE; ++i) t[i] = std::log(static_cast<double>(i));
+        for (std::size_t i = 0; i < LOG_TABLE_SIZE; ++i) t[i] = std::log(static_cast<double>(i) + 0.5);
         return t;
     }();
 
@@ -585,7 +592,18 @@ struct PixelModel {
                 s.refr_until = tb + refr;
                 continue;
             }
-            if (tc > c.t1) break;
+            if (!(tc <= c.t1)) break;  // also stops on a NaN rather than looping
+            if (!(tc > tb)) {
+                // The next level lies closer than t can resolve (a huge slope with no
+                // refractory period): the rest of this interval's levels fire as one event
+                // now, merged as at a wake-up, instead of looping at one instant.
+                const double d_end = db + g * (c.t1 - tb);
+                emit(tb, static_cast<Polarity>(pol));
+                db = pol == ON ? d_end - std::floor(d_end / th_on) * th_on : d_end + std::floor(-d_end / th_off) * th_off;
+                tb = c.t1;
+                s.refr_until = tb + refr;
+                break;
+            }
             emit(tc, static_cast<Polarity>(pol));
             tb = tc;
             db = 0.0;

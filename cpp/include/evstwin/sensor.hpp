@@ -28,6 +28,12 @@ class Sensor {
 public:
     /// Pixels per block: the unit of parallel work and of event bookkeeping.
     static constexpr std::size_t BLOCK = 256;
+    /// Shortest sample interval accepted [s]: below it 1/dt and the crossing times lose meaning.
+    static constexpr double MIN_DT_S = 1e-12;
+    /// Largest photon rate accepted [photons/s on a pixel]; with no dark current, positive
+    /// rates must be at least MIN_RATE (the log needs a representable current).
+    static constexpr double MAX_RATE = 1e20;
+    static constexpr double MIN_RATE = 1e-30;
 
     /// num_threads <= 0 means the OpenMP default.
     Sensor(int width, int height, const PixelParams& params, std::uint64_t seed = 0, int num_threads = 0)
@@ -227,6 +233,7 @@ private:
 
     struct RawEvent {
         double t;
+        double t1;  ///< end of the sample interval that produced it (the sort's second key)
         std::uint32_t pixel;
         std::uint8_t p;
     };
@@ -244,8 +251,8 @@ private:
                                             "]=" + detail::fmt(prev) + " and t_s[" + std::to_string(k) +
                                             "]=" + detail::fmt(t_s[k]));
             }
-            if (t_s[k] > 9.2e12)
-                throw std::invalid_argument("t_s must be below 9.2e12 s (int64 microseconds); got t_s[" +
+            if (!(std::fabs(t_s[k]) < 9.2e12))
+                throw std::invalid_argument("t_s must lie within +-9.2e12 s (int64 microseconds); got t_s[" +
                                             std::to_string(k) + "]=" + detail::fmt(t_s[k]));
             if (k > 0 || samples_ > 0) check_dt(t_s[k] - prev, k);
         }
@@ -253,14 +260,19 @@ private:
 
     /// The limits that depend on the sample interval dt (k names the sample in messages).
     void check_dt(double dt, std::size_t k) const {
+        if (!(dt >= MIN_DT_S))
+            throw std::invalid_argument("sample intervals must be >= 1e-12 s; got dt=" + detail::fmt(dt) + " s at t_s[" +
+                                        std::to_string(k) + "]");
         if (model_.has_filter && model_.euler && 2.0 * PI * *model_.p.cutoff_hz * dt > 2.0)
             throw std::invalid_argument("lowpass='euler' (eq. 7) is unstable when 2 pi cutoff_hz dt > 2; got cutoff_hz=" +
                                         detail::fmt(*model_.p.cutoff_hz) + " and dt=" + detail::fmt(dt) + " s at t_s[" +
                                         std::to_string(k) + "]: use lowpass='exact' or shorter samples");
-        if (model_.p.shot_noise_rate_hz * dt > 0.5)
+        // The largest eq. 12 rate is R_n (at no current) or F R_n (at I_max) when F > 1.
+        if (std::max(1.0, model_.p.shot_noise_factor) * model_.p.shot_noise_rate_hz * dt > 0.5)
             throw std::invalid_argument(
-                "shot_noise_rate_hz * dt must be <= 0.5 (eq. 13-15 draw at most one event per sample); got "
-                "shot_noise_rate_hz=" + detail::fmt(model_.p.shot_noise_rate_hz) + " and dt=" + detail::fmt(dt) + " s");
+                "max(1, shot_noise_factor) * shot_noise_rate_hz * dt must be <= 0.5 (eq. 13-15 draw at most one "
+                "event per sample); got shot_noise_rate_hz=" + detail::fmt(model_.p.shot_noise_rate_hz) +
+                ", shot_noise_factor=" + detail::fmt(model_.p.shot_noise_factor) + " and dt=" + detail::fmt(dt) + " s");
     }
 
     template <class Real>
@@ -281,8 +293,8 @@ private:
     std::size_t first_bad_rate(const Real* rate, std::size_t total_size) const {
         const std::int64_t total = static_cast<std::int64_t>(total_size);
         // Compared in the input's own type, counted rather than OR-ed, so the loop vectorises.
-        const Real top = std::numeric_limits<Real>::max();
-        const Real lowest = model_.dark_mean_e_per_s <= 0.0 ? std::numeric_limits<Real>::denorm_min() : Real(0);
+        const Real top = static_cast<Real>(MAX_RATE);
+        const Real lowest = model_.dark_mean_e_per_s <= 0.0 ? static_cast<Real>(MIN_RATE) : Real(0);
         std::int64_t n_bad = 0;
 #if EVSTWIN_HAS_OPENMP
 #pragma omp parallel for simd num_threads(num_threads_) reduction(+ : n_bad) schedule(static)
@@ -301,11 +313,12 @@ private:
     }
 
     [[noreturn]] static void throw_bad_rate(const std::string& where, double v) {
-        if (v == 0.0)
+        if (v >= 0.0 && v < MIN_RATE)
             throw std::invalid_argument(
-                "photon_rate must be > 0 where there is no dark current (dark_model='none' or "
+                "photon_rate must be >= 1e-30 photons/s where there is no dark current (dark_model='none' or "
                 "dark_rate_e_per_s=0): the log photoreceptor needs a positive current; got " + where + "=" + detail::fmt(v));
-        throw std::invalid_argument("photon_rate must be finite and >= 0 photons/s; got " + where + "=" + detail::fmt(v));
+        throw std::invalid_argument("photon_rate must be finite, >= 0 and <= 1e20 photons/s; got " + where + "=" +
+                                    detail::fmt(v));
     }
 
     std::vector<SampleConstants> sample_constants(const double* t_s, std::size_t n) const {
@@ -327,7 +340,10 @@ private:
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
-        auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
+        double t1 = 0.0;
+        auto emit = [&out, &pixel, &t1](double t, Polarity pol) {
+            out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
+        };
         const bool kernel = !probe_slot && model_.has_block_kernel();
         std::uint32_t ids[BLOCK], active[BLOCK];
         for (std::size_t i = lo; i < hi; ++i) ids[i - lo] = static_cast<std::uint32_t>(i);
@@ -335,6 +351,7 @@ private:
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
+            t1 = c.t1;
             std::size_t n_active = hi - lo;
             bool eligible = kernel && synced;
             if (kernel && !synced) {
@@ -380,7 +397,10 @@ private:
         const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
-        auto emit = [&out, &pixel](double t, Polarity pol) { out.push_back({t, pixel, static_cast<std::uint8_t>(pol)}); };
+        double t1 = 0.0;
+        auto emit = [&out, &pixel, &t1](double t, Polarity pol) {
+            out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
+        };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
         // (each sample reads one contiguous stretch of its row of rates) and scattered back.
         // The first interval starts at each pixel's own last sample; after it, every pixel
@@ -393,6 +413,7 @@ private:
             active[j] = static_cast<std::uint32_t>(j);
         }
         const bool kernel = model_.has_block_kernel();
+        t1 = t_s[0];
         // Usually every listed pixel stands at the same time (the previous base sample).
         bool same_start = kernel;
         for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
@@ -409,6 +430,7 @@ private:
         }
         for (std::size_t k = 1; k < n_samples; ++k) {
             const Real* row = rate + k * n_pixels + lo;
+            t1 = t_s[k];
             if (kernel) {
                 model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, active, m}, row, consts[k], key_, poisson,
                                   scratch, emit, pixel);
@@ -432,9 +454,12 @@ private:
         for (std::size_t i = 0; i < total; ++i) t_us[i] = std::llround(all[i].t * 1e6);
         std::vector<std::uint32_t> order(total);
         for (std::size_t i = 0; i < total; ++i) order[i] = static_cast<std::uint32_t>(i);
-        // Stable: a pixel's own events keep their time order within one microsecond.
+        // Within one microsecond, events of an earlier sample interval come first, then by
+        // pixel: a microsecond can straddle two run() calls, and this is the order that
+        // concatenating their outputs gives. Stable: a pixel's own events keep their order.
         std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
             if (t_us[a] != t_us[b]) return t_us[a] < t_us[b];
+            if (all[a].t1 != all[b].t1) return all[a].t1 < all[b].t1;
             return all[a].pixel < all[b].pixel;
         });
         std::vector<Event> events(total);
