@@ -99,6 +99,49 @@ def thresholds_from_biases(
     return theta_on, theta_off
 
 
+# Table 3 of the paper: the photodiode material constants of eq. 3.
+TABLE3_DARK = {
+    "hole_diffusion_m2_s": 6.4632e-4,
+    "electron_diffusion_m2_s": 0.0129,
+    "hole_diffusion_length_m": 5.685e-6,
+    "electron_diffusion_length_m": 2.542e-5,
+    "acceptor_m3": 1e23,
+    "donor_m3": 1e23,
+    "intrinsic_m3": 2.1e12,
+    "depletion_width_m": 1.1637e-7,
+}
+
+
+def dark_rate_eq3(
+    tau_g_s: float,
+    pixel_pitch_m: float = 18.5e-6,
+    fill_factor: float = 0.22,
+    **constants: float,
+) -> float:
+    """Mean dark-electron rate [e-/s] of eq. 1 and 3 (the ``physics`` model of DESIGN.md):
+    ``J = (e D_h / (L_h N_d) + e D_e / (L_e N_a)) n_i^2 + e W n_i / tau_g`` over the
+    photodiode area ``pitch^2 * fill_factor``, divided by e.
+
+    tau_g_s: generation lifetime [s], which the paper does not give (a parameter). The other
+    constants default to Table 3 (``TABLE3_DARK``; override by name). With them the rate is
+    tiny (about 2 e-/s of diffusion plus 18 e-/s at tau_g = 1 us, against the 18000 e-/s
+    iniVation quotes): Table 3's n_i = 2.1e12 m^-3 is far below silicon's ~1e16 m^-3, so use
+    it to explore, not as a calibrated figure. Feed the result to
+    ``PixelParams.dark_rate_e_per_s`` with ``dark_model='poisson'``.
+    """
+    unknown = sorted(set(constants) - set(TABLE3_DARK))
+    if unknown:
+        raise TypeError(f"unknown eq. 3 constant(s) {unknown}; known: {sorted(TABLE3_DARK)}")
+    c = dict(TABLE3_DARK, **constants)
+    for name, value in [("tau_g_s", tau_g_s), ("pixel_pitch_m", pixel_pitch_m), ("fill_factor", fill_factor), *c.items()]:
+        _positive(name, value)
+    diffusion = (c["hole_diffusion_m2_s"] / (c["hole_diffusion_length_m"] * c["donor_m3"])
+                 + c["electron_diffusion_m2_s"] / (c["electron_diffusion_length_m"] * c["acceptor_m3"])) * c["intrinsic_m3"] ** 2
+    generation = c["depletion_width_m"] * c["intrinsic_m3"] / tau_g_s
+    # J / e [electrons / (s m^2)] times the photodiode area.
+    return float((diffusion + generation) * pixel_pitch_m**2 * fill_factor)
+
+
 def refractory_from_bias(i_refr_a: float, charge_c: float = REFRACTORY_CHARGE_C) -> float:
     """Refractory period [s] = Q / I_refr: the time I_refr takes to recharge the reset node.
 

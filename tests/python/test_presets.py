@@ -211,3 +211,20 @@ def test_paper_runs() -> None:
     assert paper_run_params(3, dark_model="paper").dark_model == "paper"
     with pytest.raises(ValueError, match="run"):
         paper_run_params(4)
+
+
+def test_dark_rate_from_eq3_matches_a_hand_computation() -> None:
+    from evstwin.presets import dark_rate_eq3
+
+    # Table 3 by hand, in electrons / (s m^2):
+    diffusion = (6.4632e-4 / (5.685e-6 * 1e23) + 0.0129 / (2.542e-5 * 1e23)) * 2.1e12**2
+    generation = 1.1637e-7 * 2.1e12 / 1e-6
+    area = (18.5e-6) ** 2 * 0.22
+    assert dark_rate_eq3(1e-6) == pytest.approx((diffusion + generation) * area, rel=1e-12)
+    assert 15.0 < dark_rate_eq3(1e-6) < 25.0
+    assert dark_rate_eq3(1e-7) > dark_rate_eq3(1e-6)  # shorter lifetime, more generation
+    assert dark_rate_eq3(1e-6, intrinsic_m3=1e16) > 1e4  # silicon's n_i
+    with pytest.raises(ValueError, match="tau_g_s"):
+        dark_rate_eq3(0.0)
+    with pytest.raises(TypeError, match="unknown eq. 3 constant"):
+        dark_rate_eq3(1e-6, n_i=1e16)
