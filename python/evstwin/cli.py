@@ -59,8 +59,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="sensor time of scenario SIMs [s]")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
 
-    p = sub.add_parser("timing", help="event-timing bias against the ground truth of a simulated .h5/.npz")
-    p.add_argument("file")
+    p = sub.add_parser("timing", help="event-timing bias against the ground truth of simulated .h5/.npz files")
+    p.add_argument("files", nargs="+", help="one file, or several (one per bias setting) to compare")
     p.add_argument("--out", required=True)
     p.add_argument("--radius-px", type=float, default=1.0, help="attribute events within this distance of the track [px]")
     p.add_argument("--max-delay-s", type=float, default=0.3,
@@ -194,22 +194,48 @@ def _timing(args: argparse.Namespace) -> int:
     from .io import read_events
     from .validation import format_timing_bias_summary, timing_bias, timing_bias_summary
 
-    events, meta = read_events(args.file)
-    truth = meta.get("truth") or {}
-    if not truth:
-        raise ValueError(f"{args.file} holds no ground truth (/truth): simulate to .h5 or .npz first")
-    table = timing_bias(events, truth, radius_px=args.radius_px, max_abs_delay_s=args.max_delay_s)
     out = Path(args.out)
+    tables: list[tuple[str, Any]] = []
+    for path in args.files:
+        events, meta = read_events(path)
+        truth = meta.get("truth") or {}
+        if not truth:
+            raise ValueError(f"{path} holds no ground truth (/truth): simulate to .h5 or .npz first")
+        tables.append((_setting_label(path, meta), timing_bias(events, truth, radius_px=args.radius_px,
+                                                                max_abs_delay_s=args.max_delay_s)))
     out.mkdir(parents=True, exist_ok=True)
-    png = plots.plot_timing_bias(table, out / "timing_bias.png")
-    rows = {by: timing_bias_summary(table, by=by) for by in ("target", "polarity", "flux", "speed")}
+    report: dict[str, Any] = {}
+    for label, table in tables:
+        rows = {by: timing_bias_summary(table, by=by) for by in ("target", "polarity", "flux", "speed")}
+        report[label] = rows
+        print(f"== {label}: {len(table)} events attributed to a crossing")
+        for by, r in rows.items():
+            print(format_timing_bias_summary(r, by=by))
+            print()
+    if len(tables) == 1:
+        png = plots.plot_timing_bias(tables[0][1], out / "timing_bias.png")
+        report = report[tables[0][0]]
+    else:
+        png = plots.plot_timing_by_setting(tables, out / "timing_by_setting.png")
     with open(out / "timing_bias.json", "w", encoding="utf-8") as fh:
-        json.dump(rows, fh, indent=1, default=float)
-    for by, r in rows.items():
-        print(format_timing_bias_summary(r, by=by))
-        print()
-    print(f"{len(table)} events attributed to a crossing; wrote {png} and {out / 'timing_bias.json'}")
+        json.dump(report, fh, indent=1, default=float)
+    print(f"wrote {png} and {out / 'timing_bias.json'}")
     return 0
+
+
+def _setting_label(path: str, meta: dict) -> str:
+    """A file's name and the thresholds it was simulated with, when its scenario says."""
+    scenario = meta.get("scenario")
+    name = Path(path).name
+    if isinstance(scenario, dict):
+        try:
+            from .scenario import build
+
+            p = build(scenario).params
+            return f"{name}\ntheta {p.theta_on:.3g}/{p.theta_off:.3g}"
+        except ValueError:
+            return name
+    return name
 
 
 if __name__ == "__main__":  # pragma: no cover

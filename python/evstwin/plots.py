@@ -582,6 +582,43 @@ def fig_timing_bias(
     return fig
 
 
+def fig_timing_by_setting(
+    tables: Sequence[tuple[str, np.ndarray]], figsize: tuple[float, float] | None = None
+) -> Figure:
+    """Event delay after the true crossing for several recordings side by side (one per bias
+    setting, say): a box per recording and polarity (median, quartiles, 5-95 % whiskers)."""
+    n = len(tables)
+    fig = Figure(figsize=figsize or (max(6.0, 1.6 * n + 2.5), 4.6), layout="constrained")
+    ax = fig.subplots()
+    for pol, colour, name, shift in ((1, ON_COLOUR, "ON", -0.18), (0, OFF_COLOUR, "OFF", 0.18)):
+        data, where = [], []
+        for i, (_, table) in enumerate(tables):
+            sel = (table["p"] != 0) if pol else (table["p"] == 0)
+            if np.any(sel):
+                data.append(np.asarray(table["delay_s"][sel], dtype=np.float64) * 1e3)
+                where.append(i + shift)
+        if data:
+            box = ax.boxplot(data, positions=where, widths=0.3, whis=(5, 95), showfliers=False, patch_artist=True)
+            for patch in box["boxes"]:
+                patch.set_facecolor(colour)
+                patch.set_alpha(0.6)
+            for median in box["medians"]:
+                median.set_color("black")
+            ax.plot([], [], color=colour, linewidth=6, alpha=0.6, label=f"{name} events")
+    ax.set_xticks(range(n), [label for label, _ in tables], fontsize=8)
+    ax.axhline(0.0, color="grey", linewidth=0.6)
+    ax.set_ylabel("delay: event time - true crossing [ms]")
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.suptitle("Event-timing bias by recording (boxes: quartiles, whiskers: 5-95 %)", fontsize=11)
+    return fig
+
+
+def plot_timing_by_setting(tables: Sequence[tuple[str, np.ndarray]], path: PathLike, dpi: int = DPI) -> Path:
+    """Write :func:`fig_timing_by_setting` to ``path``."""
+    return save(fig_timing_by_setting(tables), path, dpi)
+
+
 def plot_timing_bias(table: np.ndarray, path: PathLike, dpi: int = DPI, **kw: Any) -> Path:
     """Write :func:`fig_timing_bias` to ``path``."""
     return save(fig_timing_bias(table, **kw), path, dpi)
@@ -589,6 +626,8 @@ def plot_timing_bias(table: np.ndarray, path: PathLike, dpi: int = DPI, **kw: An
 
 __all__: list[str] = [
     "DPI",
+    "fig_timing_by_setting",
+    "plot_timing_by_setting",
     "KIND_COLOURS",
     "MAX_SCATTER_POINTS",
     "OFF_COLOUR",

@@ -100,3 +100,17 @@ def test_python_dash_m_works() -> None:
     assert done.stdout.startswith("evstwin 0.")
     listed = subprocess.run([sys.executable, "-m", "evstwin", "scenarios"], capture_output=True, text=True, check=True)
     assert "mcreynolds-run3" in listed.stdout and "geo-stare" in listed.stdout
+
+
+def test_timing_compares_bias_settings(simulated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    high = tmp_path / "high.npz"
+    assert main(["simulate", "mcreynolds", "-o", str(high), "--duration", "0.5", "--seed", "3", "--no-progress",
+                 "--set", "pixel.theta_on=0.4", "--set", "pixel.theta_off=0.3"]) == 0
+    assert main(["timing", str(simulated), str(high), "--out", str(tmp_path / "t")]) == 0
+    text = capsys.readouterr().out
+    assert "theta 0.206/0.093" in text and "theta 0.4/0.3" in text
+    assert (tmp_path / "t" / "timing_by_setting.png").stat().st_size > 10_000
+    report = json.loads((tmp_path / "t" / "timing_bias.json").read_text())
+    assert len(report) == 2
+    medians = [next(r for r in rows["polarity"] if r["group"] == "ON")["p50_s"] for rows in report.values()]
+    assert medians[1] > medians[0]  # higher thresholds: the first ON event comes later
