@@ -1,0 +1,528 @@
+"""evstwin.tune: fit recovery, sweeps (local and Dask), resume, detect ranking, retries, CLI."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from evstwin import tune
+from evstwin.scenario import build, load, to_toml
+from evstwin.simulate import simulate
+
+HIDDEN = {"pixel.theta_on": 0.3, "pixel.theta_off": 0.2, "pixel.dark_rate_e_per_s": 2000.0}
+
+
+def flicker(x: float, y: float) -> dict:
+    """A static source stepping between 4e9 and 1.6e10 photons/s every 50 ms: a contrast of
+    ln 4 whatever the dark current, which pins the thresholds."""
+    return {
+        "kind": "static",
+        "x_px": x,
+        "y_px": y,
+        "label": f"flicker{x:g}_{y:g}",
+        "light_curve": {
+            "t_s": [0.0, 0.049, 0.05, 0.099, 0.1],
+            "flux_ph_s": [4e9, 4e9, 1.6e10, 1.6e10, 4e9],
+            "periodic": True,
+        },
+    }
+
+
+def recovery_scenario(theta_on: float, theta_off: float, dark_rate_e_per_s: float) -> dict:
+    """48 x 36 px, 0.4 s: a source on a 10 px circle and four flickering sources (blurred to
+    ~2.5 px) over a dim sky (~1000 e-/s per pixel, half the hidden dark rate). The dark pixels'
+    noise depends on dark rate / threshold^2, the flickers on the thresholds alone: together
+    they separate the three parameters."""
+    return {
+        "name": "recovery",
+        "duration_s": 0.4,
+        "background": {"photon_rate_ph_s": 2e6},
+        "sensor": {"preset": "davis346", "width": 48, "height": 36},
+        "pixel": {"theta_on": theta_on, "theta_off": theta_off, "dark_rate_e_per_s": dark_rate_e_per_s},
+        "optics": {"extra_blur_sigma_px": 2.5},
+        "sampling": {"rate_hz": 500.0, "max_shift_px": 0.5, "sparse": True, "chunk_samples": 50},
+        "targets": [
+            {
+                "kind": "circular",
+                "centre_x_px": 24.0,
+                "centre_y_px": 18.0,
+                "radius_px": 10.0,
+                "period_s": 0.4,
+                "flux_ph_s": 4e9,
+                "label": "led",
+            },
+            flicker(8.0, 8.0),
+            flicker(40.0, 8.0),
+            flicker(8.0, 28.0),
+            flicker(40.0, 28.0),
+        ],
+    }
+
+
+def noise_scenario() -> dict:
+    """A small dark field for quick sweeps (24 x 16 px, 0.3 s)."""
+    return {
+        "name": "toy",
+        "duration_s": 0.3,
+        "background": {"photon_rate_ph_s": 1e6},
+        "sensor": {"preset": "davis346", "width": 24, "height": 16},
+        "pixel": {"dark_rate_e_per_s": 2000.0},
+        "sampling": {"rate_hz": 200.0},
+        "targets": [{"kind": "static", "x_px": 5.0, "y_px": 5.0, "flux_ph_s": 1e9}],
+    }
+
+
+def geo_small() -> dict:
+    """The limiting-magnitude scenario (geo-stare optics, sky and biases) on 48 x 24 px for
+    1 s, the target crossing at 60 arcsec/s (31 px/s)."""
+    s = tune.limiting_magnitude_scenario()
+    s["sensor"] = dict(s["sensor"], width=48, height=24)
+    s["duration_s"] = 1.0
+    s["targets"][0].update(x0_px=3.0, y0_px=11.5, wx_arcsec_s=60.0)
+    return load(s)
+
+
+@pytest.fixture(scope="module")
+def dask_address():
+    """A real two-worker Dask cluster on the loopback interface."""
+    distributed = pytest.importorskip("distributed")
+    # HTTP endpoints on a free loopback port: no "port 8787 in use" warning.
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address="127.0.0.1:0"
+    )
+    try:
+        yield cluster.scheduler_address
+    finally:
+        cluster.close()
+
+
+# -- fit ----------------------------------------------------------------------------------------
+
+
+def test_fit_recovers_hidden_thresholds_and_dark_rate(tmp_path: Path) -> None:
+    real = simulate(recovery_scenario(0.3, 0.2, 2000.0), seed=123, num_threads=1)
+    # The starting point: thresholds +40 % / -30 %, dark rate x3.
+    start = recovery_scenario(0.42, 0.14, 6000.0)
+    result = tune.fit(
+        real.events,
+        real.meta,
+        start,
+        params=["theta_on", "theta_off", "dark_rate_e_per_s"],
+        budget=80,
+        seed=0,
+        workers=2,
+    )
+    best = result.best_params
+    assert best["pixel.theta_on"] == pytest.approx(0.3, rel=0.1)
+    assert best["pixel.theta_off"] == pytest.approx(0.2, rel=0.1)
+    assert 2000.0 / 1.5 < best["pixel.dark_rate_e_per_s"] < 2000.0 * 1.5
+    assert len(result.history) <= 80 and result.history[0].params["pixel.theta_on"] == pytest.approx(0.42)
+    assert result.best_distance < 0.1 < result.history[0].distance
+    assert not result.failed
+
+    paths = result.write(tmp_path / "fit")
+    for name in ("best_toml", "history", "json", "convergence", "compare_histograms", "compare_json"):
+        assert paths[name].is_file(), name
+    again = build(str(paths["best_toml"]))  # what `evstwin simulate best.toml` builds
+    assert again.params.theta_on == pytest.approx(best["pixel.theta_on"])
+    assert again.duration_s == pytest.approx(real.meta["duration_s"])
+    with open(paths["history"], newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(result.history) and rows[0]["phase"] == "nm"
+
+
+def test_fit_tpe_is_reproducible_and_independent_of_workers() -> None:
+    real = simulate(recovery_scenario(0.3, 0.2, 2000.0), duration_s=0.2, seed=5, num_threads=1)
+    start = recovery_scenario(0.4, 0.15, 4000.0)
+    kw = {
+        "params": ["theta_on", "dark_rate_e_per_s"],
+        "budget": 6,
+        "seed": 3,
+        "sampler": "tpe",
+        "batch_size": 3,
+    }
+    a = tune.fit(real.events, real.meta, start, workers=0, **kw)
+    b = tune.fit(real.events, real.meta, start, workers=2, **kw)
+    assert [(r.params, r.distance) for r in a.history] == [(r.params, r.distance) for r in b.history]
+    assert a.best_params == b.best_params and a.history[0].params["pixel.theta_on"] == 0.4
+    assert {r.phase for r in a.history} == {"tpe"}
+
+
+def test_fit_rejects_bad_input() -> None:
+    real = simulate(recovery_scenario(0.3, 0.2, 2000.0), duration_s=0.1, seed=1, num_threads=1)
+    start = recovery_scenario(0.3, 0.2, 2000.0)
+    with pytest.raises(ValueError, match=r"unknown parameter 'theta'"):
+        tune.fit(real.events, real.meta, start, params=["theta"])
+    with pytest.raises(ValueError, match=r"pixel.cutoff_hz has no default bounds"):
+        tune.fit(real.events, real.meta, start, params=["cutoff_hz"])
+    with pytest.raises(ValueError, match=r"bound low must be < high; got 0.5:0.1"):
+        tune.fit(real.events, real.meta, start, params=["theta_on"], bounds={"theta_on": "0.5:0.1"})
+    with pytest.raises(ValueError, match=r"scenario sensor is 64x36 px but the real recording is 48x36"):
+        tune.fit(
+            real.events, real.meta, dict(start, sensor={"preset": "davis346", "width": 64, "height": 36})
+        )
+    with pytest.raises(ValueError, match=r"budget must be an integer >= 1; got 0"):
+        tune.fit(real.events, real.meta, start, budget=0)
+    assert tune.parse_bound("dark_rate_e_per_s=100:1e4") == (
+        "pixel.dark_rate_e_per_s",
+        tune.ParamBound(100.0, 1e4, True, "user"),
+    )
+
+
+# -- sweep -------------------------------------------------------------------------------------
+
+GRID = {"theta_on": [0.15, 0.3], "pixel.dark_rate_e_per_s": [1000.0, 4000.0]}
+
+
+def test_sweep_every_point_and_run_identical_on_dask(tmp_path: Path, dask_address: str) -> None:
+    local = tune.sweep(
+        noise_scenario(), GRID, objective="noise", runs=2, out_dir=tmp_path / "local", workers=2
+    )
+    assert len(local.rows) == 8 and local.complete
+    assert [(r["point"], r["seed"]) for r in local.rows] == [(p, s) for p in range(4) for s in (0, 1)]
+    with open(local.csv_path, newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert len(table) == 8 and set(table[0]) == {
+        "point",
+        "pixel.theta_on",
+        "pixel.dark_rate_e_per_s",
+        "seed",
+        *tune.NoiseObjective.metrics,
+    }
+    assert [r["runs"] for r in local.summary] == [2, 2, 2, 2]
+    assert local.summary_path.is_file() and local.figure_path.is_file()
+    # Lower thresholds, more noise; more dark current, less (relative) shot noise.
+    rate = {
+        (r["pixel.theta_on"], r["pixel.dark_rate_e_per_s"]): r["mean_noise_rate_per_px_hz"]
+        for r in local.summary
+    }
+    assert rate[(0.15, 1000.0)] > rate[(0.3, 1000.0)] and rate[(0.15, 1000.0)] > rate[(0.15, 4000.0)]
+
+    on_dask = tune.sweep(
+        noise_scenario(), GRID, objective="noise", runs=2, out_dir=tmp_path / "dask", scheduler=dask_address
+    )
+    assert on_dask.rows == local.rows
+    assert on_dask.csv_path.read_text() == local.csv_path.read_text()
+    assert "Dask cluster" in on_dask.executor
+
+
+def test_sweep_resume_skips_finished_rows(tmp_path: Path) -> None:
+    out = tmp_path / "sweep"
+    # "Interrupted": only half the grid finished, and the last row was cut by the kill.
+    first = tune.sweep(
+        noise_scenario(),
+        {"theta_on": [0.15], "pixel.dark_rate_e_per_s": [1000.0, 4000.0]},
+        objective="noise",
+        runs=2,
+        out_dir=out,
+        workers=2,
+    )
+    assert len(first.rows) == 4
+    with open(out / "sweep.csv", "a") as fh:
+        fh.write("9,0.3,1000.0,0,0.5")
+    with pytest.raises(FileExistsError, match=r"sweep.csv exists: pass --resume"):
+        tune.sweep(noise_scenario(), GRID, objective="noise", runs=2, out_dir=out)
+    resumed = tune.sweep(
+        noise_scenario(), GRID, objective="noise", runs=2, out_dir=out, resume=True, workers=2
+    )
+    assert resumed.resumed == 4 and len(resumed.rows) == 8 and resumed.complete
+    fresh = tune.sweep(noise_scenario(), GRID, objective="noise", runs=2, workers=0)
+    assert resumed.rows == fresh.rows
+    with open(out / "sweep.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 8
+    # Nothing left to run: a second resume only rewrites the tables.
+    again = tune.sweep(noise_scenario(), GRID, objective="noise", runs=2, out_dir=out, resume=True)
+    assert again.resumed == 8 and again.rows == fresh.rows and again.executor == "nothing to run"
+    with pytest.raises(ValueError, match=r"--resume: .* a different grid or objective"):
+        tune.sweep(noise_scenario(), {"theta_off": [0.2]}, objective="noise", out_dir=out, resume=True)
+
+
+def test_sweep_rejects_bad_grids() -> None:
+    with pytest.raises(ValueError, match=r"unknown parameter 'thta_on'"):
+        tune.sweep(noise_scenario(), {"thta_on": [0.1]}, objective="noise")
+    with pytest.raises(ValueError, match=r"theta_on must be in \[0.001, 10\]"):
+        tune.sweep(noise_scenario(), {"theta_on": [0.1, -1.0]}, objective="noise")
+    with pytest.raises(ValueError, match=r"objective must be one of match, detect, noise; got 'snr'"):
+        tune.sweep(noise_scenario(), {"theta_on": [0.1]}, objective="snr")
+    with pytest.raises(ValueError, match=r"objective 'match' needs a real recording"):
+        tune.sweep(noise_scenario(), {"theta_on": [0.1]}, objective="match")
+    with pytest.raises(ValueError, match=r"biases.i_on_a has no effect: the scenario sets pixel.theta_on"):
+        tune.sweep(dict(noise_scenario(), pixel={"theta_on": 0.2}), {"i_on_a": [1e-7]}, objective="noise")
+    assert tune.parse_grid(["theta_on=0.1,0.2", "sensor.bias_set=paper_run_3"]) == {
+        "pixel.theta_on": [0.1, 0.2],
+        "sensor.bias_set": ["paper_run_3"],
+    }
+
+
+def test_sweep_match_scores_the_truth_best() -> None:
+    real = simulate(noise_scenario(), seed=50, num_threads=1)
+    result = tune.sweep(
+        noise_scenario(),
+        {"theta_on": [0.1, 0.2061, 0.4]},
+        objective="match",
+        real=(real.events, real.meta),
+        workers=0,
+    )
+    d = [r["mean_distance"] for r in result.summary]
+    assert d[1] < d[0] and d[1] < d[2]
+
+
+# -- detect -------------------------------------------------------------------------------------
+
+
+def test_detect_ranks_bright_above_faint_and_low_threshold_above_high() -> None:
+    # fast_pr_slow_sf_balanced_th: I_diff 8.2 nA; I_ON 30 nA / 187 nA give theta_on 0.085 / 0.206.
+    result = tune.sweep(
+        geo_small(),
+        {"targets.0.magnitude": [7.0, 9.0, 12.0], "biases.i_on_a": [3e-8, 1.869e-7]},
+        objective="detect",
+        runs=2,
+        workers=2,
+    )
+    m = {(r["targets.0.magnitude"], r["biases.i_on_a"]): r for r in result.summary}
+    for bias in (3e-8, 1.869e-7):  # bright above faint
+        assert m[(7.0, bias)]["mean_excess_fraction"] > 0.9 > m[(12.0, bias)]["mean_excess_fraction"] + 0.5
+        assert m[(7.0, bias)]["mean_snr"] > m[(12.0, bias)]["mean_snr"]
+        assert m[(7.0, bias)]["mean_track_events_per_s"] > m[(12.0, bias)]["mean_track_events_per_s"]
+    # Low threshold above high, same target (magnitude 9).
+    low, high = m[(9.0, 3e-8)], m[(9.0, 1.869e-7)]
+    assert low["mean_excess_fraction"] > high["mean_excess_fraction"] + 0.3
+    assert low["mean_track_events_per_s"] > high["mean_track_events_per_s"]
+    bright = m[(7.0, 3e-8)]
+    assert 0.0 <= bright["mean_chance_fraction"] < 0.1 and bright["mean_track_px"] >= 25
+    assert abs(bright["mean_latency_median_s"]) < 0.05 and bright["mean_noise_rate_per_px_hz"] > 0
+
+
+def test_detect_metrics_on_a_handmade_track() -> None:
+    # Target along y = 2 from x = 0 to 9 in 1 s on a 20 x 8 sensor; one event in each of the
+    # pixels x = 2..5 at the centre's entry + 10 ms, two noise events far away.
+    t = np.linspace(0.0, 1.0, 101)
+    track = {"t_s": t, "x_px": 9.0 * t, "y_px": np.full_like(t, 2.0)}
+    ev = np.zeros(6, dtype=[("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+    for i, x in enumerate(range(2, 6)):
+        ev[i] = (round(((x - 0.5) / 9.0 + 0.01) * 1e6), x, 2, 1)
+    ev[4] = (500_000, 15, 7, 0)
+    ev[5] = (600_000, 19, 0, 1)
+    out = tune.detect_metrics(ev, 20, 8, 1.0, track, exclude_px=3.0, tail_s=0.1)
+    assert out["track_px"] == 9  # x = 1..9 (x = 0 is where the track starts)
+    assert out["track_fraction"] == pytest.approx(4 / 9)
+    assert out["latency_median_s"] == pytest.approx(0.01, abs=0.02 / 9.0)  # entry to 1/50 px
+    # Elsewhere: farther than 3 px from x = 1..9, y = 2: columns 13..19 (56 px) and rows 6, 7 of
+    # columns 0..12 (26 px).
+    assert out["noise_rate_per_px_hz"] == pytest.approx(2 / 82)
+    assert out["track_events_per_s"] == 4
+    assert 0 < out["chance_fraction"] < out["track_fraction"]
+    assert out["excess_fraction"] == pytest.approx(
+        (out["track_fraction"] - out["chance_fraction"]) / (1 - out["chance_fraction"])
+    )
+
+
+def test_limiting_magnitude_table_and_figure(tmp_path: Path) -> None:
+    result = tune.limiting_magnitude(
+        geo_small(),
+        rates_arcsec_s=[30.0, 120.0],
+        magnitudes=[7.0, 9.0, 12.0],
+        runs=1,
+        out_dir=tmp_path,
+        workers=2,
+    )
+    assert [r["rate_arcsec_s"] for r in result.table] == [30.0, 120.0]
+    for row in result.table:
+        assert row["limiting_magnitude"] in (7.0, 9.0) and row["metric_at_limit"] >= 0.5
+        assert row["rate_px_s"] == pytest.approx(row["rate_arcsec_s"] / 1.908, rel=1e-3)
+    assert result.figure_path.is_file() and result.table_path.is_file()
+    assert (tmp_path / "sweep.csv").is_file()
+    assert "limiting mag" in result.to_text()
+
+
+# -- retries ----------------------------------------------------------------------------------
+
+
+class FlakyNoise(tune.NoiseObjective):
+    """Raises the first time any process evaluates it (a marker file remembers)."""
+
+    def __init__(self, marker: Path, always: bool = False) -> None:
+        self.marker = marker
+        self.always = always
+
+    def evaluate(self, result):  # type: ignore[no-untyped-def]
+        if self.always or not self.marker.exists():
+            self.marker.touch()
+            raise RuntimeError("transient failure")
+        return super().evaluate(result)
+
+
+@pytest.mark.parametrize("workers", [0, 1])
+def test_a_job_that_raises_once_is_retried(tmp_path: Path, workers: int) -> None:
+    marker = tmp_path / "failed-once"
+    result = tune.sweep(
+        noise_scenario(),
+        {"theta_on": [0.2]},
+        objective=FlakyNoise(marker),
+        runs=1,
+        out_dir=tmp_path / "out",
+        workers=workers,
+    )
+    assert marker.exists() and not result.failed and len(result.rows) == 1
+
+
+class KillerNoise(tune.NoiseObjective):
+    """Kills its worker process (SIGKILL) the first time it is evaluated."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def evaluate(self, result):  # type: ignore[no-untyped-def]
+        if not self.marker.exists():
+            self.marker.touch()
+            os.kill(os.getpid(), signal.SIGKILL)
+        return super().evaluate(result)
+
+
+def test_a_killed_worker_job_is_rerun_on_a_new_pool(tmp_path: Path) -> None:
+    marker = tmp_path / "killed-once"
+    result = tune.sweep(
+        noise_scenario(), {"theta_on": [0.2, 0.3]}, objective=KillerNoise(marker), runs=2, workers=2
+    )
+    fresh = tune.sweep(noise_scenario(), {"theta_on": [0.2, 0.3]}, objective="noise", runs=2, workers=0)
+    assert marker.exists() and not result.failed and result.rows == fresh.rows
+
+
+def test_a_job_that_always_fails_is_reported_not_lost(tmp_path: Path) -> None:
+    result = tune.sweep(
+        noise_scenario(),
+        {"theta_on": [0.2, 0.3]},
+        objective=FlakyNoise(tmp_path / "m", True),
+        runs=1,
+        out_dir=tmp_path / "out",
+        workers=1,
+    )
+    assert len(result.failed) == 2 and result.rows == [] and not result.complete
+    assert {f.attempts for f in result.failed} == {tune.JOB_RETRIES + 1}
+    assert "RuntimeError: transient failure" in result.failed[0].error
+    assert "FAILED point" in result.to_text()
+
+
+def test_a_job_retried_on_an_in_process_dask_cluster(tmp_path: Path) -> None:
+    pytest.importorskip("distributed")
+    marker = tmp_path / "failed-once-dask"
+    result = tune.sweep(
+        noise_scenario(),
+        {"theta_on": [0.2]},
+        objective=FlakyNoise(marker),
+        runs=1,
+        scheduler="local",
+        workers=2,
+    )
+    assert marker.exists() and not result.failed and len(result.rows) == 1
+    assert "Dask cluster at tcp://127.0.0.1" in result.executor
+
+
+# -- command line -------------------------------------------------------------------------------
+
+
+def test_cli_sweep_fit_and_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from evstwin import cli
+    from evstwin.io import write_events
+
+    scen = tmp_path / "toy.toml"
+    scen.write_text(to_toml(load(noise_scenario())))
+    out = tmp_path / "sw"
+    code = cli.main(
+        [
+            "sweep",
+            "--scenario",
+            str(scen),
+            "--grid",
+            "theta_on=0.15,0.3",
+            "--objective",
+            "noise",
+            "--runs",
+            "2",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+            "--no-progress",
+        ]
+    )
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "noise_rate_per_px_hz" in text and "4 rows (0 resumed) over 2 points x 2 seed(s)" in text
+    assert (out / "sweep.csv").is_file() and (out / "sweep.png").is_file()
+
+    real = simulate(noise_scenario(), seed=9, num_threads=1)
+    real_path = tmp_path / "real.h5"
+    write_events(real_path, real.events, real.meta)
+    code = cli.main(
+        [
+            "fit",
+            str(real_path),
+            "--scenario",
+            str(scen),
+            "--params",
+            "theta_on",
+            "--budget",
+            "3",
+            "--bounds",
+            "theta_on=0.1:0.4",
+            "--out",
+            str(tmp_path / "fit"),
+            "--workers",
+            "1",
+            "--no-progress",
+        ]
+    )
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "pixel.theta_on" in text and "best distance" in text
+    assert (tmp_path / "fit" / "best.toml").is_file() and (
+        tmp_path / "fit" / "compare" / "histograms.png"
+    ).is_file()
+
+    code = cli.main(
+        [
+            "sweep",
+            "--scenario",
+            str(scen),
+            "--grid",
+            "theta_on",
+            "--objective",
+            "noise",
+            "--out",
+            str(tmp_path / "bad"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--grid takes name=v1,v2" in err
+    assert not (tmp_path / "bad").exists()
+    code = cli.main(["limiting-magnitude", "--magnitudes", "7,x", "--out", str(tmp_path / "lm")])
+    assert code == 2 and "--magnitudes takes numbers" in capsys.readouterr().err
+    code = cli.main(
+        [
+            "fit",
+            str(real_path),
+            "--scenario",
+            str(scen),
+            "--bounds",
+            "theta_on=1",
+            "--out",
+            str(tmp_path / "f2"),
+        ]
+    )
+    assert code == 2 and "--bounds takes name=lo:hi" in capsys.readouterr().err
+
+
+def test_fit_bounds_are_documented() -> None:
+    for key in tune.DEFAULT_FIT_PARAMS:
+        b = tune.FIT_BOUNDS[key]
+        assert b.why and b.low < b.high
+        value = getattr(build(load("mcreynolds")).params, key.split(".", 1)[1])
+        assert b.contains(value), key  # the paper's own values are inside
+    assert math.isclose(tune.FIT_BOUNDS["pixel.dark_rate_e_per_s"].low, 10.0)
