@@ -317,11 +317,14 @@ def run_many(
     processes: Optional[int] = None,
 ) -> list[SimulationResult]:
     """The same scenario with several seeds, in parallel processes (one thread each)."""
+    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     resolved = resolve_scenario(scenario, sets)
     seeds = list(seeds)
-    with ProcessPoolExecutor(max_workers=processes) as pool:
+    # forkserver: never fork a process that has run OpenMP or BLAS threads.
+    context = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(max_workers=processes, mp_context=context) as pool:
         futures = [pool.submit(simulate, resolved, duration_s, seed, 1) for seed in seeds]
         return [f.result() for f in futures]
 
