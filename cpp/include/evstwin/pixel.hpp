@@ -299,7 +299,7 @@ struct PixelModel {
     struct BlockView {
         PixelState* state;           ///< the block's pixel states
         const std::uint32_t* ids;    ///< global pixel index of each local index
-        const std::uint32_t* active; ///< local indices to advance, in increasing order
+        const std::uint32_t* active; ///< local indices to advance, in increasing order; nullptr: all
         std::size_t n_active;
     };
 
@@ -310,6 +310,17 @@ struct PixelModel {
     template <class Real, class Emit>
     void step_block(const BlockView& v, const Real* rate, const SampleConstants& c, Philox4x32Key key,
                     PoissonSampler& poisson, BlockScratch& scratch, Emit&& emit, std::uint32_t& pixel) const {
+        // All pixels active (the common case): index them directly, without the indirection.
+        if (v.active == nullptr)
+            step_block_impl<true>(v, rate, c, key, poisson, scratch, emit, pixel);
+        else
+            step_block_impl<false>(v, rate, c, key, poisson, scratch, emit, pixel);
+    }
+
+    template <bool AllActive, class Real, class Emit>
+    EVSTWIN_ALWAYS_INLINE void step_block_impl(const BlockView& v, const Real* rate, const SampleConstants& c,
+                                               Philox4x32Key key, PoissonSampler& poisson, BlockScratch& scratch,
+                                               Emit&& emit, std::uint32_t& pixel) const {
         const std::size_t n = v.n_active;
         scratch.resize(n);
         double* u_noise = scratch.u_noise.data();
@@ -318,21 +329,22 @@ struct PixelModel {
         double* y = scratch.y.data();
         std::uint8_t* busy = scratch.busy.data();
         PixelState* st = v.state;
-        const std::uint32_t* at = v.active;
+        // at(j): the local index of the j-th active pixel.
+        const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
         const bool shot = p.shot_noise_rate_hz > 0.0;
         if (p.photon_shot_noise) {
             std::uint32_t* count_word = scratch.count_word.data();
             for (std::size_t j = 0; j < n; ++j) {
                 std::uint32_t w[2];
-                sample_words(st[at[j]], key, v.ids[at[j]], w);
+                sample_words(st[at(j)], key, v.ids[at(j)], w);
                 u_noise[j] = uniform_open(w[1]);
                 count_word[j] = w[0];
             }
             for (std::size_t j = 0; j < n; ++j) {
-                const std::uint32_t px = v.ids[at[j]];
-                const std::uint64_t sample = st[at[j]].n;
+                const std::uint32_t px = v.ids[at(j)];
+                const std::uint64_t sample = st[at(j)].n;
                 const auto more = [&] { return CounterStream(key, px, sample, PURPOSE_POISSON_EXTRA); };
-                const double mu = (e_per_photon * static_cast<double>(rate[at[j]]) + dark_mean_e_per_s) * c.dt;
+                const double mu = (e_per_photon * static_cast<double>(rate[at(j)]) + dark_mean_e_per_s) * c.dt;
                 const double k = static_cast<double>(poisson.from_word(mu, count_word[j], more));
                 x[j] = log_count(k) + c.log_e_over_dt;
                 cur[j] = k * c.e_over_dt;
@@ -342,10 +354,10 @@ struct PixelModel {
             for (std::size_t j = 0; j < n; ++j) {
                 if (shot) {
                     std::uint32_t w[2];
-                    sample_words(st[at[j]], key, v.ids[at[j]], w);
+                    sample_words(st[at(j)], key, v.ids[at(j)], w);
                     u_noise[j] = uniform_open(w[1]);
                 }
-                const double r = static_cast<double>(rate[at[j]]);
+                const double r = static_cast<double>(rate[at(j)]);
                 cur[j] = ELEMENTARY_CHARGE_C * (e_per_photon * r);
                 if (r != scratch.cached_rate) {  // most pixels share the background's rate
                     scratch.cached_rate = r;
@@ -364,7 +376,7 @@ struct PixelModel {
                 scratch.pr_dt = c.dt;
             }
             for (std::size_t j = 0; j < n; ++j) {
-                const PixelState& si = st[at[j]];
+                const PixelState& si = st[at(j)];
                 double decay, ramp;
                 const double k = p.photon_shot_noise ? scratch.count[j] : -1.0;
                 const bool tabled = k >= 0.0 && k < static_cast<double>(LOG_TABLE_SIZE);
@@ -385,11 +397,11 @@ struct PixelModel {
                 z[j] = x[j] + (si.z - si.x) * decay - (x[j] - si.x) * ramp;
             }
         } else {
-            for (std::size_t j = 0; j < n; ++j) z[j] = x[j];
+            z = x;  // no pole: the source follower's input is the log itself
         }
         // Filter, noise decision and the quiet test: branch-free arithmetic.
         for (std::size_t j = 0; j < n; ++j) {
-            PixelState& si = st[at[j]];
+            PixelState& si = st[at(j)];
             double yi;
             if (!has_filter) {
                 yi = z[j];
@@ -415,9 +427,9 @@ struct PixelModel {
             if (quiet) si.ref = yi - d1;
         }
         for (std::size_t j = 0; j < n; ++j) {
-            PixelState& si = st[at[j]];
+            PixelState& si = st[at(j)];
             if (busy[j]) {
-                pixel = v.ids[at[j]];
+                pixel = v.ids[at(j)];
                 double t_noise = 0.0;
                 const int pol = shot ? shot_noise(u_noise[j], cur[j], c, t_noise) : -1;
                 compare(si, y[j], c, pol, t_noise, emit);

@@ -368,11 +368,10 @@ private:
                 }
             }
             if (eligible) {
-                if (synced)
-                    for (std::size_t i = 0; i < n_active; ++i) active[i] = static_cast<std::uint32_t>(i);
-                model_.step_block(PixelModel::BlockView{state_.data() + lo, ids, active, n_active}, row + lo, c, key_,
-                                  poisson, scratch, emit, pixel);
-                synced = n_active == hi - lo;
+                const bool all = n_active == hi - lo;
+                model_.step_block(PixelModel::BlockView{state_.data() + lo, ids, all ? nullptr : active, n_active},
+                                  row + lo, c, key_, poisson, scratch, emit, pixel);
+                synced = all;
             } else if (!probe_slot) {
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
@@ -407,18 +406,14 @@ private:
         // stands at the same time and the block kernel applies.
         const std::size_t m = hi - lo;
         std::vector<PixelState> local(m);
-        std::uint32_t active[BLOCK];
-        for (std::size_t j = 0; j < m; ++j) {
-            local[j] = state_[pixels[lo + j]];
-            active[j] = static_cast<std::uint32_t>(j);
-        }
+        for (std::size_t j = 0; j < m; ++j) local[j] = state_[pixels[lo + j]];
         const bool kernel = model_.has_block_kernel();
         t1 = t_s[0];
         // Usually every listed pixel stands at the same time (the previous base sample).
         bool same_start = kernel;
         for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
         if (same_start) {
-            model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, active, m}, rate + lo,
+            model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, rate + lo,
                               model_.constants(local[0].t, t_s[0]), key_, poisson, scratch, emit, pixel);
         } else {
             for (std::size_t j = 0; j < m; ++j) {
@@ -432,7 +427,7 @@ private:
             const Real* row = rate + k * n_pixels + lo;
             t1 = t_s[k];
             if (kernel) {
-                model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, active, m}, row, consts[k], key_, poisson,
+                model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
                                   scratch, emit, pixel);
             } else {
                 for (std::size_t j = 0; j < m; ++j) {
