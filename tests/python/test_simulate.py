@@ -180,9 +180,10 @@ def test_monte_carlo_runs_are_reproducible_and_run_in_parallel_processes() -> No
     from evstwin.simulate import run_many
 
     scenario = spinning(100.0, noise=True, threshold_sigma=0.05)
-    scenario["duration_s"] = 1.5  # long enough that both workers take a job
-    runs = run_many(scenario, seeds=[0, 1], processes=2)
+    scenario["duration_s"] = 2.0  # six jobs, long enough that both workers take some
+    seeds = list(range(6))
+    runs = run_many(scenario, seeds=seeds, processes=2)
     assert len({r.process_id for r in runs}) == 2
-    for seed, r in zip([0, 1], runs):
+    for seed, r in zip(seeds, runs):
         assert r.events.tobytes() == simulate(scenario, seed=seed).events.tobytes()
     assert runs[0].events.tobytes() != runs[1].events.tobytes()
