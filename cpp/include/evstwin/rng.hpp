@@ -11,6 +11,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "config.hpp"
@@ -115,12 +116,26 @@ class PoissonSampler {
 public:
     static constexpr double POISSON_TABLE_MAX_MEAN = 256.0;  // 18000 e-/s over 10 ms: still a table
 
+    /// The mean rounded to 32 significant bits (relative change below 2.4e-10). Sample
+    /// times k * dt give intervals that differ in their last bits, so the background's mean
+    /// would change from sample to sample and every block would rebuild its table each
+    /// sample; rounded, it stays put. The rounding is part of the model (a pure function of
+    /// mu), so results do not depend on which tables happen to be cached.
+    static double quantised_mean(double mu) {
+        std::uint64_t bits;
+        std::memcpy(&bits, &mu, sizeof bits);
+        bits = (bits + (std::uint64_t{1} << 20)) & ~((std::uint64_t{1} << 21) - 1);
+        std::memcpy(&mu, &bits, sizeof bits);
+        return mu;
+    }
+
     /// One variate of mean mu >= 0. u is a uniform in (0, 1) used by inversion; the
     /// rejection sampler draws further uniforms from `more`, a CounterStream it builds only
     /// when needed (building one per call would cost the hot loop for nothing).
     template <class MakeStream>
     inline std::uint64_t operator()(double mu, double u, MakeStream&& more) {
         if (mu <= 0.0) return 0;
+        mu = quantised_mean(mu);
         if (mu < POISSON_TABLE_MAX_MEAN) return invert(mu, u);
         auto stream = more();
         return ptrs(mu, stream);
@@ -162,6 +177,7 @@ public:
     template <class MakeStream>
     EVSTWIN_ALWAYS_INLINE std::uint64_t from_word(double mu, std::uint32_t w, MakeStream&& more) {
         if (mu <= 0.0) return 0;
+        mu = quantised_mean(mu);
         if (mu < POISSON_TABLE_MAX_MEAN) return invert_word(mu, w);
         auto stream = more();
         return ptrs(mu, stream);
