@@ -582,18 +582,10 @@ def compare_files(
     w, h = comp.real.width, comp.real.height
     recs = [(comp.real_label + " (real)", real_events)] + [(s.label, e) for s, (e, _) in zip(comp.sims, sims)]
     bin_s = rate_bin_s if rate_bin_s is not None else nice_bin_s(comp.real.duration_s)
-    outputs = {
-        "frames": plots.plot_frames(
-            recs, w, h, out / "frames.png", window_s=window_s, n_windows=n_windows, t_offset_s=t_offset_s
-        ),
-        "xyt": plots.plot_xyt(
-            recs, w, h, out / "xyt.png", t_offset_s=t_offset_s, duration_s=window_s * n_windows
-        ),
-        "histograms": plots.plot_comparison_histograms(comp, out / "histograms.png"),
-        "percent_error": plots.plot_comparison_percent_error(comp, out / "percent_error.png"),
-        "bin_error": plots.plot_comparison_bin_error(comp, out / "bin_error.png"),
-        "event_rate": plots.plot_event_rate(recs, out / "event_rate.png", bin_s=bin_s),
-    }
+    outputs = _recording_figures(recs, w, h, out, window_s, n_windows, t_offset_s, bin_s)
+    outputs["histograms"] = plots.plot_comparison_histograms(comp, out / "histograms.png")
+    outputs["percent_error"] = plots.plot_comparison_percent_error(comp, out / "percent_error.png")
+    outputs["bin_error"] = plots.plot_comparison_bin_error(comp, out / "bin_error.png")
     comp.outputs = {k: str(v) for k, v in outputs.items()}
     comp.outputs["json"] = str(out / "compare.json")
     with open(out / "compare.json", "w", encoding="utf-8") as fh:
@@ -656,23 +648,34 @@ def show(
     for k in KINDS:
         edges[k], hists[k] = analysis.count_histogram(counts[k], bin_width)
     bin_s = rate_bin_s if rate_bin_s is not None else nice_bin_s(st.duration_s)
-    outputs = {
+    outputs = _recording_figures(recs, width, height, out, window_s, n_windows, t_offset_s, bin_s)
+    outputs["histograms"] = plots.plot_count_histograms(edges, [(recs[0][0], hists)], out / "histograms.png")
+    return {k: str(v) for k, v in outputs.items()}
+
+
+def _recording_figures(
+    recs: Sequence[tuple[str, np.ndarray]],
+    width: int,
+    height: int,
+    out: Path,
+    window_s: float,
+    n_windows: int,
+    t_offset_s: float,
+    bin_s: float,
+) -> dict[str, Path]:
+    """The figures drawn of the recordings themselves, for compare_files and show alike:
+    frames.png (Fig. 5), xyt.png (Fig. 6) and event_rate.png."""
+    from . import plots
+
+    return {
         "frames": plots.plot_frames(
-            recs,
-            width,
-            height,
-            out / "frames.png",
-            window_s=window_s,
-            n_windows=n_windows,
-            t_offset_s=t_offset_s,
+            recs, width, height, out / "frames.png", window_s=window_s, n_windows=n_windows, t_offset_s=t_offset_s
         ),
         "xyt": plots.plot_xyt(
             recs, width, height, out / "xyt.png", t_offset_s=t_offset_s, duration_s=window_s * n_windows
         ),
-        "histograms": plots.plot_count_histograms(edges, [(recs[0][0], hists)], out / "histograms.png"),
         "event_rate": plots.plot_event_rate(recs, out / "event_rate.png", bin_s=bin_s),
     }
-    return {k: str(v) for k, v in outputs.items()}
 
 
 # --------------------------------------------------------------------------------------------
