@@ -1,0 +1,43 @@
+"""Optional dependencies, imported where they are needed.
+
+The engine, scenes and the HDF5 / NPZ / text files need only NumPy, SciPy and h5py. Heavier
+libraries come with extras (``pip install 'evstwin[plot]'`` and so on; ``[all]`` installs
+every one), and a missing one is reported in one line that names the extra to install.
+"""
+
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+# module -> (extra that installs it, what it is used for)
+EXTRAS: dict[str, tuple[str, str]] = {
+    "matplotlib": ("plot", "figures"),
+    "tqdm": ("plot", "progress bars"),
+    "aedat": ("io", "reading AEDAT4 files"),
+    "faery": ("io", "Prophesee RAW/DAT and Event Stream files, AEDAT4 writing"),
+    "optuna": ("tune", "the Optuna samplers of fit"),
+    "cmaes": ("tune", "fit --sampler cmaes"),
+    "dask": ("dask", "running jobs on a Dask cluster"),
+    "distributed": ("dask", "running jobs on a Dask cluster"),
+}
+
+
+class MissingExtraError(ImportError):
+    """An optional dependency is not installed; the message names the extra to install."""
+
+
+def require(module: str, purpose: str | None = None) -> ModuleType:
+    """Import ``module`` (e.g. ``"matplotlib.pyplot"``), or raise :class:`MissingExtraError`
+    naming the extra that installs it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        top = module.split(".", 1)[0]
+        extra, used_for = EXTRAS.get(top, ("all", "this feature"))
+        raise MissingExtraError(
+            f"{purpose or used_for} needs the '{top}' package: pip install 'evstwin[{extra}]'"
+        ) from exc
+
+
+__all__ = ["EXTRAS", "MissingExtraError", "require"]

@@ -1,0 +1,261 @@
+"""``evstwin fit``, ``sweep`` and ``limiting-magnitude``: thin commands over :mod:`evstwin.tune`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..scenario import load, parse_assignment, set_value
+from ..tune import (
+    DEFAULT_FIT_PARAMS,
+    DEFAULT_MAGNITUDES,
+    DEFAULT_RATES_ARCSEC_S,
+    OBJECTIVES,
+    SAMPLERS,
+    parse_float_list,
+    fit,
+    limiting_magnitude,
+    parse_bound,
+    parse_grid,
+    sweep,
+)
+
+
+def register(subparsers: Any) -> None:
+    """Add ``fit``, ``sweep`` and ``limiting-magnitude`` to the ``evstwin`` command."""
+
+    def execution(p: argparse.ArgumentParser, dask_workers_default: str) -> None:
+        p.add_argument(
+            "--scheduler",
+            help="Dask scheduler address (tcp://host:8786), or 'local' for an in-process "
+            "cluster; default: local worker processes",
+        )
+        p.add_argument("--workers", type=int, help=f"worker processes (default: {dask_workers_default})")
+        p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    p = subparsers.add_parser("fit", help="fit twin parameters to a real recording (Optuna)")
+    p.add_argument("real", help="real recording (any format read_events takes)")
+    p.add_argument(
+        "--scenario", required=True, help="scenario to fit (built-in name or TOML), of the sensor's size"
+    )
+    p.add_argument(
+        "--params",
+        default=",".join(DEFAULT_FIT_PARAMS),
+        help="comma list of parameters (pixel fields or scenario keys); default: "
+        + ",".join(p.split(".", 1)[1] for p in DEFAULT_FIT_PARAMS),
+    )
+    p.add_argument(
+        "--bounds",
+        action="append",
+        nargs="+",
+        default=[],
+        metavar="NAME=LO:HI",
+        help="search bounds replacing the documented defaults (repeatable)",
+    )
+    p.add_argument("--budget", type=int, default=40, help="number of trials (default 40)")
+    p.add_argument("--runs-per-trial", type=int, default=1, help="seeds averaged per trial (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="sampler seed and first simulation seed (default 0)")
+    p.add_argument(
+        "--sampler",
+        default="nm",
+        choices=SAMPLERS,
+        help="nm: Nelder-Mead from the scenario's values (default); tpe: Optuna TPE, global; "
+        "tpe+nm: TPE then Nelder-Mead; cmaes: Optuna CMA-ES (needs cmaes); random",
+    )
+    p.add_argument(
+        "--batch-size", type=int, default=4, help="Optuna trials run in parallel per round (default 4)"
+    )
+    p.add_argument(
+        "--set",
+        dest="sets",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value before fitting (repeatable)",
+    )
+    p.add_argument("--out", help="output folder (default: <REAL stem>_fit)")
+    execution(p, "all cores; 2 with --scheduler local")
+    p.set_defaults(func=_cmd_fit)
+
+    p = subparsers.add_parser("sweep", help="evaluate an objective over a grid of scenario values x seeds")
+    p.add_argument("--scenario", required=True, help="built-in name or TOML")
+    p.add_argument(
+        "--grid",
+        action="append",
+        default=[],
+        required=True,
+        metavar="NAME=V1,V2,...",
+        help="a parameter and its values, named as in --set (repeatable)",
+    )
+    p.add_argument("--objective", default="detect", help=f"one of {', '.join(OBJECTIVES)} (default detect)")
+    p.add_argument("--real", help="real recording for --objective match")
+    p.add_argument("--target", help="label of the detect objective's target (default: the first moving one)")
+    p.add_argument("--runs", type=int, default=1, help="seeds per point (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--duration", type=float, help="sensor time per run [s] (default: the scenario's)")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--out", default="sweep", help="output folder (default ./sweep)")
+    p.add_argument(
+        "--resume", action="store_true", help="keep the finished rows of OUT/sweep.csv, run the rest"
+    )
+    execution(p, "all cores; 2 with --scheduler local")
+    p.set_defaults(func=_cmd_sweep)
+
+    p = subparsers.add_parser("limiting-magnitude", help="faintest magnitude detected against angular rate")
+    p.add_argument(
+        "--scenario", help="built-in name or TOML (default: geo-stare without stars, 128x64 px, 4 s)"
+    )
+    p.add_argument(
+        "--rates-arcsec-s",
+        default=",".join(f"{r:g}" for r in DEFAULT_RATES_ARCSEC_S),
+        help="angular rates [arcsec/s], v1,v2,... or lo:hi:step",
+    )
+    p.add_argument(
+        "--magnitudes",
+        default=",".join(f"{m:g}" for m in DEFAULT_MAGNITUDES),
+        help="magnitudes, v1,v2,... or lo:hi:step",
+    )
+    p.add_argument(
+        "--criterion",
+        default="excess_fraction>=0.5",
+        help="METRIC>=VALUE of the detect objective (default excess_fraction>=0.5)",
+    )
+    p.add_argument("--runs", type=int, default=1, help="seeds per (rate, magnitude) (default 1)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--duration", type=float, help="sensor time per run [s] (default: the scenario's)")
+    p.add_argument(
+        "--set",
+        dest="sets",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="bias configuration etc., e.g. sensor.bias_set=paper_run_3 (repeatable)",
+    )
+    p.add_argument("--out", default="limiting_magnitude", help="output folder (default ./limiting_magnitude)")
+    p.add_argument("--resume", action="store_true")
+    execution(p, "all cores; 2 with --scheduler local")
+    p.set_defaults(func=_cmd_limiting)
+
+
+def _check_workers(args: argparse.Namespace) -> None:
+    if args.workers is not None and args.workers < (1 if args.scheduler else 0):
+        raise ValueError(f"--workers must be >= {1 if args.scheduler else 0}; got {args.workers}")
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    _check_workers(args)
+    from ..io import read_events
+
+    if args.budget < 1:
+        raise ValueError(f"--budget must be >= 1; got {args.budget}")
+    if args.runs_per_trial < 1:
+        raise ValueError(f"--runs-per-trial must be >= 1; got {args.runs_per_trial}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0; got {args.seed}")
+    if args.batch_size < 1:
+        raise ValueError(f"--batch-size must be >= 1; got {args.batch_size}")
+    params = [p for p in args.params.split(",") if p.strip()]
+    bounds = dict(parse_bound(b) for group in args.bounds for b in group)
+    scenario = load(args.scenario)
+    for text in args.sets:
+        k, v = parse_assignment(text)
+        scenario = set_value(scenario, k, v)
+    events, meta = read_events(args.real)
+    result = fit(
+        events,
+        meta,
+        scenario,
+        params=params,
+        budget=args.budget,
+        runs_per_trial=args.runs_per_trial,
+        seed=args.seed,
+        bounds=bounds,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        progress=not args.no_progress,
+        sampler=args.sampler,
+        batch_size=args.batch_size,
+    )
+    out = Path(args.out) if args.out else Path(f"{Path(args.real).stem}_fit")
+    paths = result.write(out)
+    print(result.to_text())
+    print(
+        f"wrote {paths['best_toml']} (evstwin simulate {paths['best_toml']} -o OUT), {paths['history']}, "
+        f"{paths['json']}, {paths['convergence']} and the comparison in {out / 'compare'}"
+    )
+    for f in result.failed:
+        print(f"failed trial {f.key}: {f.error}", file=sys.stderr)
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    _check_workers(args)
+    if args.runs < 1:
+        raise ValueError(f"--runs must be >= 1; got {args.runs}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0; got {args.seed}")
+    if args.objective not in OBJECTIVES:
+        raise ValueError(f"--objective must be one of {', '.join(OBJECTIVES)}; got {args.objective!r}")
+    if args.real is not None and args.objective != "match":
+        raise ValueError(f"--real is for --objective match; got --objective {args.objective}")
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration must be > 0; got {args.duration}")
+    grid = parse_grid(args.grid)
+    result = sweep(
+        args.scenario,
+        grid,
+        objective=args.objective,
+        runs=args.runs,
+        out_dir=args.out,
+        resume=args.resume,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        real=args.real,
+        target=args.target,
+        duration_s=args.duration,
+        seed=args.seed,
+        sets=args.sets,
+        progress=not args.no_progress,
+    )
+    print(result.to_text())
+    print(f"wrote {result.csv_path}, {result.summary_path} and {result.figure_path}")
+    return 1 if result.failed else 0
+
+
+def _cmd_limiting(args: argparse.Namespace) -> int:
+    _check_workers(args)
+    if args.runs < 1:
+        raise ValueError(f"--runs must be >= 1; got {args.runs}")
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration must be > 0; got {args.duration}")
+    if ">=" not in args.criterion:
+        raise ValueError(
+            f"--criterion takes METRIC>=VALUE (e.g. excess_fraction>=0.5); got {args.criterion!r}"
+        )
+    metric, _, value = args.criterion.partition(">=")
+    try:
+        threshold = float(value)
+    except ValueError:
+        raise ValueError(f"--criterion {args.criterion!r}: the value must be a number") from None
+    rates = parse_float_list(args.rates_arcsec_s, "--rates-arcsec-s")
+    mags = parse_float_list(args.magnitudes, "--magnitudes")
+    result = limiting_magnitude(
+        args.scenario,
+        rates,
+        mags,
+        runs=args.runs,
+        criterion=(metric.strip(), threshold),
+        out_dir=args.out,
+        resume=args.resume,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        seed=args.seed,
+        sets=args.sets,
+        duration_s=args.duration,
+        progress=not args.no_progress,
+    )
+    print(result.to_text())
+    print(f"wrote {result.table_path}, {result.figure_path} and the sweep in {args.out}")
+    return 1 if result.sweep.failed else 0
