@@ -9,6 +9,15 @@ tuning (``evstwin.tune``).
 
 from __future__ import annotations
 
+import os
+
+# OpenMP threads that wait at the end of a parallel region sleep instead of spinning: on a
+# machine where another process keeps a core busy, spinning threads steal the time the
+# working ones need (the default thread count ran 2-2.5x slower than one thread). libgomp
+# reads this once, when the engine loads it, so it must be set before ``_core`` is imported;
+# a value the user set is kept.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 from ._core import __version__
 from .io import read_events, write_events
 from .pixel import PixelParams

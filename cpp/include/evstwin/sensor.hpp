@@ -34,6 +34,10 @@ public:
     /// rates must be at least MIN_RATE (the log needs a representable current).
     static constexpr double MAX_RATE = 1e20;
     static constexpr double MIN_RATE = 1e-30;
+    /// Fewest pixel-updates (pixels x samples) in one call worth a parallel region: below it
+    /// (~0.3 ms of work) waking the other threads and waiting at the join costs more than
+    /// it saves, and on a loaded machine the join waits for a descheduled thread.
+    static constexpr std::size_t PARALLEL_MIN_UPDATES = std::size_t{1} << 15;
 
     /// num_threads <= 0 means the OpenMP default.
     Sensor(int width, int height, const PixelParams& params, std::uint64_t seed = 0, int num_threads = 0)
@@ -128,7 +132,7 @@ public:
         block_events_.resize(nblocks);
         for (auto& b : block_events_) b.clear();
 
-        for_each_block(nblocks, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+        for_each_block(nblocks, npix * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
                       probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
         });
@@ -193,7 +197,7 @@ public:
         const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
         block_events_.resize(std::max(block_events_.size(), nblocks));
         for (auto& b : block_events_) b.clear();
-        for_each_block(nblocks, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+        for_each_block(nblocks, n_pixels * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
         });
         return collect();
@@ -203,13 +207,16 @@ private:
     /// fn(block, poisson, scratch) for every block, in parallel when OpenMP is on, with
     /// per-thread sampler caches and scratch (neither changes results). Blocks are fixed, so
     /// which thread runs one does not matter. An exception in a block is rethrown here,
-    /// after the parallel region (it must not escape it).
+    /// after the parallel region (it must not escape it). One parallel region per call, and
+    /// none for less than PARALLEL_MIN_UPDATES of work; blocks are handed out dynamically so
+    /// a thread that shares its core with another process takes fewer of them.
     template <class Fn>
-    void for_each_block(std::size_t nblocks, Fn&& fn) {
+    void for_each_block(std::size_t nblocks, std::size_t updates, Fn&& fn) {
         std::exception_ptr error;
         const std::int64_t nb = static_cast<std::int64_t>(nblocks);
 #if EVSTWIN_HAS_OPENMP
-#pragma omp parallel num_threads(num_threads_)
+        const bool parallel = num_threads_ > 1 && nblocks > 1 && updates >= PARALLEL_MIN_UPDATES;
+#pragma omp parallel num_threads(num_threads_) if (parallel)
 #endif
         {
             PoissonSampler poisson;
@@ -296,8 +303,10 @@ private:
         const Real top = static_cast<Real>(MAX_RATE);
         const Real lowest = model_.dark_mean_e_per_s <= 0.0 ? static_cast<Real>(MIN_RATE) : Real(0);
         std::int64_t n_bad = 0;
+        // Serial on purpose: a memory-bound pass of one compare per rate, far cheaper than
+        // the update that follows, and a parallel region here would be a second join per call.
 #if EVSTWIN_HAS_OPENMP
-#pragma omp parallel for simd num_threads(num_threads_) reduction(+ : n_bad) schedule(static)
+#pragma omp simd reduction(+ : n_bad)
 #endif
         for (std::int64_t i = 0; i < total; ++i) {
             const Real v = rate[i];
