@@ -13,7 +13,6 @@ from types import ModuleType
 # module -> (extra that installs it, what it is used for)
 EXTRAS: dict[str, tuple[str, str]] = {
     "matplotlib": ("plot", "figures"),
-    "tqdm": ("plot", "progress bars"),
     "aedat": ("io", "reading AEDAT4 files"),
     "faery": ("io", "Prophesee RAW/DAT and Event Stream files, AEDAT4 writing"),
     "optuna": ("tune", "the Optuna samplers of fit"),

@@ -2,11 +2,14 @@
 
 The tables mirror the Python objects:
 
-``[sensor]``      ``preset`` (``davis346`` | ``imx636``), optional ``width``/``height`` (a
+``[sensor]``      ``preset`` (``davis346`` | ``imx636``; required, directly or through
+                  ``base``), optional ``width``/``height`` (a
                   smaller window of the sensor), ``bias_set`` (a name from
                   ``evstwin.presets.BIAS_SETS``), ``k`` (eq. 8-9 factor).
 ``[biases]``      bias currents in amperes (``i_on_a`` ... ``i_refr_a``), overriding the set.
 ``[pixel]``       any ``PixelParams`` field by name; overrides what biases and preset derive.
+                  ``pr_pole`` defaults to true here (as in every built-in), unlike
+                  ``PixelParams``, whose default is the paper's single pole.
 ``[optics]``      ``Optics`` fields (``focal_length_m``, ``f_number``, ``extra_blur_sigma_px``...).
 ``[sampling]``    ``rate_hz`` (the floor rate of the whole array), ``max_shift_px`` (default
                   0.25: no target moves further between samples), ``sparse`` (sub-sample only
@@ -148,11 +151,22 @@ def resolve(raw: dict[str, Any]) -> dict[str, Any]:
         seen.append(base_name)
         raw = _merge(_read_toml(base_name), raw)
     _check_keys(raw)
+    # An empty file, or one that forgot its sensor, would otherwise run a DAVIS346 with every
+    # default and nobody would notice: a scenario names at least its sensor preset.
+    if not isinstance(raw.get("sensor"), dict) or "preset" not in raw["sensor"]:
+        raise ScenarioError(
+            f"a scenario must name its sensor: [sensor] preset = one of {', '.join(sorted(PRESETS))} "
+            "(or base = a built-in scenario)"
+        )
     out = copy.deepcopy(raw)
     out.setdefault("name", "scenario")
     out.setdefault("duration_s", 1.0)
     out.setdefault("seed", 0)
-    out.setdefault("sensor", {}).setdefault("preset", "davis346")
+    # Scenarios default to the photoreceptor pole on, as every built-in has it: without it the
+    # shot-noise events depend on the sampling (README, "Sampling and noise"). Written into
+    # the resolved scenario, so the file beside the events says which was used. PixelParams
+    # keeps the paper's single pole for reproducing it.
+    out.setdefault("pixel", {}).setdefault("pr_pole", True)
     sampling = dict(DEFAULT_SAMPLING)
     sampling.update(out.get("sampling", {}))
     out["sampling"] = sampling

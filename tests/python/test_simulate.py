@@ -16,6 +16,7 @@ NOISE_FREE = {
     "leak_rate_hz": 0.0,
     "shot_noise_rate_hz": 0.0,
     "refractory_s": 0.0,
+    "pr_pole": False,  # the engine's single-pole model, whose sampling behaviour these tests pin
 }
 
 
@@ -187,3 +188,21 @@ def test_monte_carlo_runs_are_reproducible_and_run_in_parallel_processes() -> No
     for seed, r in zip(seeds, runs):
         assert r.events.tobytes() == simulate(scenario, seed=seed).events.tobytes()
     assert runs[0].events.tobytes() != runs[1].events.tobytes()
+
+
+@pytest.mark.parametrize("text", ["", "name = 'x'\n", "[sensor]\nwidth = 64\n", "[pixel]\ntheta_on = 0.3\n"])
+def test_a_scenario_must_name_its_sensor(tmp_path, text: str) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError, match=r"must name its sensor: \[sensor\] preset"):
+        load(path)
+
+
+def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text("[sensor]\npreset = 'davis346'\n")
+    assert load(path)["pixel"]["pr_pole"] is True and build(path).params.pr_pole is True
+    path.write_text("[sensor]\npreset = 'davis346'\n[pixel]\npr_pole = false\n")
+    assert build(path).params.pr_pole is False  # an explicit choice is kept
+    # A scenario based on a built-in inherits the built-in's value.
+    assert load({"base": "mcreynolds"})["pixel"]["pr_pole"] is True

@@ -12,11 +12,13 @@ written then.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from typing import Optional
 
 from .._core import __version__
+from .._extras import MissingExtraError
 from . import recordings, simulate, tuning
 
 
@@ -34,16 +36,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run one command; returns the exit status (0 ok, 1 some jobs failed, 2 bad input or a
+    missing extra, 130 interrupted)."""
     ap = build_parser()
     args = ap.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return status
     except KeyboardInterrupt:
         print("evstwin: interrupted", file=sys.stderr)
         return 130
-    except (ValueError, TypeError, FileNotFoundError, FileExistsError, NotADirectoryError, PermissionError) as exc:
+    except BrokenPipeError:
+        # `evstwin scenarios | head -2`: the reader left; not an error of ours. Point stdout
+        # at /dev/null so the interpreter's final flush does not raise again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
+    except MissingExtraError as exc:
         print(f"evstwin: error: {exc}", file=sys.stderr)
         return 2
+    except (ValueError, TypeError, OSError) as exc:
+        # OSError covers a missing file, a directory where a file was expected, no space
+        # left and permissions: each names its path in the message.
+        print(f"evstwin: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}"
+    return " ".join(str(exc).split("\n")).strip() or type(exc).__name__
 
 
 __all__ = ["build_parser", "main"]

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ._common import add_force, check_output_file
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser("simulate", help="simulate a scenario and write its events")
@@ -16,6 +18,7 @@ def register(sub: Any) -> None:
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override one scenario value, e.g. pixel.theta_on=0.25 (repeatable)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_force(p)
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("scenarios", help="list the built-in scenarios")
@@ -27,6 +30,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     if args.threads is not None and args.threads < 1:
         raise ValueError(f"--threads must be >= 1; got {args.threads}")
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration must be > 0 s; got {args.duration}")
+    # Everything about the output is checked before a second of simulation is spent.
+    check_output_file(args.output, args.force, "--output")
     result = simulate_to_file(
         args.scenario, args.output, duration_s=args.duration, seed=args.seed, num_threads=args.threads,
         sets=args.sets, progress=not args.no_progress,

@@ -1,0 +1,77 @@
+"""The command's shell: one-line errors, outputs checked before any work, pipes, extras."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from evstwin.cli import main
+
+
+def test_scenarios_into_a_closed_pipe_is_quiet() -> None:
+    # `evstwin scenarios | head -1`: the reader leaves early; no BrokenPipeError traceback.
+    proc = subprocess.run(
+        f"{sys.executable} -m evstwin scenarios | head -1", shell=True, capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0
+    assert len(proc.stdout.splitlines()) == 1
+    assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr
+
+
+def test_every_scenario_description_is_a_whole_sentence(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["scenarios"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) >= 5
+    for line in lines:
+        assert not line.rstrip().endswith((" through", " a", " the", ",")), line
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda p: p.mkdir(), "is a directory; give a file name"),
+        (lambda p: p.write_bytes(b"old"), "exists; pass --force to overwrite it"),
+    ],
+)
+def test_simulate_checks_its_output_before_simulating(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                      make, message: str) -> None:
+    out = tmp_path / "o.h5"
+    make(out)
+    # A 10 s full-size run would take seconds: the error must come before any of it.
+    assert main(["simulate", "mcreynolds", "-o", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and str(out) in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.h5"]
+
+
+def test_simulate_into_a_missing_folder_and_force(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "mcreynolds", "-o", str(tmp_path / "no" / "o.h5"), "--no-progress"]) == 2
+    assert "folder" in capsys.readouterr().err and not (tmp_path / "no").exists()
+    out = tmp_path / "o.npz"
+    out.write_bytes(b"old")
+    args = ["simulate", "mcreynolds", "-o", str(out), "--duration", "0.02", "--no-progress", "--force",
+            "--set", "sensor.width=32", "--set", "sensor.height=24"]
+    assert main(args) == 0
+    assert out.stat().st_size > 100
+
+
+def test_an_empty_scenario_file_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    toml = tmp_path / "empty.toml"
+    toml.write_text("")
+    assert main(["simulate", str(toml), "-o", str(tmp_path / "o.h5"), "--no-progress"]) == 2
+    assert "must name its sensor" in capsys.readouterr().err
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_a_missing_extra_is_one_line_naming_it() -> None:
+    # matplotlib blocked: drawing must say which extra to install, not print a traceback.
+    code = (
+        "import sys; sys.modules['matplotlib'] = None\n"
+        "from evstwin._extras import require\n"
+        "try:\n    require('matplotlib.pyplot')\nexcept ImportError as e:\n    print(e)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
+    assert out.strip() == "figures needs the 'matplotlib' package: pip install 'evstwin[plot]'"
