@@ -23,9 +23,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy_reference  # noqa: E402
-from evstwin._core import has_openmp  # noqa: E402
 
 from evstwin import PixelParams, Sensor  # noqa: E402
+from evstwin._core import has_openmp  # noqa: E402
 
 WIDTH, HEIGHT, RATE_HZ = 346, 260, 1000.0
 

@@ -12,12 +12,11 @@ and interval by repeating its step for the pixels that still have something to d
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 import numpy as np
-from evstwin._core import ELEMENTARY_CHARGE_C as E
 
 from evstwin import EVENT_DTYPE, PixelParams
+from evstwin._core import ELEMENTARY_CHARGE_C as E
 
 
 class NumpySensor:
@@ -190,5 +189,5 @@ class NumpySensor:
         return ev
 
 
-def reference_events(width: int, height: int, params: PixelParams, photon_rate, t_s, seed: Optional[int] = 0) -> np.ndarray:
+def reference_events(width: int, height: int, params: PixelParams, photon_rate, t_s, seed: int | None = 0) -> np.ndarray:
     return NumpySensor(width, height, params, seed or 0).run(photon_rate, np.asarray(t_s, float))

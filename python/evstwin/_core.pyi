@@ -1,6 +1,6 @@
 """Type stubs of the compiled engine (cpp/bindings). Private: use the evstwin package."""
 
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -17,7 +17,7 @@ class PixelParams:
     theta_on: float
     theta_off: float
     refractory_s: float
-    cutoff_hz: Optional[float]
+    cutoff_hz: float | None
     lowpass: str
     leak_rate_hz: float
     shot_noise_rate_hz: float
@@ -47,7 +47,7 @@ class Sensor:
     last_time_s: float
     num_threads: int
     def __init__(
-        self, width: int, height: int, params: PixelParams, seed: int = 0, num_threads: Optional[int] = None
+        self, width: int, height: int, params: PixelParams, seed: int = 0, num_threads: int | None = None
     ) -> None: ...
     def run(self, photon_rate: npt.NDArray[np.floating], t_s: npt.ArrayLike) -> np.ndarray: ...
     def run_probe(

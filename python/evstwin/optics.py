@@ -33,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -73,7 +73,7 @@ DARK_SKY_V_MAG_PER_ARCSEC2 = 21.9
 1998, 21.9 V). Suburban skies are 19-20; the full Moon brightens V by ~3 mag."""
 
 ArrayLike = npt.ArrayLike
-FloatOrArray = Union[float, np.ndarray]
+FloatOrArray = float | np.ndarray
 
 
 # ---------------------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, Literal, Optional
+from typing import Any, Literal
 
 from . import _core
 
@@ -32,7 +32,7 @@ class PixelParams:
     """OFF threshold magnitude [ln units], > 0. Paper sec. 3.1: 0.093."""
     refractory_s: float = _DEFAULT.refractory_s
     """Dead time after each event [s], in [0, 1]. 1 ms, inside McReynolds et al.'s 0.33-10 ms."""
-    cutoff_hz: Optional[float] = _DEFAULT.cutoff_hz
+    cutoff_hz: float | None = _DEFAULT.cutoff_hz
     """Source-follower low-pass cutoff [Hz] (eq. 6); None = no filter. Paper: 10 Hz."""
     lowpass: LowPass = _DEFAULT.lowpass  # type: ignore[assignment]
     """'exact' first-order update (default) or 'euler' (eq. 7, unstable for 2 pi fc dt > 2)."""
@@ -93,7 +93,7 @@ class PixelParams:
             setattr(core, f.name, float(value) if isinstance(value, int) and not isinstance(value, bool) else value)
         return core
 
-    def replace(self, **changes: Any) -> "PixelParams":
+    def replace(self, **changes: Any) -> PixelParams:
         """A copy with some fields changed (unknown names raise TypeError)."""
         names = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(changes) - names)

@@ -37,7 +37,7 @@ import sys
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Optional, Union
+from typing import Any
 
 import numpy as np
 
@@ -109,7 +109,7 @@ def builtin_names() -> list[str]:
     return sorted(p.name[: -len(".toml")] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
-def load(source: Union[str, Path, dict]) -> dict[str, Any]:
+def load(source: str | Path | dict) -> dict[str, Any]:
     """A resolved scenario dict from a built-in name, a TOML path or a dict (validated)."""
     if isinstance(source, dict):
         raw = copy.deepcopy(source)
@@ -118,7 +118,7 @@ def load(source: Union[str, Path, dict]) -> dict[str, Any]:
     return resolve(raw)
 
 
-def _read_toml(source: Union[str, Path]) -> dict[str, Any]:
+def _read_toml(source: str | Path) -> dict[str, Any]:
     text_source = str(source)
     path = Path(text_source)
     if text_source in builtin_names():
@@ -341,7 +341,7 @@ def _wrap(key: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
         raise ScenarioError(f"{key}: {exc}") from None
 
 
-def build(scenario: Union[str, Path, dict], duration_s: Optional[float] = None, seed: Optional[int] = None) -> Scene:
+def build(scenario: str | Path | dict, duration_s: float | None = None, seed: int | None = None) -> Scene:
     """Objects for a scenario (name, path or dict); duration_s and seed override the file's."""
     s = load(scenario)
     if duration_s is not None:

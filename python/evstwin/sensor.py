@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import operator
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -30,9 +30,9 @@ class Sensor:
         self,
         width: int,
         height: int,
-        params: Optional[PixelParams] = None,
+        params: PixelParams | None = None,
         seed: int = 0,
-        num_threads: Optional[int] = None,
+        num_threads: int | None = None,
     ) -> None:
         params = PixelParams() if params is None else params
         if not isinstance(params, PixelParams):

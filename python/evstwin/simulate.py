@@ -19,9 +19,10 @@ import math
 import os
 import sys
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Optional, Sequence, Union
+from typing import Any
 
 import numpy as np
 
@@ -61,7 +62,7 @@ class SimulationResult:
         )
 
 
-def resolve_scenario(scenario: Union[str, Path, dict], sets: Sequence[str] = ()) -> dict[str, Any]:
+def resolve_scenario(scenario: str | Path | dict, sets: Sequence[str] = ()) -> dict[str, Any]:
     """The scenario with ``--set key=value`` assignments applied (ScenarioError if bad)."""
     s = load(scenario)
     for text in sets:
@@ -71,10 +72,10 @@ def resolve_scenario(scenario: Union[str, Path, dict], sets: Sequence[str] = ())
 
 
 def simulate(
-    scenario: Union[str, Path, dict],
-    duration_s: Optional[float] = None,
-    seed: Optional[int] = None,
-    num_threads: Optional[int] = None,
+    scenario: str | Path | dict,
+    duration_s: float | None = None,
+    seed: int | None = None,
+    num_threads: int | None = None,
     sets: Sequence[str] = (),
     progress: bool = False,
 ) -> SimulationResult:
@@ -115,8 +116,8 @@ def simulate(
 
 
 def simulate_to_file(
-    scenario: Union[str, Path, dict],
-    out_path: Union[str, Path],
+    scenario: str | Path | dict,
+    out_path: str | Path,
     **kwargs: Any,
 ) -> SimulationResult:
     """simulate() and write the events (format from the extension) with the scenario and
@@ -136,7 +137,7 @@ def _is_static(target: Target, duration_s: float) -> bool:
 class _Runner:
     """The chunk loop of one simulation."""
 
-    def __init__(self, scene: Scene, num_threads: Optional[int]) -> None:
+    def __init__(self, scene: Scene, num_threads: int | None) -> None:
         self.scene = scene
         self.sensor = Sensor(scene.width, scene.height, scene.params, seed=scene.seed, num_threads=num_threads)
         self.sigma = scene.psf_sigma_px
@@ -310,11 +311,11 @@ class _Runner:
 
 
 def run_many(
-    scenario: Union[str, Path, dict],
+    scenario: str | Path | dict,
     seeds: Iterable[int],
-    duration_s: Optional[float] = None,
+    duration_s: float | None = None,
     sets: Sequence[str] = (),
-    processes: Optional[int] = None,
+    processes: int | None = None,
 ) -> list[SimulationResult]:
     """The same scenario with several seeds, in parallel processes (one thread each)."""
     import multiprocessing

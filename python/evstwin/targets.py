@@ -23,7 +23,7 @@ import abc
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Union
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -113,7 +113,7 @@ class LightCurve:
         return np.interp(t, self.t_s, self.flux_ph_s)
 
 
-Brightness = Union[float, LightCurve]
+Brightness = float | LightCurve
 """A constant flux [photons/s] or a LightCurve."""
 
 

@@ -15,7 +15,6 @@ import argparse
 import os
 import sys
 from collections.abc import Sequence
-from typing import Optional
 
 from .._core import __version__
 from .._extras import MissingExtraError
@@ -35,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns the exit status (0 ok, 1 some jobs failed, 2 bad input or a
     missing extra, 130 interrupted)."""
     ap = build_parser()
