@@ -3,6 +3,13 @@
 // evstwin::evstwin target never forces it on anyone.
 #pragma once
 
+// evstwin is C++17 (inline variables, hex float literals, if constexpr). Said first, in the
+// header every other one includes, so an older -std gets this line rather than a lexer error
+// deep in rng.hpp. MSVC reports __cplusplus as 199711L unless /Zc:__cplusplus; _MSVC_LANG is right.
+#if defined(_MSVC_LANG) ? (_MSVC_LANG < 201703L) : (__cplusplus < 201703L)
+#error "evstwin needs C++17 or newer: compile with -std=c++17 (or target_compile_features(... cxx_std_17))"
+#endif
+
 #if defined(_OPENMP) && !defined(EVSTWIN_NO_OPENMP)
 #include <omp.h>
 #define EVSTWIN_HAS_OPENMP 1

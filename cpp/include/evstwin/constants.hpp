@@ -1,6 +1,8 @@
 // Physical constants, one place each.
 #pragma once
 
+#include "config.hpp"
+
 namespace evstwin {
 
 /// Elementary charge [C] (CODATA 2018, exact).

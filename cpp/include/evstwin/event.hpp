@@ -2,6 +2,8 @@
 // generated from this struct by the bindings, so the two can never disagree.
 #pragma once
 
+#include "config.hpp"
+
 #include <cstdint>
 
 namespace evstwin {
