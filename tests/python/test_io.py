@@ -9,7 +9,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+import evstwin
 from evstwin import io
+from evstwin.io import aedat, hdf5, numpy_files, prophesee, text
+from evstwin.io._registry import FORMATS
 from evstwin.sensor import EVENT_DTYPE
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -80,7 +83,7 @@ def test_roundtrip_every_format(tmp_path: Path, suffix: str, raw_format: str | N
     assert back.dtype == EVENT_DTYPE
     assert np.array_equal(back, events)
     assert (meta["width"], meta["height"]) == (346, 260)
-    assert meta["format"] == io._FORMATS[suffix].name
+    assert meta["format"] == FORMATS[suffix].name
     assert meta["path"] == str(tmp_path / f"events{suffix}")
     if suffix == ".raw":
         assert meta["raw_format"] == raw_format
@@ -204,7 +207,7 @@ def test_truth_scenario_and_extras_roundtrip(tmp_path: Path, suffix: str) -> Non
             assert np.array_equal(got["truth"][name][field], values)
     assert got["seed"] == 7 and got["exposure_note"] == "night" and got["flag"] is True
     assert got["gain"] == pytest.approx(1.5)
-    assert got["evstwin_version"] == io._core.__version__
+    assert got["evstwin_version"] == evstwin.__version__
 
 
 @pytest.mark.parametrize("suffix", [".h5", ".npz"])
@@ -244,7 +247,7 @@ def test_text_output_is_plain(tmp_path: Path) -> None:
     events["t"] = [-7, 0, 123456789012]
     io.write_events(tmp_path / "e.csv", events, {"width": 10, "height": 10})
     lines = (tmp_path / "e.csv").read_text().splitlines()
-    assert lines[0] == f"# evstwin {io._core.__version__} width=10 height=10"
+    assert lines[0] == f"# evstwin {evstwin.__version__} width=10 height=10"
     assert lines[1] == "# t,x,y,p"
     assert lines[2:] == [",".join(str(int(e[f])) for f in ("t", "x", "y", "p")) for e in events]
 
@@ -337,8 +340,8 @@ def _boom(*args: Any, **kwargs: Any) -> None:
     raise RuntimeError("disk unplugged mid-write")
 
 
-def _partial_savez(file: Any, **arrays: Any) -> None:
-    file.write(b"PK\x03\x04 partial")
+def _partial_copy(source: Any, target: Any, length: int = 0) -> None:
+    target.write(source.read(100))
     raise RuntimeError("disk unplugged mid-write")
 
 
@@ -352,22 +355,21 @@ def _overflowing_faery_events(events: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize(
-    "suffix,target,replacement",
+    "suffix,owner,target,replacement",
     [
-        (".txt", "_format_int_rows", _boom),
-        (".h5", "_write_h5_truth", _boom),
-        (".npz", "np.savez_compressed", _partial_savez),
-        (".raw", "_encode_evt3_words", _boom),
-        (".dat", "_to_faery", _overflowing_faery_events),
-        (".aedat4", "_to_faery", _overflowing_faery_events),
+        (".txt", text, "format_int_rows", _boom),
+        (".h5", hdf5, "write_truth", _boom),
+        (".npz", numpy_files.shutil, "copyfileobj", _partial_copy),
+        (".raw", prophesee, "encode_evt3_words", _boom),
+        (".dat", prophesee, "to_faery", _overflowing_faery_events),
+        (".aedat4", aedat, "to_faery", _overflowing_faery_events),
     ],
 )
 def test_failed_write_leaves_nothing(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str, target: str, replacement: Any
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str, owner: Any, target: str, replacement: Any
 ) -> None:
     final = tmp_path / f"out{suffix}"
-    owner: Any = io.np if target.startswith("np.") else io
-    monkeypatch.setattr(owner, target.split(".")[-1], replacement)
+    monkeypatch.setattr(owner, target, replacement)
     with pytest.raises(RuntimeError):
         io.write_events(final, make_events(100), {"truth": {"a": {"t_s": np.zeros(3)}}})
     assert not final.exists()
@@ -378,7 +380,7 @@ def test_failed_write_keeps_the_previous_file(tmp_path: Path, monkeypatch: pytes
     final = tmp_path / "out.txt"
     io.write_events(final, make_events(10))
     before = final.read_bytes()
-    monkeypatch.setattr(io, "_format_int_rows", _boom)
+    monkeypatch.setattr(text, "format_int_rows", _boom)
     with pytest.raises(RuntimeError):
         io.write_events(final, make_events(20))
     assert final.read_bytes() == before
