@@ -46,7 +46,6 @@ DESCRIPTIVE_KEYS = frozenset(
         "raw_header",
         "time_unit_in_file",
         "stream_id",
-        "t0_us",
     }
 )
 # Keys with a meaning of their own in ``meta``.
