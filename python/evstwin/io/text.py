@@ -1,7 +1,7 @@
 """Text: ``.txt`` (space separated) and ``.csv`` (comma separated), one ``t x y p`` line per event.
 
 Written by appending lines (a header ``# evstwin <version> width=W height=H`` and ``# t x y p``
-first). Read ``chunk`` lines at a time: ``#`` lines are comments (the first ``width=``/``height=``
+first). Read in blocks of about ``chunk`` lines (whole lines, cut at the last newline): ``#`` lines are comments (the first ``width=``/``height=``
 in the comments before the data gives the size), one leading row of names is skipped. ``t`` is
 integer microseconds; a file whose first data lines have decimals in ``t`` is read as seconds
 (the convention of the UZH/RPG event-camera datasets) and rounded to microseconds. Polarity 0/1
@@ -11,6 +11,7 @@ been read (max + 1).
 
 from __future__ import annotations
 
+import io
 import itertools
 import re
 import warnings
@@ -27,6 +28,7 @@ _HEADER_SIZE = re.compile(r"\bwidth\s*=\s*(-?\d+).*?\bheight\s*=\s*(-?\d+)")
 _HEADER_VERSION = re.compile(r"^#\s*evstwin\s+(\S+)")
 _NAMES_ROW = re.compile(r"^[\s,]*[A-Za-z_]")
 _TXT_BLOCK = 1 << 20  # events formatted per block when writing text
+_BYTES_PER_LINE = 32  # bytes read per event asked for: blocks of about `chunk` lines
 
 
 class TextEncoder:
@@ -121,12 +123,12 @@ def _read_header(path: Path) -> tuple[Meta, int]:
     return meta, skip
 
 
-def _load(lines: list[bytes], delimiter: str | None, dtype: Any) -> np.ndarray:
+def _load(data: bytes, delimiter: str | None, dtype: Any) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*[Ee]mpty input file.*")
         warnings.filterwarnings("ignore", message=".*input contained no data.*")
         return np.loadtxt(
-            [line.decode("utf-8", "replace") for line in lines],
+            io.StringIO(data.decode("utf-8", "replace")),
             dtype=dtype,
             comments="#",
             delimiter=delimiter,
@@ -135,10 +137,10 @@ def _load(lines: list[bytes], delimiter: str | None, dtype: Any) -> np.ndarray:
 
 
 def _parse(
-    lines: list[bytes], delimiter: str | None, unit: str | None, first_line: int, path: Path
+    lines: bytes, delimiter: str | None, unit: str | None, first_line: int, path: Path
 ) -> tuple[np.ndarray, str]:
-    """The lines' table as int64 [t in us] and the unit of ``t`` (decided on the first chunk)."""
-    where = f"{str(path)!r} (lines {first_line + 1}-{first_line + len(lines)})"
+    """The lines' table as int64 [t in us] and the unit of ``t`` (decided on the first block)."""
+    where = f"{str(path)!r} (from line {first_line + 1})"
     if unit != "s":
         try:
             table = _load(lines, delimiter, np.int64)
@@ -179,27 +181,42 @@ def open_source(path: Path, chunk: int, delimiter: str | None) -> EventSource:
     meta, skip = _read_header(path)
     meta["size_source"] = "header" if meta["width"] is not None else None
 
-    def packets() -> Iterator[np.ndarray]:
-        unit: str | None = None
+    block_bytes = max(1 << 16, min(chunk * _BYTES_PER_LINE, 1 << 26))
+
+    def blocks() -> Iterator[tuple[bytes, int]]:
+        """Whole lines, about ``block_bytes`` at a time, and the line number of the first."""
         with open(path, "rb") as f:
-            lines_read = skip
             for _ in itertools.islice(f, skip):
                 pass
+            line, rest = skip, b""
             while True:
-                lines = list(itertools.islice(f, chunk))
-                if not lines:
+                data = f.read(block_bytes)
+                if not data:
                     break
-                table, unit = _parse(lines, delimiter, unit, lines_read, path)
-                lines_read += len(lines)
-                meta["time_unit_in_file"] = unit
-                if table.size == 0:
+                data = rest + data
+                cut = data.rfind(b"\n") + 1
+                if cut == 0:
+                    rest = data
                     continue
-                if table.shape[1] != 4:
-                    raise ValueError(f"{str(path)!r}: expected 4 columns (t x y p); found {table.shape[1]}")
-                p = table[:, 3]
-                if not np.isin(p, (-1, 0, 1)).all():
-                    raise ValueError(f"{str(path)!r}: polarity column holds values other than 0/1 (or -1/1)")
-                yield from_columns([table[:, 0], table[:, 1], table[:, 2], (p > 0).astype(np.uint8)], path)
+                yield data[:cut], line
+                line += data.count(b"\n", 0, cut)
+                rest = data[cut:]
+            if rest.strip():
+                yield rest, line
+
+    def packets() -> Iterator[np.ndarray]:
+        unit: str | None = None
+        for data, first_line in blocks():
+            table, unit = _parse(data, delimiter, unit, first_line, path)
+            meta["time_unit_in_file"] = unit
+            if table.size == 0:
+                continue
+            if table.shape[1] != 4:
+                raise ValueError(f"{str(path)!r}: expected 4 columns (t x y p); found {table.shape[1]}")
+            p = table[:, 3]
+            if not np.isin(p, (-1, 0, 1)).all():
+                raise ValueError(f"{str(path)!r}: polarity column holds values other than 0/1 (or -1/1)")
+            yield from_columns([table[:, 0], table[:, 1], table[:, 2], (p > 0).astype(np.uint8)], path)
         meta.setdefault("time_unit_in_file", "us")
 
     return EventSource(meta, decoded(path, "numpy", packets()))
