@@ -9,17 +9,20 @@ dense way). Pixels outside every moving window see only static light, for which 
 rate is exact, so the sparse way gives the dense way's events when noise is off, and its
 statistics when noise is on (each pixel's random numbers follow its own sample counter).
 
-Memory stays flat: only one chunk of photon rates exists at a time. The events and the
-ground-truth tracks are kept (they grow with the recording, not with pixels x samples).
+Memory stays flat: only one chunk of photon rates exists at a time. :func:`simulate` keeps
+the events and ground-truth tracks in memory (they grow with the recording, not with pixels
+x samples); :func:`simulate_to_file` streams both into the output file as each chunk
+finishes, so its memory does not grow with the duration.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,11 +37,13 @@ from .targets import LightCurve, Target
 
 
 @dataclass
-class SimulationResult:
-    """Events of a simulated recording, with what produced them."""
+class SimulationStats:
+    """What a simulation produced and what it cost, without the events themselves (what
+    :func:`simulate_to_file` returns: its events went to ``path``)."""
 
-    events: np.ndarray
     meta: dict[str, Any]
+    n_events: int = 0
+    n_on: int = 0
     wall_s: float = 0.0
     engine_s: float = 0.0
     scene_s: float = 0.0
@@ -47,19 +52,27 @@ class SimulationResult:
     sub_sampled_chunks: int = 0
     process_id: int = 0
     """The process that simulated it (run_many spreads seeds over processes)."""
+    path: Path | None = None
 
     def summary(self) -> str:
-        ev = self.events
-        on = int(np.count_nonzero(ev["p"] == 1))
-        off = len(ev) - on
+        on, total = self.n_on, self.n_events
+        off = total - on
         dur = float(self.meta["duration_s"])
         ratio = on / off if off else float("inf")
         return (
-            f"events: {len(ev)}  ON: {on}  OFF: {off}  ON/OFF: {ratio:.3f}  "
-            f"rate: {len(ev) / dur:.4g} ev/s over {dur:g} s of sensor time\n"
+            f"events: {total}  ON: {on}  OFF: {off}  ON/OFF: {ratio:.3f}  "
+            f"rate: {total / dur:.4g} ev/s over {dur:g} s of sensor time\n"
             f"wall time: {self.wall_s:.2f} s (engine {self.engine_s:.2f} s, scene {self.scene_s:.2f} s), "
             f"{self.pixel_updates / max(self.engine_s, 1e-9) / 1e6:.1f} M pixel-updates/s"
         )
+
+
+@dataclass
+class SimulationResult(SimulationStats):
+    """A simulated recording in memory: its events (``EVENT_DTYPE``, sorted by t) and meta
+    (size, duration, seed, the resolved scenario, ground truth)."""
+
+    events: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, EVENT_DTYPE))
 
 
 def resolve_scenario(scenario: str | Path | dict, sets: Sequence[str] = ()) -> dict[str, Any]:
@@ -85,49 +98,77 @@ def simulate(
     progress: a tqdm bar on stderr over sensor time.
     """
     wall0 = time.perf_counter()
-    resolved = resolve_scenario(scenario, sets)
-    scene = build(resolved, duration_s=duration_s, seed=seed)
-    runner = _Runner(scene, num_threads)
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    scene = build(resolve_scenario(scenario, sets), duration_s=duration_s, seed=seed)
+    tracks: dict[str, list[dict[str, np.ndarray]]] = {}
+    runner = _Runner(scene, num_threads, truth_sink=lambda name, rows: tracks.setdefault(name, []).append(rows))
+    parts = list(_with_bar(runner, scene, progress))
+    events = np.concatenate(parts) if parts else np.zeros(0, EVENT_DTYPE)
+    truth = {name: {k: np.concatenate([r[k] for r in rows]) for k in rows[0]} for name, rows in tracks.items()}
+    return SimulationResult(events=events, **_stats(runner, dict(_meta(runner, scene), truth=truth), wall0,
+                                                    len(events), int(np.count_nonzero(events["p"] == 1))))
 
-        bar = tqdm(total=round(scene.duration_s, 6), unit="s", desc=f"simulating {scene.scenario['name']}",
-                   file=sys.stderr, bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s sensor time [{elapsed}<{remaining}]")
+
+def simulate_to_file(
+    scenario: str | Path | dict,
+    out_path: str | Path,
+    duration_s: float | None = None,
+    seed: int | None = None,
+    num_threads: int | None = None,
+    sets: Sequence[str] = (),
+    progress: bool = False,
+) -> SimulationStats:
+    """simulate() streamed into ``out_path`` (format from the extension): the events and the
+    ground truth go to the file as each chunk finishes, so memory does not grow with the
+    duration; the file appears under its name only when complete (an error or Ctrl-C leaves
+    nothing). The result carries the counts, not the events."""
+    from .io import open_event_writer
+
+    wall0 = time.perf_counter()
+    scene = build(resolve_scenario(scenario, sets), duration_s=duration_s, seed=seed)
+    with open_event_writer(out_path, {"width": scene.width, "height": scene.height}) as writer:
+        runner = _Runner(scene, num_threads, truth_sink=writer.append_truth)
+        n_on = 0
+        for part in _with_bar(runner, scene, progress):
+            writer.write(part)
+            n_on += int(np.count_nonzero(part["p"] == 1))
+        meta = _meta(runner, scene)
+        writer.update_meta(meta)
+        n_events = writer.count
+    return SimulationStats(path=writer.path, **_stats(runner, meta, wall0, n_events, n_on))
+
+
+def _with_bar(runner: _Runner, scene: Scene, progress: bool) -> Iterator[np.ndarray]:
+    """The runner's event chunks, with a tqdm bar over sensor time on stderr if asked."""
+    if not progress:
+        yield from runner.chunks()
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=round(scene.duration_s, 6), unit="s", desc=f"simulating {scene.scenario['name']}",
+               file=sys.stderr, bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s sensor time [{elapsed}<{remaining}]")
     try:
-        events = runner.run(bar)
+        yield from runner.chunks(bar)
     finally:
-        if bar is not None:
-            bar.close()
-    meta = {
+        bar.close()
+
+
+def _meta(runner: _Runner, scene: Scene) -> dict[str, Any]:
+    return {
         "width": scene.width,
         "height": scene.height,
         "duration_s": runner.t_end,
         "seed": scene.seed,
         "scenario": scene.scenario,
         "evstwin_version": __version__,
-        "truth": runner.truth(),
     }
-    return SimulationResult(
-        events=events, meta=meta, wall_s=time.perf_counter() - wall0, engine_s=runner.engine_s,
-        scene_s=runner.scene_s, pixel_updates=runner.pixel_updates, samples=runner.n_base,
-        sub_sampled_chunks=runner.sub_sampled_chunks, process_id=os.getpid(),
-    )
 
 
-def simulate_to_file(
-    scenario: str | Path | dict,
-    out_path: str | Path,
-    **kwargs: Any,
-) -> SimulationResult:
-    """simulate() and write the events (format from the extension) with the scenario and
-    the ground truth; the file appears under its name only when complete."""
-    from .io import check_writable, write_events
-
-    check_writable(out_path)
-    result = simulate(scenario, **kwargs)
-    write_events(out_path, result.events, result.meta)
-    return result
+def _stats(runner: _Runner, meta: dict[str, Any], wall0: float, n_events: int, n_on: int) -> dict[str, Any]:
+    return {
+        "meta": meta, "n_events": n_events, "n_on": n_on, "wall_s": time.perf_counter() - wall0,
+        "engine_s": runner.engine_s, "scene_s": runner.scene_s, "pixel_updates": runner.pixel_updates,
+        "samples": runner.n_base, "sub_sampled_chunks": runner.sub_sampled_chunks, "process_id": os.getpid(),
+    }
 
 
 def _is_static(target: Target, duration_s: float) -> bool:
@@ -137,7 +178,8 @@ def _is_static(target: Target, duration_s: float) -> bool:
 class _Runner:
     """The chunk loop of one simulation."""
 
-    def __init__(self, scene: Scene, num_threads: int | None) -> None:
+    def __init__(self, scene: Scene, num_threads: int | None,
+                 truth_sink: Callable[[str, dict[str, np.ndarray]], None]) -> None:
         self.scene = scene
         self.sensor = Sensor(scene.width, scene.height, scene.params, seed=scene.seed, num_threads=num_threads)
         self.sigma = scene.psf_sigma_px
@@ -157,7 +199,14 @@ class _Runner:
         self.engine_s = 0.0
         self.pixel_updates = 0
         self.sub_sampled_chunks = 0
-        self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        # Ground truth goes out as it is made: rows of each moving target's track, at every time
+        # the scene was rendered at (the fine rate where the run sub-sampled), in time order.
+        self._truth_sink = truth_sink
+        self._truth_t_last = -math.inf
+        self.track_names: list[str] = []
+        for j, target in enumerate(self.moving):
+            name = target.label or f"target{j}"
+            self.track_names.append(f"{name}#{j}" if name in self.track_names else name)
         self.half = psf.window_half_width_px(self.sigma)
         # A pixel a source has left keeps the fine sampling until the source follower has
         # settled (5 time constants): the comparator interpolates linearly between samples
@@ -173,8 +222,9 @@ class _Runner:
 
     # -- the loop --------------------------------------------------------------------------------
 
-    def run(self, bar: Any = None) -> np.ndarray:
-        parts = [self._dense(np.array([0.0]))]
+    def chunks(self, bar: Any = None) -> Iterator[np.ndarray]:
+        """The events, chunk by chunk in time order (each chunk sorted by t)."""
+        yield self._dense(np.array([0.0]))
         chunk = self.scene.chunk_samples
         a = 0
         while a < self.n_base:
@@ -189,7 +239,7 @@ class _Runner:
             k = np.arange(a + 1, b + 1)
             t_base = k * self.dt
             if n_sub == 1:
-                parts.append(self._dense(t_base))
+                yield self._dense(t_base)
             else:
                 self.sub_sampled_chunks += 1
                 i = np.arange(1, n_sub + 1)
@@ -197,15 +247,13 @@ class _Runner:
                 t_fine = np.where(i[None, :] == n_sub, (k[:, None]) * self.dt,
                                   (k[:, None] - 1 + i[None, :] / n_sub) * self.dt).reshape(-1)
                 if self.scene.sparse:
-                    parts.append(self._sparse(t_fine, t_base))
+                    yield self._sparse(t_fine, t_base)
                 else:
                     for j in range(0, t_fine.size, chunk):
-                        parts.append(self._dense(t_fine[j : j + chunk]))
+                        yield self._dense(t_fine[j : j + chunk])
             if bar is not None:
                 bar.update(round(min(b * self.dt, self.scene.duration_s) - bar.n, 6))
             a = b
-        events = np.concatenate(parts) if parts else np.zeros(0, EVENT_DTYPE)
-        return events
 
     def _n_sub(self, t0: float, t1: float) -> int:
         if not self.moving:
@@ -221,7 +269,12 @@ class _Runner:
         for j, target in enumerate(self.moving):
             x[:, j], y[:, j] = target.position_px(t)
             f[:, j] = target.flux_ph_s(t)
-        self._truth.append((t, x, y, f))
+        keep = t > self._truth_t_last  # chunks come in time order; never repeat a time
+        if keep.any():
+            self._truth_t_last = float(t[keep][-1])
+            for j, name in enumerate(self.track_names):
+                self._truth_sink(name, {"t_s": t[keep], "x_px": x[keep, j], "y_px": y[keep, j],
+                                        "flux_ph_s": f[keep, j]})
         return x, y, f
 
     def _dense(self, t: np.ndarray) -> np.ndarray:
@@ -287,28 +340,6 @@ class _Runner:
         order = np.lexsort((events["y"].astype(np.int64) * sc.width + events["x"], events["t"]))
         return events[order]
 
-    def truth(self) -> dict[str, dict[str, np.ndarray]]:
-        """Sampled track of each moving target: t_s, x_px, y_px, flux_ph_s (at every sample
-        time the scene was rendered at, so at the fine rate where the run sub-sampled)."""
-        out: dict[str, dict[str, np.ndarray]] = {}
-        if not self._truth:
-            return out
-        t = np.concatenate([p[0] for p in self._truth])
-        order = np.argsort(t, kind="stable")
-        t_sorted = t[order]
-        keep = np.concatenate([[True], np.diff(t_sorted) > 0])
-        for j, target in enumerate(self.moving):
-            name = target.label or f"target{j}"
-            if name in out:
-                name = f"{name}#{j}"
-            out[name] = {
-                "t_s": t_sorted[keep],
-                "x_px": np.concatenate([p[1][:, j] for p in self._truth])[order][keep],
-                "y_px": np.concatenate([p[2][:, j] for p in self._truth])[order][keep],
-                "flux_ph_s": np.concatenate([p[3][:, j] for p in self._truth])[order][keep],
-            }
-        return out
-
 
 def run_many(
     scenario: str | Path | dict,
@@ -330,4 +361,4 @@ def run_many(
         return [f.result() for f in futures]
 
 
-__all__ = ["SimulationResult", "ScenarioError", "resolve_scenario", "run_many", "simulate", "simulate_to_file"]
+__all__ = ["SimulationResult", "SimulationStats", "ScenarioError", "resolve_scenario", "run_many", "simulate", "simulate_to_file"]

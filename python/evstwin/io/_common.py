@@ -428,3 +428,37 @@ def decoded(path: Path, library: str, packets: Iterator[np.ndarray]) -> Iterator
     """``packets`` with the library's decoding errors turned into ValueError naming the file."""
     with decoding(path, library):
         yield from packets
+
+
+# ---------------------------------------------------------------------------------------------
+# ground truth streamed with the events
+
+
+SPOOL_BLOCK_ROWS = 1 << 18  # rows of a spooled column copied into the file at a time
+
+
+@dataclasses.dataclass
+class SpooledColumn:
+    """One ground-truth column appended chunk by chunk to a raw temporary file (native byte
+    order) while the events stream, and copied into the output in blocks at close, so a long
+    recording's truth never sits in memory."""
+
+    path: Path
+    dtype: np.dtype
+    length: int = 0
+
+    def append(self, values: np.ndarray) -> None:
+        with open(self.path, "ab") as fh:
+            fh.write(np.ascontiguousarray(values, dtype=self.dtype).tobytes())
+        self.length += len(values)
+
+    def blocks(self, rows: int = SPOOL_BLOCK_ROWS) -> Iterator[np.ndarray]:
+        """The column in order, ``rows`` values at a time."""
+        if self.length == 0:
+            return
+        with open(self.path, "rb") as fh:
+            while True:
+                block = np.fromfile(fh, dtype=self.dtype, count=rows)
+                if block.size == 0:
+                    return
+                yield block

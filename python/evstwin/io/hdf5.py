@@ -26,6 +26,7 @@ from ._common import (
     EventSource,
     FileFormat,
     Meta,
+    SpooledColumn,
     Truth,
     WriteSpec,
     decode_scenario,
@@ -133,13 +134,22 @@ def write_truth(f: Any, truth: Truth) -> None:
     for name, fields in truth.items():
         group = root.create_group(name, track_order=True)
         for field, values in fields.items():
+            opts = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+            if isinstance(values, SpooledColumn):  # streamed: copied in blocks
+                dataset = group.create_dataset(
+                    field, shape=(values.length,), dtype=values.dtype,
+                    chunks=(max(1, min(values.length, H5_CHUNK)),), **opts,
+                )
+                start = 0
+                for block in values.blocks():
+                    dataset[start : start + len(block)] = block
+                    start += len(block)
+                continue
             data = np.asarray(values)
             chunks: bool | tuple[int, ...] = (
                 (min(data.size, H5_CHUNK),) if data.ndim == 1 and data.size else True
             )
-            group.create_dataset(
-                field, data=data, chunks=chunks, compression="gzip", compression_opts=4, shuffle=True
-            )
+            group.create_dataset(field, data=data, chunks=chunks, **opts)
 
 
 # ---------------------------------------------------------------------------------------------

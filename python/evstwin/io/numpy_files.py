@@ -25,6 +25,7 @@ from ._common import (
     EventSource,
     FileFormat,
     Meta,
+    SpooledColumn,
     Truth,
     WriteSpec,
     decode_scenario,
@@ -70,9 +71,13 @@ class NpzEncoder:
             scalars["scenario_encoding"] = np.array("toml" if spec.scenario_is_toml else "str")
         for key, value in spec.extras.items():
             scalars[f"meta/{key}"] = np.array(value)
+        spooled: dict[str, SpooledColumn] = {}
         for name, fields in spec.truth.items():
             for field, values in fields.items():
-                scalars[f"truth/{name}/{field}"] = np.asarray(values)
+                if isinstance(values, SpooledColumn):
+                    spooled[f"truth/{name}/{field}"] = values
+                else:
+                    scalars[f"truth/{name}/{field}"] = np.asarray(values)
         try:
             with zipfile.ZipFile(self._tmp, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as archive:
                 with _open_entry(archive, "events") as entry, open(self._records_path, "rb") as records:
@@ -86,6 +91,14 @@ class NpzEncoder:
                 for key, array in scalars.items():
                     with _open_entry(archive, key) as entry:
                         np.lib.format.write_array(entry, array, allow_pickle=False)
+                for key, column in spooled.items():  # streamed truth, copied in blocks
+                    with _open_entry(archive, key) as entry, open(column.path, "rb") as raw:
+                        np.lib.format.write_array_header_1_0(entry, {
+                            "descr": np.lib.format.dtype_to_descr(column.dtype),
+                            "fortran_order": False,
+                            "shape": (column.length,),
+                        })
+                        shutil.copyfileobj(raw, entry, _COPY_BLOCK)
         finally:
             remove_quietly(self._records_path)
 

@@ -15,6 +15,7 @@ from ._common import (
     ChunkEncoder,
     FileFormat,
     PathLike,
+    SpooledColumn,
     WriteSpec,
     as_event_array,
     check_sorted,
@@ -51,6 +52,7 @@ class EventWriter:
         self._count = 0
         self._last_t: int | None = None
         self._open = True
+        self._truth_spool: dict[str, dict[str, SpooledColumn]] = {}
         try:
             self._encoder: ChunkEncoder = fmt.open_encoder(self._tmp, spec)
         except BaseException:
@@ -93,6 +95,40 @@ class EventWriter:
         self._count += len(ev)
         self._last_t = int(ev["t"][-1])
 
+    def append_truth(self, name: str, fields: Mapping[str, Any]) -> None:
+        """Append rows to the ground-truth track ``name`` (field -> 1-D numeric array, all of
+        one length; the same fields every time), kept in temporary files beside the output and
+        written at close by the formats that hold truth (``.h5``, ``.npz``; the others ignore
+        it, as they ignore ``meta['truth']``). Memory stays O(chunk). A name given here must
+        not also come through ``meta['truth']``."""
+        self._check_open()
+        if not isinstance(name, str) or not name or "/" in name:
+            raise ValueError(f"truth names must be non-empty str without '/'; got {name!r}")
+        if not isinstance(fields, Mapping) or not fields:
+            raise TypeError(f"truth {name!r}: fields must be a non-empty dict field -> array; got {fields!r}")
+        arrays = {}
+        for field, values in fields.items():
+            if not isinstance(field, str) or not field or "/" in field:
+                raise ValueError(f"truth {name!r}: fields must be non-empty str without '/'; got {field!r}")
+            arr = np.asarray(values)
+            if arr.ndim != 1 or arr.dtype.kind not in "biuf":
+                raise TypeError(f"truth {name!r}[{field!r}] must be a 1-D numeric array; got {arr.dtype} {arr.shape}")
+            arrays[field] = arr
+        lengths = {len(a) for a in arrays.values()}
+        if len(lengths) != 1:
+            raise ValueError(f"truth {name!r}: fields must have one length; got {sorted(lengths)}")
+        track = self._truth_spool.get(name)
+        if track is None:
+            track = self._truth_spool[name] = {
+                field: SpooledColumn(temporary_path(self._tmp, f"truth{len(self._truth_spool)}-{i}"),
+                                     arr.dtype.newbyteorder("="))
+                for i, (field, arr) in enumerate(arrays.items())
+            }
+        elif set(track) != set(arrays):
+            raise ValueError(f"truth {name!r}: fields must be {sorted(track)} every time; got {sorted(arrays)}")
+        for field, arr in arrays.items():
+            track[field].append(arr)
+
     def update_meta(self, meta: Mapping[str, Any]) -> None:
         """Replace ``scenario``/``truth`` and add extra scalars before :meth:`close` (for
         ground truth known only at the end); ``width``, ``height`` and ``raw_format`` are fixed
@@ -107,14 +143,23 @@ class EventWriter:
         if not self._open:
             return self.path
         try:
+            for name, track in self._truth_spool.items():
+                if name in self._spec.truth:
+                    raise ValueError(f"truth {name!r} was given both by append_truth and meta['truth']")
+                self._spec.truth[name] = dict(track)  # type: ignore[arg-type]  # encoders copy them in blocks
             self._encoder.close(self._spec)
             os.replace(self._tmp, self.path)
         except BaseException:
             self._open = False
             remove_quietly(self._tmp)
             raise
+        finally:
+            self._drop_spool()
         self._open = False
         return self.path
+
+    def _drop_spool(self) -> None:
+        remove_quietly(*(c.path for track in self._truth_spool.values() for c in track.values()))
 
     def abort(self) -> None:
         """Drop the file being written: the temporary file is removed, ``path`` is not touched."""
@@ -125,6 +170,7 @@ class EventWriter:
             self._encoder.abort()
         finally:
             remove_quietly(self._tmp)
+            self._drop_spool()
 
     def _check_open(self) -> None:
         if not self._open:
