@@ -75,3 +75,18 @@ def test_a_missing_extra_is_one_line_naming_it() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
     assert out.strip() == "figures needs the 'matplotlib' package: pip install 'evstwin[plot]'"
+
+
+@pytest.mark.parametrize(("env", "expected"), [(None, "PASSIVE"), ("active", "active")])
+def test_openmp_threads_wait_passively_unless_the_user_says(env: str | None, expected: str) -> None:
+    # Spinning OpenMP threads made the default thread count 2-2.5x slower than one thread on a
+    # machine with a busy core (bench/bench_threads_loaded.py measures it); the user's choice wins.
+    import os
+
+    environ = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    if env is not None:
+        environ["OMP_WAIT_POLICY"] = env
+    code = "import os, evstwin; print(os.environ['OMP_WAIT_POLICY'])"
+    out = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True,
+                         timeout=60, check=True).stdout
+    assert out.strip() == expected
