@@ -32,3 +32,21 @@ def check_output_dir(path: str | Path, force: bool, option: str = "--out") -> Pa
     if p.is_dir() and any(p.iterdir()) and not force:
         raise FileExistsError(f"{option} {p} is not empty; pass --force to overwrite its files")
     return p
+
+
+def add_size(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--size", type=parse_size, metavar="W,H",
+                   help="sensor size in pixels for recordings whose header has none (e.g. Prophesee Gen3 "
+                        "EVT2 files); default: the header, the camera plugin's size, else the events' extent")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``'640,480'`` -> (640, 480); argparse turns the ValueError into a one-line usage error."""
+    parts = text.replace("x", ",").split(",")
+    try:
+        width, height = (int(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size takes W,H in pixels (e.g. 640,480); got {text!r}") from None
+    if not (1 <= width <= 65535 and 1 <= height <= 65535):
+        raise argparse.ArgumentTypeError(f"--size W,H must each be in 1..65535; got {text!r}")
+    return width, height
