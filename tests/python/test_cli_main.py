@@ -90,3 +90,23 @@ def test_openmp_threads_wait_passively_unless_the_user_says(env: str | None, exp
     out = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True,
                          timeout=60, check=True).stdout
     assert out.strip() == expected
+
+
+def test_default_thread_count_leaves_a_busy_core_alone() -> None:
+    # With another process spinning, the default engine thread count drops by at least one
+    # core (on a 2-core machine: one thread, which measured no slower than --threads 1).
+    import os
+
+    from evstwin.simulate import default_num_threads
+
+    cores = len(os.sched_getaffinity(0))
+    assert 1 <= default_num_threads() <= cores
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        import time
+
+        time.sleep(0.3)  # let it start spinning
+        assert default_num_threads() <= max(1, cores - 1)
+    finally:
+        busy.kill()
+        busy.wait()
