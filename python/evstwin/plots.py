@@ -13,19 +13,26 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Union
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.colors import to_rgb
-from matplotlib.figure import Figure
 
 from . import analysis
+from ._extras import require
 from .analysis import KINDS
+
+# matplotlib is the ``plot`` extra: importing this module without it is one line naming it.
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.colors import to_rgb
+    from matplotlib.figure import Figure
+else:
+    to_rgb = require("matplotlib.colors").to_rgb
+    Figure = require("matplotlib.figure").Figure
 
 if TYPE_CHECKING:  # pragma: no cover
     from .validation import Comparison, MonteCarloSummary
 
-PathLike = Union[str, Path]
+PathLike = str | Path
 LabelledEvents = tuple[str, np.ndarray]
 
 ON_COLOUR = "#e34a1b"

@@ -130,6 +130,8 @@ def test_fit_recovers_hidden_thresholds_and_dark_rate(tmp_path: Path) -> None:
     assert not result.failed
 
     paths = result.write(tmp_path / "fit")
+    assert set(paths) == {"best_toml", "history", "json"}  # data only: drawing is figures'
+    paths.update(tune.draw_fit(result, tmp_path / "fit"))
     for name in ("best_toml", "history", "json", "convergence", "compare_histograms", "compare_json"):
         assert paths[name].is_file(), name
     again = build(str(paths["best_toml"]))  # what `evstwin simulate best.toml` builds
@@ -199,7 +201,8 @@ def test_sweep_every_point_and_run_identical_on_dask(tmp_path: Path, dask_addres
         *tune.NoiseObjective.metrics,
     }
     assert [r["runs"] for r in local.summary] == [2, 2, 2, 2]
-    assert local.summary_path.is_file() and local.figure_path.is_file()
+    assert local.summary_path.is_file() and local.figure_path is None
+    assert tune.draw_sweep(local).is_file() and local.figure_path == tmp_path / "local" / "sweep.png"
     # Lower thresholds, more noise; more dark current, less (relative) shot noise.
     rate = {
         (r["pixel.theta_on"], r["pixel.dark_rate_e_per_s"]): r["mean_noise_rate_per_px_hz"]
@@ -339,7 +342,8 @@ def test_limiting_magnitude_table_and_figure(tmp_path: Path) -> None:
     for row in result.table:
         assert row["limiting_magnitude"] in (7.0, 9.0) and row["metric_at_limit"] >= 0.5
         assert row["rate_px_s"] == pytest.approx(row["rate_arcsec_s"] / 1.908, rel=1e-3)
-    assert result.figure_path.is_file() and result.table_path.is_file()
+    assert result.figure_path is None and result.table_path.is_file()
+    assert tune.draw_limiting_magnitude(result, tmp_path).is_file() and result.figure_path is not None
     assert (tmp_path / "sweep.csv").is_file()
     assert "limiting mag" in result.to_text()
 

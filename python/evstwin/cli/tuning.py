@@ -14,10 +14,13 @@ from ..tune import (
     DEFAULT_RATES_ARCSEC_S,
     OBJECTIVES,
     SAMPLERS,
-    parse_float_list,
+    draw_fit,
+    draw_limiting_magnitude,
+    draw_sweep,
     fit,
     limiting_magnitude,
     parse_bound,
+    parse_float_list,
     parse_grid,
     sweep,
 )
@@ -180,6 +183,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     )
     out = Path(args.out) if args.out else Path(f"{Path(args.real).stem}_fit")
     paths = result.write(out)
+    paths.update(draw_fit(result, out))
     print(result.to_text())
     print(
         f"wrote {paths['best_toml']} (evstwin simulate {paths['best_toml']} -o OUT), {paths['history']}, "
@@ -219,6 +223,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         sets=args.sets,
         progress=not args.no_progress,
     )
+    if result.csv_path is not None:
+        draw_sweep(result)
     print(result.to_text())
     print(f"wrote {result.csv_path}, {result.summary_path} and {result.figure_path}")
     return 1 if result.failed else 0
@@ -256,6 +262,9 @@ def _cmd_limiting(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         progress=not args.no_progress,
     )
+    draw_limiting_magnitude(result, args.out)
+    if result.sweep.csv_path is not None:
+        draw_sweep(result.sweep)
     print(result.to_text())
     print(f"wrote {result.table_path}, {result.figure_path} and the sweep in {args.out}")
     return 1 if result.sweep.failed else 0

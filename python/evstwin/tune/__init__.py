@@ -1,0 +1,113 @@
+"""Tuning: fit the twin to a real recording, sweep bias configurations, limiting magnitudes.
+
+Three entry points, each a grid or a search of independent simulations ("jobs"):
+
+* :func:`fit` -- search of named twin parameters within documented bounds
+  (:data:`FIT_BOUNDS`) minimising the comparison distance of
+  :func:`evstwin.validation.compare` between a real recording and the simulated scenario
+  (mean over ``runs_per_trial`` seeds): SciPy's Nelder-Mead from the scenario's values by
+  default, or Optuna (seeded TPE, CMA-ES, random; ask/tell, trials batched to the workers);
+  see :data:`SAMPLERS`. :class:`FitResult.write` writes the best scenario as a TOML that
+  ``evstwin simulate`` takes, the history, a convergence figure and the comparison figures
+  of the best fit.
+* :func:`sweep` -- every combination of a grid of scenario values (``--set`` keys) times K
+  seeds, scored by an objective (:data:`OBJECTIVES`: ``match``, ``detect``, ``noise``; see
+  :class:`MatchObjective`, :class:`DetectObjective`, :class:`NoiseObjective`), tabulated in a
+  CSV written row by row as jobs finish (an interrupted sweep keeps its finished rows and
+  ``resume=True`` skips them), a summary CSV and a figure.
+* :func:`limiting_magnitude` -- the faintest magnitude detected against angular rate, for
+  one bias configuration: a ``detect`` sweep of a linear mover over (rate, magnitude).
+
+Execution. Every job is the top-level function :func:`evaluate` ``(scenario, overrides, seed,
+objective)`` returning a dict of numbers. Jobs run in local worker processes
+(``concurrent.futures.ProcessPoolExecutor``, one engine thread each) by default, or on a Dask
+distributed cluster when ``scheduler`` is an address (``tcp://host:8786``), a
+``distributed.Client``, or ``"local"`` (an in-process ``LocalCluster`` on the loopback
+interface). A job that raises, or whose worker dies, is resubmitted up to
+:data:`JOB_RETRIES` times (Dask: ``retries=`` on submit; local pool: resubmission, with a new
+pool when a worker died); a job that still fails is reported (``FitResult.failed``,
+``SweepResult.failed``), never dropped silently. Results depend only on the seeds, not on
+where or in which order jobs ran.
+
+The package is laid out by the user's verbs and what they share:
+
+* :mod:`.bounds` -- parameter names, documented search bounds, scenario keys.
+* :mod:`.objectives` -- what a job measures: ``match``, ``detect``, ``noise``.
+* :mod:`.execution` -- jobs on local worker processes or a Dask cluster, retries, progress.
+* :mod:`.fit`, :mod:`.sweep`, :mod:`.limits` -- the three verbs; each returns data and
+  writes its tables.
+* :mod:`.figures` -- the figures of those results (matplotlib, the ``plot`` extra); no
+  compute module imports it.
+"""
+
+from __future__ import annotations
+
+from .bounds import DEFAULT_FIT_PARAMS, FIT_BOUNDS, ParamBound, canonical_key, parse_bound
+from .execution import JOB_RETRIES, DaskExecutor, JobFailure, LocalExecutor, evaluate, make_executor
+from .figures import (
+    draw_fit,
+    draw_limiting_magnitude,
+    draw_sweep,
+    plot_convergence,
+    plot_limiting_magnitude,
+    plot_sweep,
+)
+from .fit import SAMPLERS, FitResult, TrialRecord, fit
+from .limits import (
+    DEFAULT_MAGNITUDES,
+    DEFAULT_RATES_ARCSEC_S,
+    LimitingMagnitudeResult,
+    limiting_magnitude,
+    limiting_magnitude_scenario,
+    parse_float_list,
+)
+from .objectives import (
+    OBJECTIVES,
+    DetectObjective,
+    MatchObjective,
+    NoiseObjective,
+    Objective,
+    detect_metrics,
+    make_objective,
+)
+from .sweep import SweepResult, parse_grid, sweep
+
+__all__ = [
+    "DEFAULT_FIT_PARAMS",
+    "DEFAULT_MAGNITUDES",
+    "DEFAULT_RATES_ARCSEC_S",
+    "FIT_BOUNDS",
+    "DaskExecutor",
+    "DetectObjective",
+    "FitResult",
+    "JOB_RETRIES",
+    "JobFailure",
+    "LimitingMagnitudeResult",
+    "LocalExecutor",
+    "MatchObjective",
+    "NoiseObjective",
+    "OBJECTIVES",
+    "Objective",
+    "ParamBound",
+    "SAMPLERS",
+    "SweepResult",
+    "TrialRecord",
+    "canonical_key",
+    "detect_metrics",
+    "draw_fit",
+    "draw_limiting_magnitude",
+    "draw_sweep",
+    "evaluate",
+    "fit",
+    "limiting_magnitude",
+    "limiting_magnitude_scenario",
+    "make_executor",
+    "make_objective",
+    "parse_bound",
+    "parse_float_list",
+    "parse_grid",
+    "plot_convergence",
+    "plot_limiting_magnitude",
+    "plot_sweep",
+    "sweep",
+]

@@ -1,0 +1,208 @@
+"""Figures of tuning results (matplotlib, the ``plot`` extra). Compute modules never import this one."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._extras import require
+from ._types import PathLike
+from .fit import FitResult, TrialRecord
+from .limits import LimitingMagnitudeResult
+from .sweep import SweepResult, _fmt_value, _short
+
+
+def plot_convergence(history: Sequence[TrialRecord], path: PathLike) -> Path:
+    """Distance of each trial (dots) and the best so far (line) against the trial number."""
+    Figure = require("matplotlib.figure").Figure
+
+    from .. import plots
+
+    trial = np.array([r.trial for r in history], dtype=float)
+    dist = np.array([r.distance for r in history], dtype=float)
+    fig = Figure(figsize=(7, 4))
+    ax = fig.add_subplot(1, 1, 1)
+    ok = np.isfinite(dist)
+    ax.plot(trial[ok], dist[ok], "o", ms=4, color=plots.TOTAL_COLOUR, alpha=0.6, label="trial")
+    if ok.any():
+        best = np.fmin.accumulate(np.where(ok, dist, np.inf))
+        shown = np.isfinite(best)
+        ax.step(trial[shown], best[shown], where="post", color=plots.ON_COLOUR, label="best so far")
+        if np.all(dist[ok] > 0):
+            ax.set_yscale("log")
+    if (~ok).any():
+        ax.plot(
+            trial[~ok],
+            np.full((~ok).sum(), np.nanmax(dist) if ok.any() else 1.0),
+            "x",
+            color="k",
+            label="failed",
+        )
+    ax.set_xlabel("trial")
+    ax.set_ylabel("distance to the real recording")
+    ax.set_title("fit convergence")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    return plots.save(fig, Path(path))
+
+
+def _axis_values(values: Sequence[Any]) -> tuple[np.ndarray, bool, list[str]]:
+    numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+    if numeric:
+        return np.array(values, dtype=float), True, []
+    return np.arange(len(values), dtype=float), False, [str(v) for v in values]
+
+
+def plot_sweep(result: SweepResult, path: PathLike) -> Path:
+    """Headline metrics (mean, error bar = sample std) against the first grid parameter, one
+    line per value of the other parameters (the second's, in a 2-D grid)."""
+    Figure = require("matplotlib.figure").Figure
+
+    from .. import plots
+
+    keys = list(result.grid)
+    first = keys[0]
+    rest = keys[1:]
+    xs_all, numeric, labels = _axis_values(result.grid[first])
+    metrics = list(result.headline) or list(result.metrics[:1])
+    fig = Figure(figsize=(6.5, 3.2 * len(metrics)))
+    groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
+    for row in result.summary:
+        groups.setdefault(tuple(_fmt_value(row[k]) for k in rest), []).append(row)
+    first_pos = {_fmt_value(v): j for j, v in enumerate(result.grid[first])}
+    for n, m in enumerate(metrics):
+        ax = fig.add_subplot(len(metrics), 1, n + 1)
+        for gkey, rs in groups.items():
+            xi = np.array([first_pos[_fmt_value(r[first])] for r in rs])
+            order = np.argsort(xi)
+            x = xs_all[xi[order]]
+            y = np.array([r[f"mean_{m}"] for r in rs], dtype=float)[order]
+            e = np.array([r[f"std_{m}"] for r in rs], dtype=float)[order]
+            label = ", ".join(f"{_short(k)}={v}" for k, v in zip(rest, gkey)) or None
+            ax.errorbar(x, y, yerr=np.where(np.isfinite(e), e, 0.0), marker="o", ms=4, capsize=3, label=label)
+        if numeric and np.all(xs_all > 0) and xs_all.max() / xs_all.min() > 50:
+            ax.set_xscale("log")
+        if not numeric:
+            ax.set_xticks(xs_all, labels)
+        ax.set_ylabel(m)
+        ax.grid(True, alpha=0.3)
+        if rest and n == 0:
+            ax.legend(fontsize="small")
+        if n == len(metrics) - 1:
+            ax.set_xlabel(first)
+    fig.suptitle(f"sweep, objective {result.objective} ({result.runs} seed(s) per point)")
+    fig.tight_layout()
+    return plots.save(fig, Path(path))
+
+
+def plot_limiting_magnitude(result: LimitingMagnitudeResult, path: PathLike) -> Path:
+    """Limiting magnitude against angular rate (log axis), over a map of the criterion
+    metric on the (rate, magnitude) grid."""
+    Figure = require("matplotlib.figure").Figure
+
+    from .. import plots
+
+    metric, threshold = result.criterion
+    rates = np.array([r["rate_arcsec_s"] for r in result.table])
+    limit = np.array([r["limiting_magnitude"] for r in result.table])
+    mags = np.array(sorted({float(r["targets.0.magnitude"]) for r in result.sweep.summary}))
+    grid = np.full((mags.size, rates.size), np.nan)
+    for r in result.sweep.summary:
+        i = int(np.searchsorted(mags, float(r["targets.0.magnitude"])))
+        j = int(np.flatnonzero(rates == float(r["targets.0.wx_arcsec_s"]))[0])
+        grid[i, j] = r[f"mean_{metric}"]
+    fig = Figure(figsize=(7, 4.5))
+    ax = fig.add_subplot(1, 1, 1)
+    order = np.argsort(rates)
+    if rates.size > 1:
+        lr = np.log10(rates[order])
+        edges_x = 10 ** np.concatenate(
+            [[lr[0] - (lr[1] - lr[0]) / 2], (lr[1:] + lr[:-1]) / 2, [lr[-1] + (lr[-1] - lr[-2]) / 2]]
+        )
+    else:
+        edges_x = np.array([rates[0] / 1.5, rates[0] * 1.5])
+    if mags.size > 1:
+        edges_y = np.concatenate(
+            [
+                [mags[0] - (mags[1] - mags[0]) / 2],
+                (mags[1:] + mags[:-1]) / 2,
+                [mags[-1] + (mags[-1] - mags[-2]) / 2],
+            ]
+        )
+    else:
+        edges_y = np.array([mags[0] - 0.5, mags[0] + 0.5])
+    mesh = ax.pcolormesh(edges_x, edges_y, grid[:, order], cmap="Greys", vmin=0.0, vmax=1.0, shading="flat")
+    fig.colorbar(mesh, ax=ax, label=f"mean {metric}")
+    ok = np.isfinite(limit[order])
+    ax.plot(
+        rates[order][ok],
+        limit[order][ok],
+        "o-",
+        color=plots.ON_COLOUR,
+        lw=2,
+        label=f"limiting magnitude ({metric} >= {threshold:g})",
+    )
+    ax.set_xscale("log")
+    ax.set_xlabel("angular rate [arcsec/s]")
+    ax.set_ylabel("magnitude (fainter up)")
+    ax.set_title("limiting magnitude against angular rate")
+    ax.legend(loc="lower left", fontsize="small")
+    fig.tight_layout()
+    return plots.save(fig, Path(path))
+
+
+# ---------------------------------------------------------------------------------------------
+# what the commands draw after computing
+
+
+def draw_fit(result: FitResult, out_dir: PathLike, comparison: bool = True) -> dict[str, Path]:
+    """``convergence.png`` and, with ``comparison``, the comparison of the best fit (simulated
+    with the first fit seed) in ``compare/`` (figures and compare.json of
+    :func:`evstwin.validation.compare_files`). Returns {name: path}."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"convergence": plot_convergence(result.history, out / "convergence.png")}
+    if comparison:
+        paths.update(_fit_comparison(result, out / "compare"))
+    return paths
+
+
+def _fit_comparison(result: FitResult, out: Path) -> dict[str, Path]:
+    from ..io import write_events
+    from ..simulate import simulate
+    from ..validation import compare_files
+
+    out.mkdir(parents=True, exist_ok=True)
+    real_path = Path(str(result.real_meta.get("path", "")))
+    if not (str(result.real_meta.get("path", "")) and real_path.is_file()):
+        real_path = out / "real.h5"
+        write_events(
+            real_path,
+            result.real_events,
+            {k: v for k, v in result.real_meta.items() if k in ("width", "height", "duration_s")},
+        )
+    best = simulate(result.best_scenario, num_threads=1)
+    sim_path = out / "best_fit.h5"
+    write_events(sim_path, best.events, best.meta)
+    comp = compare_files(real_path, [sim_path], out)
+    paths = {f"compare_{k}": Path(v) for k, v in comp.outputs.items()}
+    paths["best_fit_events"] = sim_path
+    return paths
+
+
+def draw_sweep(result: SweepResult) -> Path:
+    """``sweep.png`` beside the sweep's CSV; sets ``result.figure_path``."""
+    if result.csv_path is None:
+        raise ValueError("the sweep was run without out_dir: nothing to draw beside")
+    result.figure_path = plot_sweep(result, result.csv_path.parent / "sweep.png")
+    return result.figure_path
+
+
+def draw_limiting_magnitude(result: LimitingMagnitudeResult, out_dir: PathLike) -> Path:
+    """``limiting_magnitude.png`` in ``out_dir``; sets ``result.figure_path``."""
+    result.figure_path = plot_limiting_magnitude(result, Path(out_dir) / "limiting_magnitude.png")
+    return result.figure_path
