@@ -187,5 +187,5 @@ def test_dpi_sets_pixel_size(tmp_path, dpi):
 
 
 def test_percent_error_gaps_for_bins_empty_in_both():
-    v = plots._mask_empty([0.0, 50.0, 0.0, -100.0], [0.0, 0.2, 0.0, 0.1], [0.0, 0.3, 0.1, 0.0])
+    v = plots.comparison._mask_empty([0.0, 50.0, 0.0, -100.0], [0.0, 0.2, 0.0, 0.1], [0.0, 0.3, 0.1, 0.0])
     np.testing.assert_array_equal(np.isnan(v), [True, False, False, False])

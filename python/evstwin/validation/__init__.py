@@ -1,0 +1,46 @@
+"""Validation of a simulation against a real recording: the method of the paper's section 3.
+
+* :func:`compare` -- totals and ON/OFF ratio (Table 4), per-pixel count histograms (Fig. 7),
+  their per-bin error and percent error (Fig. 8), the error as a share of the sensor's pixels
+  (Fig. 9), and one summary ``distance`` a tuner can minimise.
+* :func:`aggregate` -- mean and spread of every number over N Monte Carlo runs (the paper's 20).
+* :func:`compare_files`, :func:`info`, :func:`show` -- the file-level entry points the CLI uses
+  (:mod:`.report`, the one module here that draws); they return values or text and print nothing.
+* :func:`timing_bias`, :func:`timing_bias_summary` -- delay of each event after the true
+  crossing of a source over its pixel, against brightness and speed (the astrometry obstacle
+  the paper names).
+
+The summary distance (0 for identical recordings, see :func:`compare`)::
+
+    distance = (W1_total + W1_on + W1_off) / m_real + |rel. total error| + |rel. ON/OFF error|
+
+where W1_k is the 1-Wasserstein distance between the real and simulated distributions over
+pixels of the per-pixel count of kind k (mean |sorted(real) - sorted(sim)|, the unbinned
+limit of the Fig. 7 histograms) and m_real is the real recording's mean per-pixel total count."""
+
+from __future__ import annotations
+
+from .comparison import DISTANCE_FORMULA, Comparison, PathLike, Recording, SimComparison, compare
+from .montecarlo import MonteCarloSummary, aggregate
+from .report import compare_files, format_info, info, nice_bin_s, show
+from .timing import TruthTrack, format_timing_bias_summary, timing_bias, timing_bias_summary
+
+__all__ = [
+    "Comparison",
+    "DISTANCE_FORMULA",
+    "MonteCarloSummary",
+    "PathLike",
+    "Recording",
+    "SimComparison",
+    "TruthTrack",
+    "aggregate",
+    "compare",
+    "compare_files",
+    "format_info",
+    "format_timing_bias_summary",
+    "info",
+    "nice_bin_s",
+    "show",
+    "timing_bias",
+    "timing_bias_summary",
+]

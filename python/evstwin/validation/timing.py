@@ -1,0 +1,237 @@
+"""Event-timing bias: the delay of each event after the true crossing of a source over its pixel."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .. import analysis
+
+TruthTrack = Mapping[str, np.ndarray]
+
+
+def _crossings(
+    name_index: int, track: TruthTrack, radius_px: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closest approaches of one sampled track to every pixel centre within radius_px.
+
+    The track is linear between samples. A pixel's closest approach on a segment is the foot
+    of the perpendicular from its centre; it counts when it falls inside the segment
+    (0 <= u < 1) and lies within radius_px. Stationary segments have no crossing.
+    Returns (x, y, t_s, distance_px, flux_ph_s, speed_px_s, target index) arrays.
+    """
+    t = np.asarray(track["t_s"], dtype=np.float64)
+    xs = np.asarray(track["x_px"], dtype=np.float64)
+    ys = np.asarray(track["y_px"], dtype=np.float64)
+    flux = np.broadcast_to(np.asarray(track["flux_ph_s"], dtype=np.float64), t.shape)
+    if not (t.shape == xs.shape == ys.shape) or t.ndim != 1:
+        raise ValueError(
+            f"truth arrays t_s, x_px, y_px must be 1-D of one length; got {t.shape}, {xs.shape}, {ys.shape}"
+        )
+    if t.size >= 2 and np.any(np.diff(t) < 0):
+        raise ValueError("truth t_s must be increasing")
+    x0, x1, y0, y1 = xs[:-1], xs[1:], ys[:-1], ys[1:]
+    dt = np.diff(t)
+    dx, dy = x1 - x0, y1 - y0
+    len2 = dx * dx + dy * dy
+    seg = np.nonzero((len2 > 0) & (dt > 0))[0]
+    empty = np.zeros(0)
+    if seg.size == 0:
+        return (empty.astype(np.int64),) * 2 + (empty,) * 4 + (empty.astype(np.int64),)  # type: ignore[return-value]
+    xmin = np.floor(np.minimum(x0, x1)[seg] - radius_px).astype(np.int64)
+    xmax = np.ceil(np.maximum(x0, x1)[seg] + radius_px).astype(np.int64)
+    ymin = np.floor(np.minimum(y0, y1)[seg] - radius_px).astype(np.int64)
+    ymax = np.ceil(np.maximum(y0, y1)[seg] + radius_px).astype(np.int64)
+    nx, ny = xmax - xmin + 1, ymax - ymin + 1
+    n = nx * ny
+    owner = np.repeat(np.arange(seg.size), n)
+    local = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    px = xmin[owner] + local % nx[owner]
+    py = ymin[owner] + local // nx[owner]
+    s = seg[owner]
+    u = ((px - x0[s]) * dx[s] + (py - y0[s]) * dy[s]) / len2[s]
+    cx, cy = x0[s] + u * dx[s], y0[s] + u * dy[s]
+    dist = np.hypot(px - cx, py - cy)
+    keep = (u >= 0) & (u < 1) & (dist <= radius_px) & (px >= 0) & (py >= 0)
+    s, u, px, py, dist = s[keep], u[keep], px[keep], py[keep], dist[keep]
+    tc = t[s] + u * dt[s]
+    fc = flux[s] + u * (flux[s + 1] - flux[s])
+    speed = np.sqrt(len2[s]) / dt[s]
+    return px, py, tc, dist, fc, speed, np.full(px.size, name_index, dtype=np.int64)
+
+
+def timing_bias(
+    events: np.ndarray,
+    truth: Mapping[str, TruthTrack],
+    radius_px: float = 1.0,
+    max_abs_delay_s: float | None = 0.1,
+) -> np.ndarray:
+    """Delay of each event after the true crossing of a source over its pixel.
+
+    truth: target name -> {'t_s', 'x_px', 'y_px', 'flux_ph_s'}: the sampled track [s, px] of
+        the source centre (pixel (x, y) covers [x - 0.5, x + 0.5] x [y - 0.5, y + 0.5], its
+        centre at integer coordinates) and its photon flux [photons/s] (scalar or per
+        sample). The track is linear between samples.
+    radius_px: an event is attributed to a crossing of its pixel when the track's closest
+        approach to the pixel centre is within this distance [px] (default 1 px).
+    max_abs_delay_s: ... and when |delay| <= this [s] (default 0.1 s; None: no limit). Keep it
+        below the time between two passes of a source over one pixel.
+
+    The true crossing time is when the interpolated track passes closest to the pixel centre;
+    each event takes the crossing of its pixel nearest in time (any target), and its delay is
+    event time - crossing time [s] (negative: the event came first). Events with no crossing
+    are left out; so are crossings by a stationary source (no crossing time).
+
+    Returns a structured array, one row per attributed event, sorted by event time: target
+    (name), t_us, x, y, p (the event), t_true_s, delay_s, distance_px (closest approach),
+    flux_ph_s and speed_px_s (of the source at the crossing).
+    """
+    events = analysis._check_events(events)
+    names = list(truth.keys())
+    parts = [_crossings(i, truth[n], float(radius_px)) for i, n in enumerate(names)]
+    name_len = max([len(str(n)) for n in names] + [1])
+    dtype = np.dtype(
+        [
+            ("target", f"U{name_len}"),
+            ("t_us", "<i8"),
+            ("x", "<u2"),
+            ("y", "<u2"),
+            ("p", "u1"),
+            ("t_true_s", "<f8"),
+            ("delay_s", "<f8"),
+            ("distance_px", "<f8"),
+            ("flux_ph_s", "<f8"),
+            ("speed_px_s", "<f8"),
+        ]
+    )
+    if not parts or events.size == 0:
+        return np.zeros(0, dtype=dtype)
+    cx, cy, ct, cd, cf, cs, ci = (np.concatenate([p[j] for p in parts]) for j in range(7))
+    if ct.size == 0:
+        return np.zeros(0, dtype=dtype)
+    ex = events["x"].astype(np.int64)
+    ey = events["y"].astype(np.int64)
+    et_s = events["t"].astype(np.int64) * 1e-6
+    width = int(max(cx.max(), ex.max())) + 1
+    ckey = cy * width + cx
+    ekey = ey * width + ex
+    # One sorted int64 key per (pixel, time [us]), so that searchsorted finds, for each
+    # event, the crossings of its pixel just before and after it.
+    t0 = min(float(ct.min()), float(et_s.min()))
+    ct_us = np.floor((ct - t0) * 1e6).astype(np.int64)
+    et_us = np.floor((et_s - t0) * 1e6).astype(np.int64)
+    span = int(max(ct_us.max(), et_us.max())) + 2
+    if int(max(ckey.max(), ekey.max())) + 1 > (2**62) // span:
+        raise ValueError("time span x sensor size too large for the crossing index")
+    ccomp = ckey * span + ct_us
+    order = np.argsort(ccomp, kind="stable")
+    ccomp, ckey, ct = ccomp[order], ckey[order], ct[order]
+    ecomp = ekey * span + et_us
+    hi = np.searchsorted(ccomp, ecomp, side="right")
+    lo = hi - 1
+    nc = ccomp.size
+    lo_ok = (lo >= 0) & (ckey[np.clip(lo, 0, nc - 1)] == ekey)
+    hi_ok = (hi < nc) & (ckey[np.clip(hi, 0, nc - 1)] == ekey)
+    d_lo = np.where(lo_ok, np.abs(et_s - ct[np.clip(lo, 0, nc - 1)]), np.inf)
+    d_hi = np.where(hi_ok, np.abs(et_s - ct[np.clip(hi, 0, nc - 1)]), np.inf)
+    pick = np.where(d_hi < d_lo, hi, lo)
+    best = np.minimum(d_lo, d_hi)
+    ok = np.isfinite(best)
+    if max_abs_delay_s is not None:
+        ok &= best <= max_abs_delay_s
+    ev = np.nonzero(ok)[0]
+    c = order[pick[ev]]
+    out = np.zeros(ev.size, dtype=dtype)
+    out["target"] = np.asarray(names, dtype=object)[ci[c]].astype(str) if ev.size else []
+    out["t_us"] = events["t"][ev]
+    out["x"] = events["x"][ev]
+    out["y"] = events["y"][ev]
+    out["p"] = events["p"][ev]
+    t_true = np.concatenate([p[2] for p in parts])[c]
+    out["t_true_s"] = t_true
+    out["delay_s"] = et_s[ev] - t_true
+    out["distance_px"] = cd[c]
+    out["flux_ph_s"] = cf[c]
+    out["speed_px_s"] = cs[c]
+    return out
+
+
+def _bin_edges(values: np.ndarray, bins: int | Sequence[float] | np.ndarray, log: bool) -> np.ndarray:
+    if np.ndim(bins) == 1:
+        return np.asarray(bins, dtype=np.float64)
+    n = int(bins)  # type: ignore[arg-type]
+    lo, hi = float(values.min()), float(values.max())
+    if log and lo > 0:
+        if hi == lo:
+            return np.array([lo / 1.001, hi * 1.001])
+        return np.geomspace(lo, hi, n + 1)
+    if hi == lo:
+        return np.array([lo - 0.5, hi + 0.5])
+    return np.linspace(lo, hi, n + 1)
+
+
+def timing_bias_summary(
+    table: np.ndarray,
+    by: str = "target",
+    bins: int | Sequence[float] | np.ndarray = 5,
+    percentiles: Sequence[float] = (5, 25, 50, 75, 95),
+) -> list[dict[str, Any]]:
+    """Delay statistics per group of a :func:`timing_bias` table.
+
+    by: 'target' (one group per name), 'polarity' (ON, OFF), 'flux' (``bins`` log-spaced
+        flux bins [photons/s] between the smallest and largest, or explicit edges) or 'speed'
+        (``bins`` linear speed bins [px/s], or edges). Bins are [lo, hi), the last [lo, hi].
+    Returns one dict per non-empty group: group (name or [lo, hi]), n, mean_s, std_s and
+    p<q>_s for each percentile q (delays in seconds; the median is p50_s).
+    """
+    if by not in ("target", "polarity", "flux", "speed"):
+        raise ValueError(f"by must be 'target', 'polarity', 'flux' or 'speed'; got {by!r}")
+    delay = np.asarray(table["delay_s"], dtype=np.float64)
+    groups: list[tuple[Any, np.ndarray]] = []
+    if delay.size == 0:
+        return []
+    if by == "target":
+        names, inv = np.unique(table["target"], return_inverse=True)
+        groups = [(str(n), inv == i) for i, n in enumerate(names)]
+    elif by == "polarity":
+        groups = [("ON", table["p"] != 0), ("OFF", table["p"] == 0)]
+    else:
+        col = "flux_ph_s" if by == "flux" else "speed_px_s"
+        vals = np.asarray(table[col], dtype=np.float64)
+        edges = _bin_edges(vals, bins, log=(by == "flux"))
+        idx = np.searchsorted(edges, vals, side="right") - 1
+        idx[vals == edges[-1]] = edges.size - 2
+        groups = [([float(edges[i]), float(edges[i + 1])], idx == i) for i in range(edges.size - 1)]
+    out = []
+    for label, mask in groups:
+        d = delay[mask]
+        if d.size == 0:
+            continue
+        row: dict[str, Any] = {
+            "group": label,
+            "n": int(d.size),
+            "mean_s": float(d.mean()),
+            "std_s": float(d.std(ddof=1)) if d.size > 1 else None,
+        }
+        for q, v in zip(percentiles, np.percentile(d, list(percentiles))):
+            row[f"p{q:g}_s"] = float(v)
+        out.append(row)
+    return out
+
+
+def format_timing_bias_summary(rows: Sequence[Mapping[str, Any]], by: str = "target") -> str:
+    """A text table of :func:`timing_bias_summary` rows (delays in ms)."""
+    if not rows:
+        return "no event attributed to a crossing"
+    pkeys = [k for k in rows[0] if k.startswith("p") and k.endswith("_s")]
+    head = [by, "n", "mean [ms]"] + [k[:-2] + " [ms]" for k in pkeys]
+    body = []
+    for r in rows:
+        g = r["group"]
+        gtxt = f"{g[0]:.4g}..{g[1]:.4g}" if isinstance(g, list) else str(g)
+        body.append([gtxt, str(r["n"]), f"{1e3 * r['mean_s']:.3f}"] + [f"{1e3 * r[k]:.3f}" for k in pkeys])
+    widths = [max(len(x) for x in col) for col in zip(head, *body)]
+    lines = ["  ".join(c.rjust(w) for c, w in zip(row, widths)) for row in [head] + body]
+    return "\n".join(lines)
