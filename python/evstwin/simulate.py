@@ -378,10 +378,12 @@ def run_many(
     duration_s: float | None = None,
     sets: Sequence[str] = (),
     processes: int | None = None,
+    progress: bool = False,
 ) -> list[SimulationResult]:
-    """The same scenario with several seeds, in parallel processes (one thread each)."""
+    """The same scenario with several seeds, in parallel processes (one thread each), in the
+    order of ``seeds``; ``progress``: a tqdm bar on stderr counting finished runs."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     resolved = resolve_scenario(scenario, sets)
     seeds = list(seeds)
@@ -389,6 +391,13 @@ def run_many(
     context = multiprocessing.get_context("forkserver")
     with ProcessPoolExecutor(max_workers=processes, mp_context=context) as pool:
         futures = [pool.submit(simulate, resolved, duration_s, seed, 1) for seed in seeds]
+        if progress:
+            from tqdm import tqdm
+
+            with tqdm(total=len(futures), unit="run", desc=f"simulating {resolved['name']}",
+                      file=sys.stderr) as bar:
+                for _ in as_completed(futures):
+                    bar.update(1)
         return [f.result() for f in futures]
 
 

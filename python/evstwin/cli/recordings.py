@@ -9,47 +9,71 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ._common import add_force, add_size, check_output_dir
+
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("info", help="print a recording's summary")
-    p.add_argument("file")
+    p = sub.add_parser("info", help="print a recording's summary (read in chunks: any size)")
+    p.add_argument("file", help="event file in any format read_events takes (.h5, .aedat4, .raw, ...)")
+    add_size(p)
     p.set_defaults(func=cmd_info)
 
     p = sub.add_parser("show", help="draw one recording's figures")
-    p.add_argument("file")
-    p.add_argument("--out", required=True, help="output folder for the PNGs")
+    p.add_argument("file", help="event file in any format read_events takes")
+    p.add_argument("--out", required=True, help="output folder for the PNGs (created; must be empty or new)")
+    p.add_argument("--t0", type=float, default=0.0,
+                   help="start of the frames and x-y-t figures after the recording's first event [s] (default 0)")
+    p.add_argument("--window", type=float, default=0.033,
+                   help="length of each of the three frames [s] (default 0.033, the paper's Fig. 5)")
+    add_size(p)
+    add_force(p)
     p.set_defaults(func=cmd_show)
 
     p = sub.add_parser("compare", help="compare a real recording with simulations (paper sec. 3)")
     p.add_argument("real", help="real recording (AEDAT4, RAW, ... any format read_events takes)")
-    p.add_argument("sims", nargs="+", help="simulated recordings, or scenarios to simulate")
-    p.add_argument("--out", required=True)
-    p.add_argument("--bin-width", type=float, default=2.0, help="histogram bin width [events] (paper: 2)")
-    p.add_argument("--runs", type=int, default=1, help="seeds per scenario SIM (Monte Carlo; paper: 20)")
-    p.add_argument("--duration", type=float, help="sensor time of scenario SIMs [s]")
-    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("sims", nargs="+", help="simulated recordings, or scenarios (built-in names or TOML) to simulate")
+    p.add_argument("--out", required=True,
+                   help="output folder for compare.json, the figures and the simulated runs (must be empty or new)")
+    p.add_argument("--bin-width", type=float, default=2.0,
+                   help="per-pixel count histogram bin width [events] (default 2, the paper's)")
+    p.add_argument("--runs", type=int, default=1,
+                   help="seeds per scenario SIM, a Monte Carlo run in parallel processes (default 1; paper: 20)")
+    p.add_argument("--duration", type=float,
+                   help="sensor time simulated per scenario SIM [s] (default: the real recording's span)")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a value of every scenario SIM, e.g. pixel.theta_on=0.25 (repeatable)")
+    add_size(p)
+    add_force(p)
     p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser("timing", help="event-timing bias against the ground truth of simulated .h5/.npz files")
     p.add_argument("files", nargs="+", help="one file, or several (one per bias setting) to compare")
-    p.add_argument("--out", required=True)
-    p.add_argument("--radius-px", type=float, default=1.0, help="attribute events within this distance of the track [px]")
+    p.add_argument("--out", required=True, help="output folder for timing_bias.json and the figure (must be empty or new)")
+    p.add_argument("--radius-px", type=float, default=1.0,
+                   help="attribute events within this distance of the track [px] (default 1)")
     p.add_argument("--max-delay-s", type=float, default=0.3,
-                   help="longest delay attributed to a crossing [s]; keep it below the time between two passes")
+                   help="longest delay attributed to a crossing [s] (default 0.3); keep it below the time "
+                        "between two passes")
+    add_force(p)
     p.set_defaults(func=cmd_timing)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
     from ..validation import info
 
-    print(info(args.file))
+    print(info(args.file, size=args.size))
     return 0
 
 
 def cmd_show(args: argparse.Namespace) -> int:
     from ..validation import show
 
-    for name, path in show(args.file, args.out).items():
+    if not args.window > 0:
+        raise ValueError(f"--window must be > 0 s; got {args.window}")
+    if not args.t0 >= 0:
+        raise ValueError(f"--t0 must be >= 0 s; got {args.t0}")
+    check_output_dir(args.out, args.force)
+    for name, path in show(args.file, args.out, window_s=args.window, t_offset_s=args.t0, size=args.size).items():
         print(f"{name}: {path}")
     return 0
 
@@ -63,16 +87,34 @@ def _is_event_file(text: str) -> bool:
 def cmd_compare(args: argparse.Namespace) -> int:
     from .. import plots
     from ..io import read_events, write_events
-    from ..simulate import run_many
+    from ..scenario import build
+    from ..simulate import resolve_scenario, run_many
     from ..validation import aggregate, compare, compare_files
 
     if args.runs < 1:
         raise ValueError(f"--runs must be >= 1; got {args.runs}")
-    if args.bin_width <= 0:
+    if not args.bin_width > 0:
         raise ValueError(f"--bin-width must be > 0; got {args.bin_width}")
-    out = Path(args.out)
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration must be > 0 s; got {args.duration}")
+    out = check_output_dir(args.out, args.force)
+    # Everything is read and checked before a folder is made or a second simulated.
+    real_events, real_meta = read_events(args.real, size=args.size)
+    width, height = int(real_meta["width"]), int(real_meta["height"])
+    duration_s = args.duration if args.duration is not None else _span_s(real_events, real_meta)
+    for sim in args.sims:
+        if _is_event_file(sim):
+            continue
+        scene = build(resolve_scenario(sim, args.sets), duration_s=duration_s)
+        if (scene.width, scene.height) != (width, height):
+            raise ValueError(
+                f"scenario {sim!r} simulates a {scene.width}x{scene.height} sensor but {args.real} is "
+                f"{width}x{height}: set sensor.width/height (--set) or compare another scenario"
+            )
+    if not any(_is_event_file(sim) for sim in args.sims):
+        print(f"simulating {duration_s:.6g} s per run (the real recording's span; --duration to change)",
+              file=sys.stderr)
     out.mkdir(parents=True, exist_ok=True)
-    real_events, real_meta = read_events(args.real)
     # Scenario SIMs are simulated (--runs seeds each, in parallel processes) and written
     # beside the figures, so every number in compare.json points at a file.
     runs: list[list[Path]] = [[] for _ in range(args.runs)]
@@ -84,14 +126,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
                 r.append(Path(sim))
             continue
         start = time.perf_counter()
-        results = run_many(sim, seeds=range(args.runs), duration_s=args.duration, sets=args.sets)
+        results = run_many(sim, seeds=range(args.runs), duration_s=duration_s, sets=args.sets, progress=True)
         stem = Path(sim).stem if sim.endswith(".toml") else sim
         for seed, res in enumerate(results):
             path = out / f"{stem}_seed{seed}.h5"
             write_events(path, res.events, res.meta)
             runs[seed].append(path)
         print(f"simulated {sim}: {args.runs} run(s) in {time.perf_counter() - start:.1f} s", file=sys.stderr)
-    comparison = compare_files(args.real, runs[0], out, bin_width=args.bin_width)
+    comparison = compare_files(args.real, runs[0], out, bin_width=args.bin_width, size=args.size)
     report = comparison.to_json_dict()
     print(comparison.to_text())
     if args.runs > 1:
@@ -109,6 +151,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _span_s(events: Any, meta: dict) -> float:
+    """The recording's duration [s]: its meta's, else first to last event (at least 1 ms)."""
+    if meta.get("duration_s"):
+        return float(meta["duration_s"])
+    if len(events) < 2:
+        return 1e-3
+    return max(1e-3, (int(events["t"][-1]) - int(events["t"][0])) * 1e-6)
+
+
 def _with_path(pair: Any, label: str) -> Any:
     events, meta = pair
     return events, dict(meta, path=label)
@@ -119,7 +170,11 @@ def cmd_timing(args: argparse.Namespace) -> int:
     from ..io import read_events
     from ..validation import format_timing_bias_summary, timing_bias, timing_bias_summary
 
-    out = Path(args.out)
+    if not args.radius_px > 0:
+        raise ValueError(f"--radius-px must be > 0 px; got {args.radius_px}")
+    if not args.max_delay_s > 0:
+        raise ValueError(f"--max-delay-s must be > 0 s; got {args.max_delay_s}")
+    out = check_output_dir(args.out, args.force)
     tables: list[tuple[str, Any]] = []
     for path in args.files:
         events, meta = read_events(path)

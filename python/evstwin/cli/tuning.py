@@ -38,7 +38,7 @@ def register(subparsers: Any) -> None:
         p.add_argument("--workers", type=int, help=f"worker processes (default: {dask_workers_default})")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
-    p = subparsers.add_parser("fit", help="fit twin parameters to a real recording (Optuna)")
+    p = subparsers.add_parser("fit", help="fit twin parameters to a real recording (Nelder-Mead by default; Optuna samplers)")
     p.add_argument("real", help="real recording (any format read_events takes)")
     p.add_argument(
         "--scenario", required=True, help="scenario to fit (built-in name or TOML), of the sensor's size"
@@ -98,7 +98,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--runs", type=int, default=1, help="seeds per point (default 1)")
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--duration", type=float, help="sensor time per run [s] (default: the scenario's)")
-    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scenario value at every point, e.g. sensor.bias_set=paper_run_3 (repeatable)")
     p.add_argument("--out", default="sweep", help="output folder (default ./sweep)")
     p.add_argument(
         "--resume", action="store_true", help="keep the finished rows of OUT/sweep.csv, run the rest"
@@ -113,12 +114,12 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--rates-arcsec-s",
         default=",".join(f"{r:g}" for r in DEFAULT_RATES_ARCSEC_S),
-        help="angular rates [arcsec/s], v1,v2,... or lo:hi:step",
+        help="angular rates [arcsec/s], v1,v2,... or lo:hi:step (default %(default)s)",
     )
     p.add_argument(
         "--magnitudes",
         default=",".join(f"{m:g}" for m in DEFAULT_MAGNITUDES),
-        help="magnitudes, v1,v2,... or lo:hi:step",
+        help="magnitudes, v1,v2,... or lo:hi:step (default %(default)s)",
     )
     p.add_argument(
         "--criterion",
@@ -126,7 +127,7 @@ def register(subparsers: Any) -> None:
         help="METRIC>=VALUE of the detect objective (default excess_fraction>=0.5)",
     )
     p.add_argument("--runs", type=int, default=1, help="seeds per (rate, magnitude) (default 1)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--duration", type=float, help="sensor time per run [s] (default: the scenario's)")
     p.add_argument(
         "--set",
@@ -137,7 +138,8 @@ def register(subparsers: Any) -> None:
         help="bias configuration etc., e.g. sensor.bias_set=paper_run_3 (repeatable)",
     )
     p.add_argument("--out", default="limiting_magnitude", help="output folder (default ./limiting_magnitude)")
-    p.add_argument("--resume", action="store_true")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the finished rows of OUT/sweep.csv and run only the rest")
     execution(p, "all cores; 2 with --scheduler local")
     p.set_defaults(func=_cmd_limiting)
 

@@ -15,10 +15,10 @@ from ..analysis import KINDS
 from .comparison import Comparison, PathLike, _duration, _fmt, _label, _size, compare
 
 
-def _read(path: PathLike) -> tuple[np.ndarray, dict[str, Any]]:
+def _read(path: PathLike, size: tuple[int, int] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     from ..io import read_events  # lazy: io is optional at import time
 
-    events, meta = read_events(path)
+    events, meta = read_events(path, size=size)
     meta = dict(meta)
     meta.setdefault("path", str(path))
     return events, meta
@@ -46,6 +46,7 @@ def compare_files(
     n_windows: int = 3,
     t_offset_s: float = 0.0,
     rate_bin_s: float | None = None,
+    size: tuple[int, int] | None = None,
 ) -> Comparison:
     """Read the recordings (any format :func:`evstwin.io.read_events` takes), compare them,
     and write ``out_dir/compare.json`` (every number) and the figures:
@@ -54,15 +55,17 @@ def compare_files(
     ``t_offset_s`` after each recording's start), xyt.png (Fig. 6, the same time slice),
     histograms.png (Fig. 7), percent_error.png (Fig. 8), bin_error.png (Fig. 9) and
     event_rate.png (bins of ``rate_bin_s``, default about 1/100 of the real duration).
-    The written paths are in ``Comparison.outputs``.
+    The written paths are in ``Comparison.outputs``. ``size`` (W, H) is the real recording's
+    sensor size where its header has none. Every input is read and compared before
+    ``out_dir`` is created.
     """
     from .. import plots
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    real_events, real_meta = _read(real_path)
+    real_events, real_meta = _read(real_path, size)
     sims = [_read(p) for p in sim_paths]
     comp = compare(real_events, real_meta, sims, bin_width=bin_width)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     w, h = comp.real.width, comp.real.height
     recs = [(comp.real_label + " (real)", real_events)] + [(s.label, e) for s, (e, _) in zip(comp.sims, sims)]
     bin_s = rate_bin_s if rate_bin_s is not None else nice_bin_s(comp.real.duration_s)
@@ -77,30 +80,60 @@ def compare_files(
     return comp
 
 
-def info(path: PathLike) -> str:
-    """A summary of one recording, as text."""
-    events, meta = _read(path)
-    return format_info(events, meta)
+def info(path: PathLike, *, size: tuple[int, int] | None = None, chunk: int = 1_000_000) -> str:
+    """A summary of one recording, as text, read ``chunk`` events at a time: memory does not
+    grow with the recording (per-pixel counts and running totals are all it keeps). A text
+    file without a size header is read whole, its size being known only from its events."""
+    from ..io import iter_events
+
+    stream = iter_events(path, chunk=chunk, size=size)
+    meta = dict(stream.meta)
+    meta.setdefault("path", str(path))
+    if not (meta.get("width") and meta.get("height")):
+        events, meta = _read(path, size)
+        return format_info(events, meta)
+    width, height = _size(meta, str(path))
+    counts = np.zeros(width * height, np.int64)
+    total = on = 0
+    t_first: int | None = None
+    t_last = 0
+    for ev in stream:
+        if len(ev) == 0:
+            continue
+        counts += np.bincount(ev["y"].astype(np.int64) * width + ev["x"], minlength=counts.size)
+        total += len(ev)
+        on += int(np.count_nonzero(ev["p"]))
+        t_first = int(ev["t"][0]) if t_first is None else t_first
+        t_last = int(ev["t"][-1])
+    duration = meta.get("duration_s")
+    if duration is None:
+        duration = (t_last - t_first) * 1e-6 if t_first is not None else 0.0
+    return _info_text(meta, width, height, total, on, t_first or 0, t_last, float(duration), counts)
 
 
 def format_info(events: np.ndarray, meta: Mapping[str, Any]) -> str:
     """The text of :func:`info` for events already in memory."""
     width, height = _size(meta, str(meta.get("path", "recording")))
     st = analysis.stats(events, width, height, _duration(events, meta))
-    counts = analysis.pixel_counts(events, width, height)["total"]
+    counts = analysis.pixel_counts(events, width, height)["total"].reshape(-1)
+    return _info_text(meta, width, height, st.total, st.on, st.t_start_us, st.t_end_us, st.duration_s, counts)
+
+
+def _info_text(meta: Mapping[str, Any], width: int, height: int, total: int, on: int, t_start_us: int,
+               t_end_us: int, duration_s: float, counts: np.ndarray) -> str:
+    off = total - on
+    pixels = width * height
+    rate = total / duration_s if duration_s > 0 else math.nan
     active = int(np.count_nonzero(counts))
     lines = [
         f"file          {meta.get('path', '')}",
-        f"sensor        {width} x {height} px ({st.pixel_count} pixels)",
-        f"events        {st.total} (ON {st.on}, OFF {st.off}), ON/OFF {_fmt(st.on_off_ratio, 4)}",
-        f"time          {st.t_start_us} .. {st.t_end_us} us, duration {st.duration_s:.6g} s",
-        (
-            f"mean rate     {_fmt(st.mean_rate_hz, 1)} events/s, "
-            f"{_fmt(st.mean_rate_hz / st.pixel_count, 4)} events/s per pixel"
-        ),
+        f"sensor        {width} x {height} px ({pixels} pixels)",
+        f"events        {total} (ON {on}, OFF {off}), ON/OFF {_fmt(analysis.ratio(on, off), 4)}",
+        f"time          {t_start_us} .. {t_end_us} us, duration {duration_s:.6g} s",
+        f"mean rate     {_fmt(rate, 1)} events/s, {_fmt(rate / pixels, 4)} events/s per pixel",
         (
             f"per pixel     mean {counts.mean():.4g}, max {int(counts.max()) if counts.size else 0} events; "
-            f"{active} pixels ({100 * active / st.pixel_count:.2f} %) have events"
+            f"{active} pixels ({100 * active / pixels:.2f} %) have events"
         ),
     ]
     return "\n".join(lines)
@@ -115,15 +148,16 @@ def show(
     n_windows: int = 3,
     t_offset_s: float = 0.0,
     rate_bin_s: float | None = None,
+    size: tuple[int, int] | None = None,
 ) -> dict[str, str]:
     """Draw one recording's figures into ``out_dir``: frames.png, xyt.png, histograms.png and
     event_rate.png (options as in :func:`compare_files`). Returns {figure: path}."""
     from .. import plots
 
+    events, meta = _read(path, size)
+    width, height = _size(meta, str(path))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    events, meta = _read(path)
-    width, height = _size(meta, str(path))
     st = analysis.stats(events, width, height, _duration(events, meta))
     recs = [(_label(str(meta["path"])), events)]
     counts = analysis.pixel_counts(events, width, height)

@@ -1,0 +1,106 @@
+"""The commands on recordings (info, show, compare, timing) as a new user meets them: inputs
+checked before anything is written or simulated, outputs never overwritten silently,
+progress, help that says every default."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import pytest
+
+from evstwin.cli import build_parser, main
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+DAVIS = DATA / "davis346_road_cut.aedat4"  # 346 x 260, 2000 real events over 50 ms
+EVK4 = DATA / "imx636_cut_evt3.raw"  # 1280 x 720
+
+
+def one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err
+    assert err.startswith("evstwin: error: ") and err.count("\n") == 1, err
+    return err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["compare", "nonexist.aedat4", "mcreynolds", "--out", "{out}"],
+        ["show", "nonexist.h5", "--out", "{out}"],
+        ["compare", str(DAVIS), "no-such-scenario", "--out", "{out}"],
+        ["timing", "nonexist.h5", "--out", "{out}"],
+    ],
+)
+def test_bad_inputs_leave_no_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    out = tmp_path / "out"
+    assert main([a.replace("{out}", str(out)) for a in argv]) == 2
+    one_line_error(capsys)
+    assert not out.exists()
+
+
+def test_info_of_a_directory_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "d.h5").mkdir()
+    assert main(["info", str(tmp_path / "d.h5")]) == 2
+    assert "d.h5" in one_line_error(capsys)
+
+
+def test_size_mismatch_is_found_before_simulating(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "cmp"
+    assert main(["compare", str(EVK4), "mcreynolds", "--out", str(out)]) == 2
+    err = one_line_error(capsys)
+    assert "346x260" in err and "1280x720" in err
+    assert not out.exists()
+
+
+def test_compare_simulates_the_recordings_span_with_progress(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "cmp"
+    assert main(["compare", str(DAVIS), "mcreynolds", "--out", str(out), "--runs", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "simulating 0.049926 s per run" in err  # the cut's span, not the scenario's 10 s
+    assert "2/2" in err  # the per-run progress bar finished
+    report = json.loads((out / "compare.json").read_text())
+    assert report["monte_carlo"]["runs"] == 2
+    from evstwin.io import read_events
+
+    _, meta = read_events(out / "mcreynolds_seed1.h5")
+    assert meta["duration_s"] == pytest.approx(0.049926, abs=0.004)  # whole 4 ms samples
+    # The same folder again is refused, then allowed with --force.
+    assert main(["compare", str(DAVIS), str(out / "mcreynolds_seed0.h5"), "--out", str(out)]) == 2
+    assert "--force" in one_line_error(capsys)
+    assert main(["compare", str(DAVIS), str(out / "mcreynolds_seed0.h5"), "--out", str(out), "--force"]) == 0
+
+
+def test_show_takes_a_time_window_and_refuses_a_full_folder(tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "figs"
+    assert main(["show", str(DAVIS), "--out", str(out), "--t0", "0.01", "--window", "0.005"]) == 0
+    assert (out / "frames.png").is_file() and (out / "xyt.png").is_file()
+    assert main(["show", str(DAVIS), "--out", str(out)]) == 2
+    assert "not empty" in one_line_error(capsys)
+    assert main(["show", str(DAVIS), "--out", str(out), "--window", "0"]) == 2
+    assert "--window" in one_line_error(capsys)
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--radius-px", "-1"), ("--radius-px", "0"), ("--max-delay-s", "0")])
+def test_timing_refuses_non_positive_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                            flag: str, value: str) -> None:
+    assert main(["timing", str(DAVIS), "--out", str(tmp_path / "t"), flag, value]) == 2
+    assert flag in one_line_error(capsys)
+    assert not (tmp_path / "t").exists()
+
+
+def test_every_argument_has_help_that_states_its_default() -> None:
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    missing = []
+    for name, command in sub.choices.items():
+        for action in command._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            if not action.help:
+                missing.append(f"{name} {action.dest}: no help")
+            elif action.default not in (None, False, [], argparse.SUPPRESS) and "default" not in action.help:
+                missing.append(f"{name} {action.dest}: default {action.default!r} not stated")
+    assert not missing, missing
