@@ -202,6 +202,21 @@ def _stats(runner: _Runner, meta: dict[str, Any], wall0: float, n_events: int, n
     }
 
 
+def track_names(scene: Scene) -> list[str]:
+    """The names under which a scene's moving targets' ground truth is written (their labels,
+    ``target<j>`` for unlabelled ones, ``#<j>`` appended to a repeated label)."""
+    t_end = max(1, math.ceil(scene.duration_s * scene.rate_hz - 1e-9)) / scene.rate_hz
+    return _names([t for t in scene.targets if not _is_static(t, t_end)])
+
+
+def _names(moving: Sequence[Target]) -> list[str]:
+    names: list[str] = []
+    for j, target in enumerate(moving):
+        name = target.label or f"target{j}"
+        names.append(f"{name}#{j}" if name in names else name)
+    return names
+
+
 def _is_static(target: Target, duration_s: float) -> bool:
     return not isinstance(target.brightness, LightCurve) and target.max_speed_px_s(0.0, duration_s) == 0.0
 
@@ -234,10 +249,7 @@ class _Runner:
         # the scene was rendered at (the fine rate where the run sub-sampled), in time order.
         self._truth_sink = truth_sink
         self._truth_t_last = -math.inf
-        self.track_names: list[str] = []
-        for j, target in enumerate(self.moving):
-            name = target.label or f"target{j}"
-            self.track_names.append(f"{name}#{j}" if name in self.track_names else name)
+        self.track_names = _names(self.moving)
         self.half = psf.window_half_width_px(self.sigma)
         # A pixel a source has left keeps the fine sampling until the source follower has
         # settled (5 time constants): the comparator interpolates linearly between samples

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import os
 import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -533,3 +537,104 @@ def test_fit_bounds_are_documented() -> None:
         value = getattr(build(load("mcreynolds")).params, key.split(".", 1)[1])
         assert b.contains(value), key  # the paper's own values are inside
     assert math.isclose(tune.FIT_BOUNDS["pixel.dark_rate_e_per_s"].low, 10.0)
+
+
+# -- defects a new user hit ---------------------------------------------------------------------
+
+
+def test_sweep_with_an_unknown_target_fails_at_once_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from evstwin import cli
+
+    scen = tmp_path / "geo.toml"
+    scen.write_text(to_toml(geo_small()))
+    out = tmp_path / "sw"
+    argv = ["sweep", "--scenario", str(scen), "--grid", "pixel.theta_on=0.2,0.3", "--target", "nosuch",
+            "--out", str(out), "--no-progress"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'nosuch' is not a moving target" in err and "known: target" in err
+    assert not out.exists()
+
+
+class _AlwaysWrong(tune.NoiseObjective):
+    """A job error that every try would repeat (a deterministic bug in the job)."""
+
+    name = "wrong"
+
+    def evaluate(self, result):  # type: ignore[no-untyped-def]
+        raise ValueError("this job is wrong every time")
+
+
+@pytest.mark.parametrize("workers", [0, 1])
+def test_deterministic_job_errors_are_not_retried(workers: int) -> None:
+    from evstwin.tune.execution import LocalExecutor, _Context, _Job
+
+    ctx = _Context(scenario=load(noise_scenario()), objective=_AlwaysWrong())
+    executor = LocalExecutor(workers)
+    try:
+        (job, res), = list(executor.run(ctx, [_Job(0, {}, 0)]))
+    finally:
+        executor.close()
+    assert isinstance(res, tune.JobFailure) and res.attempts == 1 and "wrong every time" in res.error
+
+
+def _descendants(pid: int) -> set[int]:
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
+            except OSError:
+                continue
+            children.setdefault(ppid, []).append(int(entry))
+    out, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="needs /proc to find the worker processes")
+def test_sigint_to_the_main_process_alone_stops_the_sweep_and_its_workers(tmp_path: Path) -> None:
+    scen = load(noise_scenario())
+    scen["sensor"] = dict(scen["sensor"], width=96, height=64)
+    scen["duration_s"] = 600.0  # each job takes over a minute: the interrupt lands mid-job
+    (tmp_path / "s.toml").write_text(to_toml(scen))
+    out = tmp_path / "sw"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "evstwin", "sweep", "--scenario", str(tmp_path / "s.toml"), "--grid",
+         "pixel.theta_on=0.15,0.2,0.25,0.3", "--objective", "noise", "--workers", "2", "--out", str(out)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while len(_descendants(proc.pid)) < 3 and time.monotonic() < deadline:  # forkserver + 2 workers
+            time.sleep(0.2)
+        time.sleep(1.0)
+        workers = _descendants(proc.pid)
+        assert len(workers) >= 3
+        start = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)
+        stopped_s = time.monotonic() - start
+    finally:
+        if proc.poll() is None:  # failed: leave no process behind in any case
+            for pid in _descendants(proc.pid) | {proc.pid}:
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130 and stopped_s < 10
+    time.sleep(1.0)
+    assert not [p for p in workers if _running(p)]
+
+
+def _running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"  # a zombie has ended
+    except OSError:
+        return False

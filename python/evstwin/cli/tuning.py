@@ -24,6 +24,7 @@ from ..tune import (
     parse_grid,
     sweep,
 )
+from ._common import add_force, add_size, check_output_dir
 
 
 def register(subparsers: Any) -> None:
@@ -37,6 +38,7 @@ def register(subparsers: Any) -> None:
         )
         p.add_argument("--workers", type=int, help=f"worker processes (default: {dask_workers_default})")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")
+        add_force(p)
 
     p = subparsers.add_parser("fit", help="fit twin parameters to a real recording (Nelder-Mead by default; Optuna samplers)")
     p.add_argument("real", help="real recording (any format read_events takes)")
@@ -79,6 +81,7 @@ def register(subparsers: Any) -> None:
         help="override a scenario value before fitting (repeatable)",
     )
     p.add_argument("--out", help="output folder (default: <REAL stem>_fit)")
+    add_size(p)
     execution(p, "all cores; 2 with --scheduler local")
     p.set_defaults(func=_cmd_fit)
 
@@ -167,7 +170,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     for text in args.sets:
         k, v = parse_assignment(text)
         scenario = set_value(scenario, k, v)
-    events, meta = read_events(args.real)
+    out = check_output_dir(args.out if args.out else f"{Path(args.real).stem}_fit", args.force)
+    events, meta = read_events(args.real, size=args.size)
     result = fit(
         events,
         meta,
@@ -183,7 +187,6 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         sampler=args.sampler,
         batch_size=args.batch_size,
     )
-    out = Path(args.out) if args.out else Path(f"{Path(args.real).stem}_fit")
     paths = result.write(out)
     paths.update(draw_fit(result, out))
     print(result.to_text())
@@ -209,6 +212,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration must be > 0; got {args.duration}")
     grid = parse_grid(args.grid)
+    if not args.resume:
+        check_output_dir(args.out, args.force)
+        if args.force:  # overwrite: the old table would otherwise be taken for one to resume
+            (Path(args.out) / "sweep.csv").unlink(missing_ok=True)
     result = sweep(
         args.scenario,
         grid,
@@ -249,6 +256,10 @@ def _cmd_limiting(args: argparse.Namespace) -> int:
         raise ValueError(f"--criterion {args.criterion!r}: the value must be a number") from None
     rates = parse_float_list(args.rates_arcsec_s, "--rates-arcsec-s")
     mags = parse_float_list(args.magnitudes, "--magnitudes")
+    if not args.resume:
+        check_output_dir(args.out, args.force)
+        if args.force:
+            (Path(args.out) / "sweep.csv").unlink(missing_ok=True)
     result = limiting_magnitude(
         args.scenario,
         rates,

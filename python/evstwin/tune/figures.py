@@ -12,7 +12,7 @@ from .._extras import require
 from ._types import PathLike
 from .fit import FitResult, TrialRecord
 from .limits import LimitingMagnitudeResult
-from .sweep import SweepResult, _fmt_value, _short
+from .sweep import SweepResult, _fmt_value
 
 
 def plot_convergence(history: Sequence[TrialRecord], path: PathLike) -> Path:
@@ -50,6 +50,39 @@ def plot_convergence(history: Sequence[TrialRecord], path: PathLike) -> Path:
     return plots.save(fig, Path(path))
 
 
+_LABELS = {
+    "pixel.theta_on": "ON threshold theta_on (log units)",
+    "pixel.theta_off": "OFF threshold theta_off (log units)",
+    "pixel.dark_rate_e_per_s": "dark current (e-/s)",
+    "pixel.leak_rate_hz": "leak rate (Hz)",
+    "pixel.shot_noise_rate_hz": "shot-noise rate (Hz per polarity)",
+    "pixel.refractory_s": "refractory period (s)",
+    "pixel.cutoff_hz": "source-follower cutoff (Hz)",
+    "pixel.threshold_sigma": "threshold mismatch (sigma, fraction)",
+    "sensor.bias_set": "bias set",
+    "excess_fraction": "track pixels that fire,\nbeyond noise (fraction)",
+    "fraction": "track pixels that fire (fraction)",
+    "snr": "track / noise event rate\n(per pixel, SNR)",
+    "latency_median_s": "first-event latency,\nmedian (s)",
+    "noise_rate_per_px_hz": "noise rate\n(events/s per pixel)",
+    "distance": "comparison distance",
+}
+_UNITS = (("_e_per_s", "e-/s"), ("_arcsec_s", "arcsec/s"), ("_px_s", "px/s"), ("_ph_s", "photons/s"),
+          ("_hz", "Hz"), ("_px", "px"), ("_s", "s"), ("_m", "m"))
+
+
+def readable(key: str) -> str:
+    """A figure label for a scenario key or metric name, with its unit (``pixel.theta_on`` ->
+    "ON threshold theta_on (log units)"); unknown names get the unit their suffix says."""
+    if key in _LABELS:
+        return _LABELS[key]
+    name = key.split(".")[-1]
+    for suffix, unit in _UNITS:
+        if name.endswith(suffix):
+            return f"{name[: -len(suffix)].replace('_', ' ')} ({unit})"
+    return name.replace("_", " ")
+
+
 def _axis_values(values: Sequence[Any]) -> tuple[np.ndarray, bool, list[str]]:
     numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
     if numeric:
@@ -69,7 +102,8 @@ def plot_sweep(result: SweepResult, path: PathLike) -> Path:
     rest = keys[1:]
     xs_all, numeric, labels = _axis_values(result.grid[first])
     metrics = list(result.headline) or list(result.metrics[:1])
-    fig = Figure(figsize=(6.5, 3.2 * len(metrics)))
+    # constrained layout keeps the legend, outside the axes on the right, inside the figure.
+    fig = Figure(figsize=(8.0, 2.8 * len(metrics) + 0.6), constrained_layout=True)
     groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
     for row in result.summary:
         groups.setdefault(tuple(_fmt_value(row[k]) for k in rest), []).append(row)
@@ -82,20 +116,19 @@ def plot_sweep(result: SweepResult, path: PathLike) -> Path:
             x = xs_all[xi[order]]
             y = np.array([r[f"mean_{m}"] for r in rs], dtype=float)[order]
             e = np.array([r[f"std_{m}"] for r in rs], dtype=float)[order]
-            label = ", ".join(f"{_short(k)}={v}" for k, v in zip(rest, gkey)) or None
+            label = ", ".join(f"{readable(k)} = {v}" for k, v in zip(rest, gkey)) or None
             ax.errorbar(x, y, yerr=np.where(np.isfinite(e), e, 0.0), marker="o", ms=4, capsize=3, label=label)
         if numeric and np.all(xs_all > 0) and xs_all.max() / xs_all.min() > 50:
             ax.set_xscale("log")
         if not numeric:
             ax.set_xticks(xs_all, labels)
-        ax.set_ylabel(m)
+        ax.set_ylabel(readable(m), fontsize="small")
         ax.grid(True, alpha=0.3)
         if rest and n == 0:
-            ax.legend(fontsize="small")
+            ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
         if n == len(metrics) - 1:
-            ax.set_xlabel(first)
-    fig.suptitle(f"sweep, objective {result.objective} ({result.runs} seed(s) per point)")
-    fig.tight_layout()
+            ax.set_xlabel(readable(first))
+    fig.suptitle(f"sweep, objective {result.objective} (mean and std over {result.runs} seed(s) per point)")
     return plots.save(fig, Path(path))
 
 

@@ -6,6 +6,7 @@ import csv
 import dataclasses
 import json
 import math
+import sys
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -27,7 +28,7 @@ from .bounds import (
     canonical_key,
     parse_bound,
 )
-from .execution import JobFailure, _bar, _Context, _Job, make_executor
+from .execution import JobFailure, _bar, _Context, _Job, announce, make_executor
 from .objectives import MatchObjective
 from .sweep import _atomic_write_text, _fmt_value, _jsonable
 
@@ -387,6 +388,9 @@ def fit(
     history: list[TrialRecord] = []
     failed: list[JobFailure] = []
     executor = make_executor(scheduler, workers)
+    if progress:
+        print(announce(f"fit ({sampler}, up to {budget} trials x {runs_per_trial} seed(s))", budget * runs_per_trial,
+                       build(objective.prepare(base)), executor), file=sys.stderr)
     bar = _bar(budget, f"fit ({sampler})", progress, unit="trial")
     best = [math.inf]
 

@@ -37,6 +37,10 @@ class Objective:
     def prepare(self, scenario: dict[str, Any]) -> dict[str, Any]:
         return scenario
 
+    def check(self, scene: Any) -> None:
+        """Raise ValueError now, in the main process, for what would make every job fail
+        (called on each built scenario before any job runs)."""
+
     def evaluate(self, result: Any) -> dict[str, float]:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -170,6 +174,17 @@ class DetectObjective(Objective):
         self.radius_px = float(radius_px)
         self.tail_s = float(tail_s)
         self.exclude_px = float(exclude_px)
+
+    def check(self, scene: Any) -> None:
+        from ..simulate import track_names
+
+        names = track_names(scene)
+        if not names:
+            raise ValueError("the detect objective needs a moving target; the scenario has none")
+        if self.target is not None and self.target not in names:
+            raise ValueError(
+                f"detect target {self.target!r} is not a moving target of the scenario; known: {', '.join(names)}"
+            )
 
     def evaluate(self, result: Any) -> dict[str, float]:
         truth = result.meta.get("truth") or {}

@@ -7,6 +7,7 @@ import csv
 import itertools
 import math
 import os
+import sys
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -19,7 +20,7 @@ import numpy as np
 from ..scenario import build, load, parse_assignment, set_value
 from ._types import PathLike, Recording
 from .bounds import _check_not_shadowed, canonical_key
-from .execution import JobFailure, _bar, _Context, _Job, make_executor
+from .execution import JobFailure, _bar, _Context, _Job, announce, make_executor
 from .objectives import MatchObjective, Objective, make_objective
 
 
@@ -244,7 +245,7 @@ def sweep(
         s = base
         for k, v in zip(keys, pt):
             s = set_value(s, k, v)
-        build(obj.prepare(s))
+        obj.check(build(obj.prepare(s)))
     if isinstance(obj, MatchObjective):
         w, h = build(base).width, build(base).height
         if (w, h) != (obj.width, obj.height):
@@ -278,8 +279,10 @@ def sweep(
     rows = list(done)
     failed: list[JobFailure] = []
     ctx = _Context(scenario=base, objective=obj)
-    bar = _bar(len(points) * runs, f"sweep ({obj.name})", progress, initial=len(done))
     executor = make_executor(scheduler, workers) if jobs else None
+    if progress and jobs:
+        print(announce(f"sweep ({obj.name})", len(jobs), build(obj.prepare(base)), executor), file=sys.stderr)
+    bar = _bar(len(points) * runs, f"sweep ({obj.name})", progress, initial=len(done))
     try:
         with contextlib.ExitStack() as stack:
             writer = None
