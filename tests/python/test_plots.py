@@ -189,3 +189,37 @@ def test_dpi_sets_pixel_size(tmp_path, dpi):
 def test_percent_error_gaps_for_bins_empty_in_both():
     v = plots.comparison._mask_empty([0.0, 50.0, 0.0, -100.0], [0.0, 0.2, 0.0, 0.1], [0.0, 0.3, 0.1, 0.0])
     np.testing.assert_array_equal(np.isnan(v), [True, False, False, False])
+
+
+def test_one_panel_titles_stay_inside_the_figure():
+    # A Monte Carlo figure has one panel and the longest title: it used to run off both edges.
+    sims = [(s.label, s.percent_error) for s in COMP.sims]
+    fig = plots.fig_percent_error(COMP.edges, sims, std=[s.percent_error for s in COMP.sims])
+    fig.canvas.draw()
+    box = fig._suptitle.get_window_extent()
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.width
+
+
+def test_event_rate_rows_share_the_rate_scale_and_the_first_recordings_time():
+    long_sim = random_events(3, 6000, duration_us=3_000_000)  # ten times the real one
+    fig = plots.fig_event_rate([("real", REAL), ("sim", long_sim)], bin_s=0.01)
+    top, bottom = fig.axes[0], fig.axes[1]
+    assert top.get_ylim() == bottom.get_ylim()
+    span_s = (int(REAL["t"][-1]) - int(REAL["t"][0]) + 1) * 1e-6
+    assert bottom.get_xlim()[1] == pytest.approx(span_s)
+
+
+def test_timing_figure_has_one_legend_and_medians_per_polarity():
+    truth_t = np.linspace(0.0, 0.3, 50)
+    table = np.zeros(200, dtype=[("delay_s", "f8"), ("p", "u1"), ("flux_ph_s", "f8"), ("speed_px_s", "f8")])
+    table["p"] = np.arange(200) % 2
+    table["delay_s"] = np.where(table["p"] == 1, 0.005, 0.1)
+    table["flux_ph_s"] = 1e9  # one brightness: a plain axis, no 1e-12+1e9 offset
+    table["speed_px_s"] = np.repeat(truth_t[:4] * 1000 + 100, 50)
+    fig = plots.fig_timing_bias(table)
+    assert all(ax.get_legend() is None for ax in fig.axes) and len(fig.legends) == 1
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "ON median, 25-75 %" in labels and "OFF median, 25-75 %" in labels
+    fig.canvas.draw()
+    assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["1e+09"]
+    assert fig.axes[0].xaxis.get_offset_text().get_text() == ""

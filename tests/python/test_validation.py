@@ -387,3 +387,18 @@ def test_timing_bias_empty_cases():
     still = {"still": truth["still"]}
     assert validation.timing_bias(ev, still).size == 0
     assert validation.timing_bias_summary(validation.timing_bias(ev, still)) == []
+
+
+def test_timing_bias_summary_single_values_and_polarities():
+    truth, ev = truth_and_events()
+    tab = validation.timing_bias(ev, truth)
+    fast = tab[tab["target"] == "fast"]  # one speed and one flux
+    rows = validation.timing_bias_summary(fast, by="speed")
+    assert len(rows) == 1 and isinstance(rows[0]["group"], float)  # a value, not a 7.883..7.883 bin
+    text = validation.format_timing_bias_summary(rows, by="speed")
+    assert ".." not in text.splitlines()[1]
+    split = validation.timing_bias_summary(tab, by="target", split_polarity=True)
+    slow = {r["polarity"]: r for r in split if r["group"] == "slow"}
+    # The slow target's 17 ON delays of 3 ms and 17 OFF delays of 5 ms, no longer one 4 ms median.
+    assert slow["ON"]["p50_s"] == pytest.approx(0.003) and slow["OFF"]["p50_s"] == pytest.approx(0.005)
+    assert "polarity" in validation.format_timing_bias_summary(split)

@@ -186,7 +186,8 @@ def cmd_timing(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {}
     for label, table in tables:
-        rows = {by: timing_bias_summary(table, by=by) for by in ("target", "polarity", "flux", "speed")}
+        rows = {by: timing_bias_summary(table, by=by, split_polarity=True)
+                for by in ("target", "polarity", "flux", "speed")}
         report[label] = rows
         print(f"== {label}: {len(table)} events attributed to a crossing")
         for by, r in rows.items():

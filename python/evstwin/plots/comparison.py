@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -76,7 +77,9 @@ def _error_panels(
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle(title, fontsize=11)
+    # Wrapped to the figure's width (about 11 characters an inch at this size): a one-panel
+    # figure would otherwise clip a long title at both ends.
+    fig.suptitle(textwrap.fill(title, width=max(30, int(10.5 * figsize[0]))), fontsize=11)
     return fig, axes
 
 
@@ -192,7 +195,8 @@ def plot_monte_carlo(summary: MonteCarloSummary, out_dir: PathLike, dpi: int = D
     m, s = summary.mean, summary.std
     edges = {k: np.asarray(m["edges"][k], dtype=np.float64) for k in KINDS}
     labels = [str(x["path"]) if isinstance(x["path"], str) else str(x["path"][0]) for x in m["sims"]]
-    labels = [lab.replace("\\", "/").rsplit("/", 1)[-1] + f" ({summary.runs} runs)" for lab in labels]
+    labels = [lab.replace("\\", "/").rsplit("/", 1)[-1] for lab in labels]
+    labels = [lab if "seeds)" in lab else f"{lab} ({summary.runs} runs)" for lab in labels]
     unit = m.get("value_unit", "events")
     real_h = {k: _nan_list(m["real_histogram"][k]) for k in KINDS}
     pct = [

@@ -217,17 +217,23 @@ def fig_event_rate(
     if figsize is None:
         figsize = (9.0, 2.4 * n + 0.8)
     fig = Figure(figsize=figsize, layout="constrained")
-    axes = fig.subplots(n, 1, squeeze=False, sharex=True)[:, 0]
-    for ax, (label, events) in zip(axes, recordings):
-        t, on, off = analysis.event_rate(events, bin_s)
+    # One y scale for every row, so rates compare by eye; the time axis spans the first
+    # recording (the real one in a comparison), not the longest.
+    axes = fig.subplots(n, 1, squeeze=False, sharex=True, sharey=True)[:, 0]
+    curves = [analysis.event_rate(events, bin_s) for _, events in recordings]
+    peak = max((float(max(on.max(), off.max())) for t, on, off in curves if t.size), default=0.0)
+    for ax, (label, events), (t, on, off) in zip(axes, recordings, curves):
         ax.step(t, on, where="mid", color=ON_COLOUR, linewidth=1.2, label="ON")
         ax.step(t, off, where="mid", color=OFF_COLOUR, linewidth=1.2, label="OFF")
         ax.set_title(label, fontsize=10)
         ax.set_ylabel("event rate [events/s]")
-        peak = float(max(on.max(), off.max())) if t.size else 1.0
-        ax.set_ylim(0, 1.3 * peak if peak > 0 else 1.0)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="upper right", ncol=2)
+    axes[0].set_ylim(0, 1.3 * peak if peak > 0 else 1.0)
+    first = recordings[0][1] if n else None
+    if first is not None and first.size > 1:
+        span_s = (int(first["t"][-1]) - int(first["t"][0]) + 1) * 1e-6
+        axes[0].set_xlim(0, max(span_s, bin_s))
     axes[-1].set_xlabel("time since first event [s]")
     fig.suptitle(f"Event rate ({1e3 * bin_s:g} ms bins)", fontsize=11)
     return fig

@@ -78,32 +78,43 @@ def fig_timing_bias(
                 edges = np.geomspace(lo, hi, n_bins + 1) if hi > lo else np.array([lo / 1.01, hi * 1.01])
             else:
                 edges = np.linspace(lo, hi, n_bins + 1) if hi > lo else np.array([lo - 0.5, hi + 0.5])
-            c, med, q1, q3 = _binned_median(v, delay_ms, edges, log=log and lo > 0)
-            ax.errorbar(
-                c,
-                med,
-                yerr=[med - q1, q3 - med],
-                color="black",
-                marker="o",
-                markersize=4,
-                capsize=3,
-                linewidth=1.2,
-                label="median, 25-75 %",
-            )
+            # ON and OFF medians apart: in the dark OFF events trail ON ones by an order of
+            # magnitude, and one median of both would describe neither.
+            for pol, colour, name, shift in ((1, ON_COLOUR, "ON", -1), (0, OFF_COLOUR, "OFF", 1)):
+                sel = (np.asarray(table["p"]) != 0) if pol else (np.asarray(table["p"]) == 0)
+                if not sel.any():
+                    continue
+                c, med, q1, q3 = _binned_median(v[sel], delay_ms[sel], edges, log=log and lo > 0)
+                ax.errorbar(c, med, yerr=[med - q1, q3 - med], color=colour, marker="o", markersize=5,
+                            markeredgecolor="black", capsize=3, linewidth=1.4,
+                            label=f"{name} median, 25-75 %")
+            if hi == lo:  # one brightness or speed: a plain axis around it, no offset notation
+                ax.set_xlim(lo - 0.5 * abs(lo or 1.0), hi + 0.5 * abs(hi or 1.0))
+                ax.set_xticks([lo])
+                ax.set_xticklabels([f"{lo:.4g}"])
         if log and v.size and v.min() > 0 and v.max() > v.min():  # one brightness: linear axis
             ax.set_xscale("log")
+        elif v.size and v.max() > v.min():
+            ax.ticklabel_format(axis="x", useOffset=False)  # 1e-12+7.88 helps nobody
         ax.axhline(0.0, color="grey", linewidth=0.6)
         ax.set_xlabel(xlabel)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if handles:  # one legend for both panels, below them
+        fig.legend(handles, labels, loc="outside lower center", ncols=4, fontsize=8)
+    outside = 0
     if delay_ms.size:
         lo_ms, hi_ms = np.percentile(delay_ms, [1, 99])
         pad = 0.15 * (hi_ms - lo_ms) + 0.05
-        axes[0].set_ylim(min(lo_ms, 0.0) - pad, max(hi_ms, 0.0) + pad)
+        y0, y1 = min(lo_ms, 0.0) - pad, max(hi_ms, 0.0) + pad
+        axes[0].set_ylim(y0, y1)
+        outside = int(np.count_nonzero((delay_ms < y0) | (delay_ms > y1)))
     axes[0].set_ylabel("delay: event time - true crossing [ms]")
     axes[0].set_title("delay vs brightness", fontsize=10)
     axes[1].set_title("delay vs speed", fontsize=10)
     note = "" if shown.size == table.size else f", {shown.size} of {table.size} shown"
+    if outside:
+        note += f", {outside} beyond the delay axis"
     fig.suptitle(f"Event-timing bias ({table.size} events attributed to a crossing{note})", fontsize=11)
     return fig
 

@@ -177,14 +177,19 @@ def timing_bias_summary(
     by: str = "target",
     bins: int | Sequence[float] | np.ndarray = 5,
     percentiles: Sequence[float] = (5, 25, 50, 75, 95),
+    split_polarity: bool = False,
 ) -> list[dict[str, Any]]:
     """Delay statistics per group of a :func:`timing_bias` table.
 
     by: 'target' (one group per name), 'polarity' (ON, OFF), 'flux' (``bins`` log-spaced
         flux bins [photons/s] between the smallest and largest, or explicit edges) or 'speed'
-        (``bins`` linear speed bins [px/s], or edges). Bins are [lo, hi), the last [lo, hi].
-    Returns one dict per non-empty group: group (name or [lo, hi]), n, mean_s, std_s and
-    p<q>_s for each percentile q (delays in seconds; the median is p50_s).
+        (``bins`` linear speed bins [px/s], or edges). Bins are [lo, hi), the last [lo, hi];
+        a flux or speed with a single value is one group named by that value (not a bin).
+    split_polarity: one row per group and polarity (key ``polarity``, 'ON'/'OFF'): ON and OFF
+        delays differ by an order of magnitude in the dark, and a median of both describes
+        neither.
+    Returns one dict per non-empty group: group (name, value or [lo, hi]), n, mean_s, std_s
+    and p<q>_s for each percentile q (delays in seconds; the median is p50_s).
     """
     if by not in ("target", "polarity", "flux", "speed"):
         raise ValueError(f"by must be 'target', 'polarity', 'flux' or 'speed'; got {by!r}")
@@ -200,17 +205,28 @@ def timing_bias_summary(
     else:
         col = "flux_ph_s" if by == "flux" else "speed_px_s"
         vals = np.asarray(table[col], dtype=np.float64)
-        edges = _bin_edges(vals, bins, log=(by == "flux"))
-        idx = np.searchsorted(edges, vals, side="right") - 1
-        idx[vals == edges[-1]] = edges.size - 2
-        groups = [([float(edges[i]), float(edges[i + 1])], idx == i) for i in range(edges.size - 1)]
+        if np.ndim(bins) == 0 and vals.max() - vals.min() <= 1e-9 * abs(vals.max()):
+            groups = [(float(np.median(vals)), np.ones(vals.size, bool))]  # one value, one group
+        else:
+            edges = _bin_edges(vals, bins, log=(by == "flux"))
+            idx = np.searchsorted(edges, vals, side="right") - 1
+            idx[vals == edges[-1]] = edges.size - 2
+            groups = [([float(edges[i]), float(edges[i + 1])], idx == i) for i in range(edges.size - 1)]
+    rows: list[tuple[Any, np.ndarray, str | None]]
+    if split_polarity and by != "polarity":
+        on = np.asarray(table["p"]) != 0
+        rows = [(label, mask & sel, pol) for label, mask in groups for pol, sel in (("ON", on), ("OFF", ~on))]
+    else:
+        rows = [(label, mask, None) for label, mask in groups]
     out = []
-    for label, mask in groups:
+    for label, mask, pol in rows:
         d = delay[mask]
         if d.size == 0:
             continue
-        row: dict[str, Any] = {
-            "group": label,
+        row: dict[str, Any] = {"group": label}
+        if pol is not None:
+            row["polarity"] = pol
+        row |= {
             "n": int(d.size),
             "mean_s": float(d.mean()),
             "std_s": float(d.std(ddof=1)) if d.size > 1 else None,
@@ -226,12 +242,19 @@ def format_timing_bias_summary(rows: Sequence[Mapping[str, Any]], by: str = "tar
     if not rows:
         return "no event attributed to a crossing"
     pkeys = [k for k in rows[0] if k.startswith("p") and k.endswith("_s")]
-    head = [by, "n", "mean [ms]"] + [k[:-2] + " [ms]" for k in pkeys]
+    split = "polarity" in rows[0]
+    head = [by] + (["polarity"] if split else []) + ["n", "mean [ms]"] + [k[:-2] + " [ms]" for k in pkeys]
     body = []
     for r in rows:
         g = r["group"]
-        gtxt = f"{g[0]:.4g}..{g[1]:.4g}" if isinstance(g, list) else str(g)
-        body.append([gtxt, str(r["n"]), f"{1e3 * r['mean_s']:.3f}"] + [f"{1e3 * r[k]:.3f}" for k in pkeys])
+        if isinstance(g, list):
+            gtxt = f"{g[0]:.4g}..{g[1]:.4g}"
+        elif isinstance(g, float):
+            gtxt = f"{g:.4g}"
+        else:
+            gtxt = str(g)
+        body.append([gtxt] + ([str(r["polarity"])] if split else []) + [str(r["n"]), f"{1e3 * r['mean_s']:.3f}"]
+                    + [f"{1e3 * r[k]:.3f}" for k in pkeys])
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
     lines = ["  ".join(c.rjust(w) for c, w in zip(row, widths)) for row in [head] + body]
     return "\n".join(lines)
