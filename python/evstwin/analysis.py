@@ -9,6 +9,7 @@ Events are arrays of :data:`evstwin.EVENT_DTYPE` (``t`` [us, int64], ``x``, ``y`
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -120,19 +121,29 @@ def event_rate(
     bin's rate is its count / the recording's span.
 
     Returns (t_centres_s, on_rate_hz, off_rate_hz): bin centres [s] relative to the start,
-    and rates [events/s]. Empty arrays for an empty recording.
+    and rates [events/s]. Empty arrays for an empty recording. :func:`event_rate_chunks`
+    gives the same from a stream of chunks.
     """
     events = _check_events(events)
-    if not bin_s > 0:
-        raise ValueError(f"bin_s must be > 0; got {bin_s}")
     if events.size == 0:
+        if not bin_s > 0:
+            raise ValueError(f"bin_s must be > 0; got {bin_s}")
         empty = np.zeros(0)
         return empty, empty.copy(), empty.copy()
-    t = events["t"].astype(np.int64)
-    t0 = int(t[0]) if t_start_us is None else int(t_start_us)
-    t1 = int(t[-1]) + 1 if t_end_us is None else int(t_end_us)
-    if t0 > int(t[0]):
-        raise ValueError(f"t_start_us={t0} is after the first event (t={int(t[0])} us)")
+    t0 = int(events["t"][0]) if t_start_us is None else int(t_start_us)
+    t1 = int(events["t"][-1]) + 1 if t_end_us is None else int(t_end_us)
+    return event_rate_chunks([events], bin_s, t0, t1)
+
+
+def event_rate_chunks(
+    chunks: Iterable[np.ndarray], bin_s: float, t_start_us: int, t_end_us: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`event_rate` of a recording given as time-ordered chunks, whose first event time
+    and last event time + 1 us are ``t_start_us`` and ``t_end_us`` (from a first pass, or
+    :class:`CountedRecording`); memory is one count per bin, whatever the length."""
+    if not bin_s > 0:
+        raise ValueError(f"bin_s must be > 0; got {bin_s}")
+    t0, t1 = int(t_start_us), int(t_end_us)
     if t1 <= t0:
         raise ValueError(f"t_end_us={t1} must be after t_start_us={t0}")
     bin_us = bin_s * 1e6
@@ -140,13 +151,86 @@ def event_rate(
     width_s = bin_s
     if n == 0:
         n, width_s = 1, (t1 - t0) * 1e-6
-    idx = np.floor((t - t0) / bin_us).astype(np.int64)
-    keep = idx < n
-    is_on = events["p"] != 0
-    on = np.bincount(idx[keep & is_on], minlength=n)
-    off = np.bincount(idx[keep & ~is_on], minlength=n)
+    on = np.zeros(n, np.int64)
+    off = np.zeros(n, np.int64)
+    for events in chunks:
+        events = _check_events(events)
+        if events.size == 0:
+            continue
+        t = events["t"].astype(np.int64)
+        if int(t[0]) < t0:
+            raise ValueError(f"t_start_us={t0} is after the first event (t={int(t[0])} us)")
+        idx = np.floor((t - t0) / bin_us).astype(np.int64)
+        keep = idx < n
+        is_on = events["p"] != 0
+        on += np.bincount(idx[keep & is_on], minlength=n)[:n]
+        off += np.bincount(idx[keep & ~is_on], minlength=n)[:n]
     centres = (np.arange(n) + 0.5) * bin_s if width_s == bin_s else np.array([0.5 * width_s])
     return centres, on / width_s, off / width_s
+
+
+@dataclass
+class CountedRecording:
+    """A recording reduced to what a comparison needs, built chunk by chunk
+    (:meth:`add`): per-pixel ON and OFF counts (flat, row-major) and the first and last
+    event times. Memory is two integers per pixel however long the recording."""
+
+    width: int
+    height: int
+    on: np.ndarray
+    off: np.ndarray
+    t_start_us: int | None = None
+    t_end_us: int = 0
+
+    @classmethod
+    def empty(cls, width: int, height: int) -> CountedRecording:
+        width, height = _check_size(width, height)
+        n = width * height
+        return cls(width, height, np.zeros(n, np.int64), np.zeros(n, np.int64))
+
+    @classmethod
+    def from_chunks(cls, chunks: Iterable[np.ndarray], width: int, height: int) -> CountedRecording:
+        rec = cls.empty(width, height)
+        for chunk in chunks:
+            rec.add(chunk)
+        return rec
+
+    def add(self, events: np.ndarray) -> None:
+        """Count one chunk (time-ordered, after the previous one)."""
+        counts = pixel_counts(events, self.width, self.height)  # checks the coordinates
+        self.on += counts["on"].reshape(-1)
+        self.off += counts["off"].reshape(-1)
+        if events.size:
+            if self.t_start_us is None:
+                self.t_start_us = int(events["t"][0])
+            self.t_end_us = int(events["t"][-1])
+
+    @property
+    def total(self) -> int:
+        return int(self.on.sum() + self.off.sum())
+
+    def pixel_counts(self) -> dict[str, np.ndarray]:
+        """As :func:`pixel_counts` of the whole recording."""
+        on = self.on.reshape(self.height, self.width)
+        off = self.off.reshape(self.height, self.width)
+        return {"total": on + off, "on": on, "off": off}
+
+    def stats(self, duration_s: float | None = None) -> RecordingStats:
+        """As :func:`stats` of the whole recording."""
+        on, off = int(self.on.sum()), int(self.off.sum())
+        total = on + off
+        t_start = self.t_start_us if self.t_start_us is not None else 0
+        t_end = self.t_end_us if total else 0
+        if duration_s is None:
+            duration_s = (t_end - t_start) * 1e-6
+        duration_s = float(duration_s)
+        if duration_s < 0:
+            raise ValueError(f"duration_s must be >= 0; got {duration_s}")
+        return RecordingStats(
+            total=total, on=on, off=off, on_off_ratio=ratio(on, off), duration_s=duration_s,
+            t_start_us=t_start, t_end_us=t_end, width=self.width, height=self.height,
+            mean_rate_hz=total / duration_s if duration_s > 0 else math.nan,
+        )
 
 
 def pixel_counts(events: np.ndarray, width: int, height: int) -> dict[str, np.ndarray]:

@@ -90,6 +90,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from ..scenario import build
     from ..simulate import resolve_scenario, run_many
     from ..validation import aggregate, compare, compare_files
+    from ..validation.report import scan_recording
 
     if args.runs < 1:
         raise ValueError(f"--runs must be >= 1; got {args.runs}")
@@ -98,10 +99,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration must be > 0 s; got {args.duration}")
     out = check_output_dir(args.out, args.force)
-    # Everything is read and checked before a folder is made or a second simulated.
-    real_events, real_meta = read_events(args.real, size=args.size)
-    width, height = int(real_meta["width"]), int(real_meta["height"])
-    duration_s = args.duration if args.duration is not None else _span_s(real_events, real_meta)
+    # Everything is read and checked before a folder is made or a second simulated; the real
+    # recording is read in chunks (its per-pixel counts are all the comparison keeps).
+    real_rec, real_meta, _ = scan_recording(args.real, args.size, 0.0, 0.0)
+    width, height = real_rec.width, real_rec.height
+    duration_s = args.duration if args.duration is not None else _span_s(real_rec, real_meta)
     for sim in args.sims:
         if _is_event_file(sim):
             continue
@@ -137,7 +139,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     report = comparison.to_json_dict()
     print(comparison.to_text())
     if args.runs > 1:
-        comparisons = [compare(real_events, dict(real_meta, path=args.real),
+        comparisons = [compare(real_rec, dict(real_meta, path=args.real),
                                [_with_path(read_events(p), label) for p, label in zip(paths, labels)],
                                bin_width=args.bin_width)
                        for paths in runs]
@@ -151,13 +153,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
-def _span_s(events: Any, meta: dict) -> float:
+def _span_s(rec: Any, meta: dict) -> float:
     """The recording's duration [s]: its meta's, else first to last event (at least 1 ms)."""
     if meta.get("duration_s"):
         return float(meta["duration_s"])
-    if len(events) < 2:
+    if rec.t_start_us is None:
         return 1e-3
-    return max(1e-3, (int(events["t"][-1]) - int(events["t"][0])) * 1e-6)
+    return max(1e-3, (rec.t_end_us - rec.t_start_us) * 1e-6)
 
 
 def _with_path(pair: Any, label: str) -> Any:

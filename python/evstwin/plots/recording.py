@@ -208,11 +208,18 @@ def plot_count_histograms(
 
 
 def fig_event_rate(
-    recordings: Sequence[LabelledEvents], bin_s: float = 0.01, figsize: tuple[float, float] | None = None
+    recordings: Sequence[LabelledEvents],
+    bin_s: float = 0.01,
+    figsize: tuple[float, float] | None = None,
+    curves: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
+    span_s: float | None = None,
 ) -> Figure:
     """ON and OFF event rate over time in ``bin_s`` bins, one row per recording (shared time
     axis, from each recording's first event; whole bins only, see
-    :func:`evstwin.analysis.event_rate`)."""
+    :func:`evstwin.analysis.event_rate`). ``curves``: the rates already binned (from
+    :func:`evstwin.analysis.event_rate_chunks`, for recordings read in chunks), one per
+    recording, whose events are then not used; ``span_s``: the time axis's extent (default:
+    the first recording's span)."""
     n = len(recordings)
     if figsize is None:
         figsize = (9.0, 2.4 * n + 0.8)
@@ -220,7 +227,8 @@ def fig_event_rate(
     # One y scale for every row, so rates compare by eye; the time axis spans the first
     # recording (the real one in a comparison), not the longest.
     axes = fig.subplots(n, 1, squeeze=False, sharex=True, sharey=True)[:, 0]
-    curves = [analysis.event_rate(events, bin_s) for _, events in recordings]
+    if curves is None:
+        curves = [analysis.event_rate(events, bin_s) for _, events in recordings]
     peak = max((float(max(on.max(), off.max())) for t, on, off in curves if t.size), default=0.0)
     for ax, (label, events), (t, on, off) in zip(axes, recordings, curves):
         ax.step(t, on, where="mid", color=ON_COLOUR, linewidth=1.2, label="ON")
@@ -231,8 +239,9 @@ def fig_event_rate(
         ax.legend(fontsize=8, loc="upper right", ncol=2)
     axes[0].set_ylim(0, 1.3 * peak if peak > 0 else 1.0)
     first = recordings[0][1] if n else None
-    if first is not None and first.size > 1:
+    if span_s is None and first is not None and first.size > 1:
         span_s = (int(first["t"][-1]) - int(first["t"][0]) + 1) * 1e-6
+    if span_s is not None:
         axes[0].set_xlim(0, max(span_s, bin_s))
     axes[-1].set_xlabel("time since first event [s]")
     fig.suptitle(f"Event rate ({1e3 * bin_s:g} ms bins)", fontsize=11)

@@ -11,12 +11,12 @@ from typing import Any, Union
 import numpy as np
 
 from .. import analysis
-from ..analysis import KINDS, RecordingStats
+from ..analysis import KINDS, CountedRecording, RecordingStats
 
 PathLike = Union[str, "os.PathLike[str]"]
 
 
-Recording = tuple[np.ndarray, Mapping[str, Any]]
+Recording = tuple[np.ndarray | CountedRecording, Mapping[str, Any]]
 
 
 DISTANCE_FORMULA = (
@@ -217,13 +217,27 @@ def _diff(sim: float, real: float) -> float:
     return sim - real
 
 
-def _duration(events: np.ndarray, meta: Mapping[str, Any]) -> float:
+def _duration(events: np.ndarray | CountedRecording, meta: Mapping[str, Any]) -> float:
     d = meta.get("duration_s")
     if d is not None:
         return float(d)
+    if isinstance(events, CountedRecording):
+        return events.stats().duration_s
     if events.size == 0:
         return 0.0
     return (int(events["t"][-1]) - int(events["t"][0])) * 1e-6
+
+
+def _stats(events: np.ndarray | CountedRecording, width: int, height: int, duration_s: float) -> RecordingStats:
+    if isinstance(events, CountedRecording):
+        return events.stats(duration_s)
+    return analysis.stats(events, width, height, duration_s)
+
+
+def _pixel_counts(events: np.ndarray | CountedRecording, width: int, height: int) -> dict[str, np.ndarray]:
+    if isinstance(events, CountedRecording):
+        return events.pixel_counts()
+    return analysis.pixel_counts(events, width, height)
 
 
 def _size(meta: Mapping[str, Any], what: str) -> tuple[int, int]:
@@ -234,7 +248,7 @@ def _size(meta: Mapping[str, Any], what: str) -> tuple[int, int]:
 
 
 def compare(
-    real_events: np.ndarray,
+    real_events: np.ndarray | CountedRecording,
     real_meta: Mapping[str, Any],
     sims: Sequence[Recording],
     bin_width: float = 2,
@@ -242,6 +256,8 @@ def compare(
 ) -> Comparison:
     """Compare a real recording with one or more simulations of the same sensor.
 
+    real_events / each sim's events: an event array, or a :class:`evstwin.analysis.CountedRecording`
+        built chunk by chunk (a recording larger than memory; the result is the same).
     real_meta / each sim's meta: a mapping with 'width' and 'height' [px]; optional
         'duration_s' (recording length; default last - first event time) and 'path' (a
         label; default 'real' and 'sim1', 'sim2', ...).
@@ -281,8 +297,8 @@ def compare(
             )
 
     real_dur = _duration(real_events, real_meta)
-    real_stats = analysis.stats(real_events, width, height, real_dur)
-    sim_stats = [analysis.stats(e, width, height, _duration(e, m)) for e, m in sims]
+    real_stats = _stats(real_events, width, height, real_dur)
+    sim_stats = [_stats(e, width, height, _duration(e, m)) for e, m in sims]
     adjustments: list[str] = []
     differ = [
         (p, s.duration_s)
@@ -310,12 +326,12 @@ def compare(
         used_bw = float(bin_width)
         value_unit = "events"
 
-    def values(events: np.ndarray, st: RecordingStats) -> dict[str, np.ndarray]:
+    def values(events: np.ndarray | CountedRecording, st: RecordingStats) -> dict[str, np.ndarray]:
         # By rate, counts are rescaled to the real duration (count * T_real / T): the rate
         # times T_real. Binning these with the count bin width is binning rates with width
         # bin_width / T_real, and keeps the real recording's integer counts exact (no
         # rounding of count / T onto a bin edge).
-        counts = analysis.pixel_counts(events, width, height)
+        counts = _pixel_counts(events, width, height)
         factor = real_dur / st.duration_s if by_rate else 1.0
         return {k: v * factor for k, v in counts.items()}
 

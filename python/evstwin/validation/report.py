@@ -12,6 +12,7 @@ import numpy as np
 
 from .. import analysis
 from ..analysis import KINDS
+from ..sensor import EVENT_DTYPE
 from .comparison import Comparison, PathLike, _duration, _fmt, _label, _size, compare
 
 
@@ -61,15 +62,21 @@ def compare_files(
     """
     from .. import plots
 
-    real_events, real_meta = _read(real_path, size)
-    sims = [_read(p) for p in sim_paths]
-    comp = compare(real_events, real_meta, sims, bin_width=bin_width)
+    # Every recording is read once in chunks for its counts and the events of the figures'
+    # time slice, and once more for its event rate: memory does not grow with its length.
+    span_s = window_s * n_windows
+    real_rec, real_meta, real_slice = scan_recording(real_path, size, t_offset_s, span_s)
+    sims = [scan_recording(p, None, t_offset_s, span_s) for p in sim_paths]
+    comp = compare(real_rec, real_meta, [(rec, meta) for rec, meta, _ in sims], bin_width=bin_width)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     w, h = comp.real.width, comp.real.height
-    recs = [(comp.real_label + " (real)", real_events)] + [(s.label, e) for s, (e, _) in zip(comp.sims, sims)]
+    recs = [(comp.real_label + " (real)", real_slice)] + [(s.label, sl) for s, (_, _, sl) in zip(comp.sims, sims)]
     bin_s = rate_bin_s if rate_bin_s is not None else nice_bin_s(comp.real.duration_s)
-    outputs = _recording_figures(recs, w, h, out, window_s, n_windows, t_offset_s, bin_s)
+    rates = [_rate(p, r, bin_s, sz) for p, r, sz in [(real_path, real_rec, size)]
+             + [(p, rec, None) for p, (rec, _, _) in zip(sim_paths, sims)]]
+    real_span = (real_rec.t_end_us - real_rec.t_start_us + 1) * 1e-6 if real_rec.t_start_us is not None else None
+    outputs = _recording_figures(recs, w, h, out, window_s, n_windows, t_offset_s, bin_s, rates, real_span)
     outputs["histograms"] = plots.plot_comparison_histograms(comp, out / "histograms.png")
     outputs["percent_error"] = plots.plot_comparison_percent_error(comp, out / "percent_error.png")
     outputs["bin_error"] = plots.plot_comparison_bin_error(comp, out / "bin_error.png")
@@ -78,6 +85,56 @@ def compare_files(
     with open(out / "compare.json", "w", encoding="utf-8") as fh:
         json.dump(comp.to_json_dict(), fh, indent=1, allow_nan=False)
     return comp
+
+
+READ_CHUNK = 1_000_000
+"""Events read at a time by the file-level functions (about 13 MB)."""
+
+
+def scan_recording(
+    path: PathLike, size: tuple[int, int] | None, t_offset_s: float, span_s: float
+) -> tuple[analysis.CountedRecording, dict[str, Any], np.ndarray]:
+    """One pass over a recording: its per-pixel counts, its meta, and the events of the
+    figures' slice [first + t_offset_s, first + t_offset_s + span_s), preceded by the first
+    event (the figures measure their offset from a recording's first event)."""
+    from ..io import iter_events
+
+    stream = iter_events(path, chunk=READ_CHUNK, size=size)
+    meta = dict(stream.meta)
+    meta.setdefault("path", str(path))
+    if not (meta.get("width") and meta.get("height")):  # a text file without a size header
+        events, meta = _read(path, size)
+        width, height = _size(meta, str(path))
+        return analysis.CountedRecording.from_chunks([events], width, height), meta, events
+    width, height = _size(meta, str(path))
+    rec = analysis.CountedRecording.empty(width, height)
+    parts: list[np.ndarray] = []
+    lo = hi = 0
+    for ev in stream:
+        if len(ev) == 0:
+            continue
+        if rec.t_start_us is None:
+            lo = int(ev["t"][0]) + round(t_offset_s * 1e6)
+            hi = lo + round(span_s * 1e6)
+            if int(ev["t"][0]) < lo:
+                parts.append(ev[:1])
+        rec.add(ev)
+        parts.append(ev[(ev["t"] >= lo) & (ev["t"] < hi)])
+    events = np.concatenate(parts) if parts else np.zeros(0, EVENT_DTYPE)
+    return rec, meta, events
+
+
+def _rate(
+    path: PathLike, rec: analysis.CountedRecording, bin_s: float, size: tuple[int, int] | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The event-rate curve of a recording, in a second pass over its chunks."""
+    from ..io import iter_events
+
+    if rec.t_start_us is None:
+        empty = np.zeros(0)
+        return empty, empty.copy(), empty.copy()
+    return analysis.event_rate_chunks(iter_events(path, chunk=READ_CHUNK, size=size), bin_s,
+                                      rec.t_start_us, rec.t_end_us + 1)
 
 
 def info(path: PathLike, *, size: tuple[int, int] | None = None, chunk: int = 1_000_000) -> str:
@@ -180,9 +237,12 @@ def _recording_figures(
     n_windows: int,
     t_offset_s: float,
     bin_s: float,
+    rates: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
+    span_s: float | None = None,
 ) -> dict[str, Path]:
     """The figures drawn of the recordings themselves, for compare_files and show alike:
-    frames.png (Fig. 5), xyt.png (Fig. 6) and event_rate.png."""
+    frames.png (Fig. 5), xyt.png (Fig. 6) and event_rate.png (from ``rates`` where the
+    recordings were read in chunks)."""
     from .. import plots
 
     return {
@@ -192,5 +252,5 @@ def _recording_figures(
         "xyt": plots.plot_xyt(
             recs, width, height, out / "xyt.png", t_offset_s=t_offset_s, duration_s=window_s * n_windows
         ),
-        "event_rate": plots.plot_event_rate(recs, out / "event_rate.png", bin_s=bin_s),
+        "event_rate": plots.plot_event_rate(recs, out / "event_rate.png", bin_s=bin_s, curves=rates, span_s=span_s),
     }
