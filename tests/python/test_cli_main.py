@@ -110,3 +110,27 @@ def test_default_thread_count_leaves_a_busy_core_alone() -> None:
     finally:
         busy.kill()
         busy.wait()
+
+
+def test_the_core_imports_without_any_extra() -> None:
+    # The engine, scenes, HDF5/NPZ/text files, statistics and tuning compute need only NumPy,
+    # SciPy and h5py: every extra blocked, they still import, simulate and write an .h5.
+    code = (
+        "import sys\n"
+        "for m in ('matplotlib', 'aedat', 'faery', 'optuna', 'cmaes', 'dask', 'distributed'):\n"
+        "    sys.modules[m] = None\n"
+        "import evstwin, evstwin.tune, evstwin.validation, evstwin.analysis, evstwin.io, evstwin.cli\n"
+        "r = evstwin.simulate('mcreynolds', duration_s=0.02, sets=['sensor.width=32', 'sensor.height=24'])\n"
+        "evstwin.write_events(sys.argv[1], r.events, r.meta)\n"
+        "print(len(evstwin.read_events(sys.argv[1])[0]) == len(r.events))\n"
+        "try:\n    evstwin.read_events('tests/data/davis346_road_cut.aedat4')\n"
+        "except ImportError as e:\n    print(e)\n"
+    )
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = subprocess.run([sys.executable, "-c", code, f"{tmp}/o.h5"], capture_output=True, text=True,
+                             timeout=120, check=True, cwd=str(Path(__file__).resolve().parents[2])).stdout
+    lines = out.strip().splitlines()
+    assert lines[0] == "True"
+    assert "pip install 'evstwin[io]'" in lines[1]
