@@ -638,3 +638,17 @@ def _running(pid: int) -> bool:
             return fh.read().rsplit(")", 1)[1].split()[0] != "Z"  # a zombie has ended
     except OSError:
         return False
+
+
+def test_sweep_says_what_it_will_run_and_labels_its_figure(tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    from evstwin.tune.figures import readable
+
+    result = tune.sweep(noise_scenario(), {"pixel.theta_on": [0.2, 0.3]}, objective="noise", out_dir=tmp_path,
+                        workers=0, progress=True)
+    err = capsys.readouterr().err
+    assert "sweep (noise): 2 job(s) of 24x16 px for 0.3 s of sensor time at 200 Hz" in err
+    assert "estimate ~" in err and "in all" in err
+    assert readable("pixel.theta_on") == "ON threshold theta_on (log units)"
+    assert readable("targets.0.wx_arcsec_s") == "wx (arcsec/s)"  # unknown keys: the unit of the suffix
+    assert tune.draw_sweep(result).is_file()
