@@ -15,6 +15,14 @@ std::string shape_str(const py::array& a) {
     return s + (a.ndim() == 1 ? ",)" : ")");
 }
 
+/// A (T, height, width) view that repeats one C-contiguous frame (np.broadcast_to of a
+/// static scene): read as that one frame, without a copy.
+bool is_static_frames(const py::array& rate) {
+    if (rate.ndim() != 3 || rate.shape(0) < 1 || rate.strides(0) != 0) return false;
+    const auto item = rate.itemsize();
+    return rate.strides(2) == item && rate.strides(1) == item * rate.shape(2);
+}
+
 /// Checks with the GIL held; returns a C-contiguous float32/float64 array (the same object
 /// when it already is one, so no copy).
 py::array checked_rates(const Sensor& s, py::array rate) {
@@ -25,16 +33,22 @@ py::array checked_rates(const Sensor& s, py::array rate) {
     if (rate.ndim() != 3 || rate.shape(1) != s.height() || rate.shape(2) != s.width())
         throw py::value_error("photon_rate must have shape (T, height, width) = (T, " + std::to_string(s.height()) +
                               ", " + std::to_string(s.width()) + "); got shape " + shape_str(rate));
+    // The engine reads native-endian, aligned values: a big-endian array (a FITS or HDF5
+    // file's bytes) would be read as garbage and an unaligned one is undefined behaviour, so
+    // both are converted here (one copy; a static broadcast copies only its one frame).
+    const bool native = rate.dtype().attr("isnative").cast<bool>();
+    const bool aligned = rate.attr("flags").attr("aligned").cast<bool>();
+    if (!native || !aligned) {
+        auto np = py::module_::import("numpy");
+        const py::object dtype = rate.dtype().attr("newbyteorder")("=");
+        if (rate.ndim() == 3 && rate.shape(0) >= 1 && rate.strides(0) == 0) {  // a broadcast static scene
+            py::array frame = np.attr("array")(rate[py::int_(0)], py::arg("dtype") = dtype, py::arg("order") = "C");
+            return np.attr("broadcast_to")(frame, rate.attr("shape"));
+        }
+        return np.attr("array")(rate, py::arg("dtype") = dtype, py::arg("order") = "C");
+    }
     if (!(rate.flags() & py::array::c_style)) rate = py::module_::import("numpy").attr("ascontiguousarray")(rate);
     return rate;
-}
-
-/// A (T, height, width) view that repeats one C-contiguous frame (np.broadcast_to of a
-/// static scene): read as that one frame, without a copy.
-bool is_static_frames(const py::array& rate) {
-    if (rate.ndim() != 3 || rate.shape(0) < 1 || rate.strides(0) != 0) return false;
-    const auto item = rate.itemsize();
-    return rate.strides(2) == item && rate.strides(1) == item * rate.shape(2);
 }
 
 py::array_t<double> checked_times(py::array t_s, py::ssize_t n) {
@@ -63,8 +77,8 @@ std::vector<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, co
                                     std::vector<evstwin::TraceSample>* trace) {
     const bool static_frame = rate.dtype().kind() == 'f' && rate.ndim() == 3 && rate.shape(1) == s.height() &&
                               rate.shape(2) == s.width() && is_static_frames(rate);
-    if (!static_frame) rate = checked_rates(s, rate);
-    else if (rate.itemsize() != 4 && rate.itemsize() != 8) rate = checked_rates(s, rate);
+    const bool raw_ok = rate.dtype().attr("isnative").cast<bool>() && rate.attr("flags").attr("aligned").cast<bool>();
+    if (!static_frame || !raw_ok || (rate.itemsize() != 4 && rate.itemsize() != 8)) rate = checked_rates(s, rate);
     auto t = checked_times(t_s, rate.shape(0));
     if (rate.itemsize() == 4) return run_typed<float>(s, rate, t, probe, trace, static_frame);
     return run_typed<double>(s, rate, t, probe, trace, static_frame);
@@ -92,6 +106,9 @@ std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::arra
     if (rate.ndim() != 2 || rate.shape(1) != n)
         throw py::value_error("photon_rate must have shape (T, len(pixels)) = (T, " + std::to_string(n) +
                               "); got shape " + shape_str(rate));
+    if (!rate.dtype().attr("isnative").cast<bool>() || !rate.attr("flags").attr("aligned").cast<bool>())
+        rate = py::module_::import("numpy").attr("array")(rate, py::arg("dtype") = rate.dtype().attr("newbyteorder")("="),
+                                                          py::arg("order") = "C");  // native, aligned (see checked_rates)
     if (!(rate.flags() & py::array::c_style)) rate = py::module_::import("numpy").attr("ascontiguousarray")(rate);
     auto t = checked_times(t_s, rate.shape(0));
     const std::size_t T = static_cast<std::size_t>(rate.shape(0));

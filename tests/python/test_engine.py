@@ -539,3 +539,47 @@ def test_chunk_boundaries_inside_a_microsecond_keep_the_order_of_one_run() -> No
         chunked = Sensor(w, h, IDEAL, seed=1)
         parts = [chunked.run(rate[a : a + size], t[a : a + size]) for a in range(0, n, size)]
         assert np.concatenate(parts).tobytes() == one.tobytes()
+
+
+# -- hardening (issue 11) ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [1025, 5000, 100_000, 2**31 - 1])
+def test_thread_counts_beyond_the_bound_are_refused_not_crashed(n: int) -> None:
+    with pytest.raises(ValueError, match=r"num_threads must be in \[1, 1024\].*num_threads=" + str(n)):
+        Sensor(8, 8, PixelParams(), num_threads=n)
+
+
+def test_non_native_and_unaligned_rates_give_the_native_events() -> None:
+    t = np.arange(1, 51) * 1e-3
+    r = np.random.default_rng(0).uniform(1e6, 1e9, (50, 8, 8))
+    native = Sensor(8, 8, PixelParams(), seed=1).run(r, t)
+    assert len(native) > 100
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run(r.astype(">f8"), t), native)
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run(r.astype(">f4"), t),
+                          Sensor(8, 8, PixelParams(), seed=1).run(r.astype("<f4"), t))
+    unaligned = np.zeros(r.nbytes + 1, np.uint8)[1:].view(np.float64).reshape(r.shape)
+    unaligned[:] = r
+    assert not unaligned.flags.aligned
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run(unaligned, t), native)
+    static = np.broadcast_to(r[0], r.shape)
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run(np.broadcast_to(r[0].astype(">f8"), r.shape), t),
+                          Sensor(8, 8, PixelParams(), seed=1).run(static, t))
+    px = np.array([3, 9])
+    rates = r.reshape(50, 64)[:, px]
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run_pixels(px, rates.astype(">f8"), t),
+                          Sensor(8, 8, PixelParams(), seed=1).run_pixels(px, rates, t))
+
+
+def test_float32_rates_meet_the_same_limit_as_float64() -> None:
+    t = np.array([1e-3, 2e-3])
+    top = np.float32(1e20)  # rounds up to 1.00000002e20, above the limit
+    for dtype in (np.float32, np.float64):
+        with pytest.raises(ValueError, match="<= 1e20 photons/s"):
+            Sensor(4, 4, PixelParams()).run(np.full((2, 4, 4), top, dtype), t)
+    Sensor(4, 4, PixelParams()).run(np.full((2, 4, 4), np.nextafter(top, np.float32(0))), t)  # the largest below
+
+
+def test_run_pixels_refuses_times_beyond_int64_microseconds() -> None:
+    with pytest.raises(ValueError, match=r"t_s must lie within \+-9.2e12 s"):
+        Sensor(4, 4, PixelParams()).run_pixels(np.array([0]), np.full((1, 1), 1e6), np.array([1e13]))

@@ -34,6 +34,9 @@ public:
     /// rates must be at least MIN_RATE (the log needs a representable current).
     static constexpr double MAX_RATE = 1e20;
     static constexpr double MIN_RATE = 1e-30;
+    /// Most engine threads accepted: far above any machine's cores, far below the counts
+    /// (5000, 2^31 - 1) at which the OpenMP runtime exits or crashes.
+    static constexpr int MAX_THREADS = 1024;
     /// Fewest pixel-updates (pixels x samples) in one call worth a parallel region: below it
     /// (~0.3 ms of work) waking the other threads and waiting at the join costs more than
     /// it saves, and on a loaded machine the join waits for a descheduled thread.
@@ -66,10 +69,10 @@ public:
     int num_threads() const { return num_threads_; }
 
     void set_num_threads(int num_threads) {
-        if (num_threads < 0)
-            throw std::invalid_argument("num_threads must be >= 1 (or 0/None for the default); got num_threads=" +
-                                        std::to_string(num_threads));
-        num_threads_ = num_threads == 0 ? default_num_threads() : num_threads;
+        if (num_threads < 0 || num_threads > MAX_THREADS)
+            throw std::invalid_argument("num_threads must be in [1, " + std::to_string(MAX_THREADS) +
+                                        "] (or 0/None for the default); got num_threads=" + std::to_string(num_threads));
+        num_threads_ = num_threads == 0 ? std::min(default_num_threads(), MAX_THREADS) : num_threads;
     }
 
     /// Forget the past: the next sample is a first sample again. Mismatch stays (it is a
@@ -173,6 +176,9 @@ public:
         for (std::size_t k = 0; k < n_samples; ++k) {
             if (!std::isfinite(t_s[k]))
                 throw std::invalid_argument("t_s must be finite; got t_s[" + std::to_string(k) + "]=" + detail::fmt(t_s[k]));
+            if (!(std::fabs(t_s[k]) < 9.2e12))  // as run(): event times are int64 microseconds
+                throw std::invalid_argument("t_s must lie within +-9.2e12 s (int64 microseconds); got t_s[" +
+                                            std::to_string(k) + "]=" + detail::fmt(t_s[k]));
             const double prev = k == 0 ? latest : t_s[k - 1];
             if (!(t_s[k] > prev)) {
                 if (k == 0)
@@ -300,7 +306,10 @@ private:
     std::size_t first_bad_rate(const Real* rate, std::size_t total_size) const {
         const std::int64_t total = static_cast<std::int64_t>(total_size);
         // Compared in the input's own type, counted rather than OR-ed, so the loop vectorises.
-        const Real top = static_cast<Real>(MAX_RATE);
+        // The largest Real not above MAX_RATE: float(1e20) rounds up to 1.00000002e20, which
+        // the double limit refuses, so a float32 input must not slip past it.
+        Real top = static_cast<Real>(MAX_RATE);
+        if (static_cast<double>(top) > MAX_RATE) top = std::nextafter(top, Real(0));
         const Real lowest = model_.dark_mean_e_per_s <= 0.0 ? static_cast<Real>(MIN_RATE) : Real(0);
         std::int64_t n_bad = 0;
         // Serial on purpose: a memory-bound pass of one compare per rate, far cheaper than
