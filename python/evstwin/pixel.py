@@ -83,6 +83,12 @@ class PixelParams:
                 pass
             elif isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise TypeError(f"{f.name} must be a number; got {f.name}={value!r}")
+            elif isinstance(value, int):
+                try:
+                    float(value)
+                except OverflowError:
+                    raise ValueError(f"{f.name} must fit a 64-bit float; got an integer of {len(str(value))} "
+                                     "digits") from None
         self.to_core().validate()
 
     def to_core(self) -> Any:

@@ -196,6 +196,7 @@ def _check_keys(raw: dict[str, Any]) -> None:
             for sub in value:
                 if sub not in spec:
                     raise ScenarioError(f"unknown scenario key '{key}.{sub}'; allowed: {', '.join(spec)}")
+                _check_type(f"{key}.{sub}", value[sub], spec[sub])
         elif spec is list:
             if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
                 raise ScenarioError(f"{key} must be an array of tables ([[{key}]]); got {value!r}")
@@ -203,14 +204,58 @@ def _check_keys(raw: dict[str, Any]) -> None:
                 _check_target_keys(i, target)
 
 
+def _check_type(key: str, value: Any, kind: Any) -> None:
+    """A value of the declared type: an int is a whole number (not true/false, not 1.5), a
+    float a finite number that fits a float; Any is checked where it is used. Every number
+    anywhere in a scenario must fit a float (TOML integers do not have to)."""
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ScenarioError(f"{key} must be an integer; got {value!r}")
+    elif kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(f"{key} must be a number; got {value!r}")
+    elif kind is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(f"{key} must be true or false; got {value!r}")
+    elif kind is str:
+        if not isinstance(value, str):
+            raise ScenarioError(f"{key} must be a string; got {value!r}")
+    _check_numbers(key, value)
+
+
+def _check_numbers(key: str, value: Any) -> None:
+    if isinstance(value, bool):
+        return
+    if isinstance(value, int) and _too_big_for_float(value):
+        text = str(value)
+        raise ScenarioError(f"{key}: {text[:12]}...({len(text)} digits) does not fit a 64-bit float (|value| < 1.8e308)")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ScenarioError(f"{key} must be finite; got {value!r}")
+    if isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_numbers(f"{key}[{i}]", v)
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_numbers(f"{key}.{k}", v)
+
+
+def _too_big_for_float(value: int) -> bool:
+    try:
+        float(value)
+    except OverflowError:
+        return True
+    return False
+
+
 def _check_target_keys(i: int, target: dict[str, Any]) -> None:
     kind = target.get("kind")
-    if kind not in _TARGET_KEYS:
+    if not isinstance(kind, str) or kind not in _TARGET_KEYS:
         raise ScenarioError(f"targets[{i}].kind must be one of {', '.join(_TARGET_KEYS)}; got {kind!r}")
     allowed = ("kind", "label") + _TARGET_KEYS[kind] + _BRIGHTNESS_KEYS
     for key in target:
         if key not in allowed:
             raise ScenarioError(f"unknown scenario key 'targets[{i}].{key}' for kind {kind!r}; allowed: {', '.join(allowed)}")
+        _check_numbers(f"targets[{i}].{key}", target[key])
     given = [k for k in _BRIGHTNESS_KEYS if k in target]
     if len(given) != 1:
         raise ScenarioError(
@@ -232,6 +277,9 @@ def _check_values(s: dict[str, Any]) -> None:
     number("duration_s", s["duration_s"], 0.0, 1e7, lo_open=True)
     if isinstance(s["seed"], bool) or not isinstance(s["seed"], int) or not 0 <= s["seed"] < 2**64:
         raise ScenarioError(f"seed must be an integer in [0, 2**64); got {s['seed']!r}")
+    for dim in ("width", "height"):
+        if dim in s["sensor"] and not 1 <= s["sensor"][dim] <= 65535:
+            raise ScenarioError(f"sensor.{dim} must be in [1, 65535]; got {s['sensor'][dim]!r}")
     preset = s["sensor"]["preset"]
     if not isinstance(preset, str) or preset.lower() not in PRESETS:
         raise ScenarioError(f"sensor.preset must be one of {', '.join(sorted(PRESETS))}; got {preset!r}")
@@ -300,6 +348,8 @@ def set_value(scenario: dict[str, Any], key: str, value: Any) -> dict[str, Any]:
         value = None
     if node is out and last not in SCHEMA:
         raise ScenarioError(f"unknown scenario key {key!r}; allowed: {', '.join(SCHEMA)}")
+    if node is out and isinstance(SCHEMA[last], dict) and not isinstance(value, dict):
+        raise ScenarioError(f"{key} is a table: set one of its keys, e.g. {key}.{next(iter(SCHEMA[last]))}=...")
     node[last] = value
     if out.get("pixel", {}).get("cutoff_hz", 0) is None:
         # TOML has no null: a cutoff of None is written as the string "none" in the dict.
@@ -337,8 +387,18 @@ class Scene:
 def _wrap(key: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
     try:
         return fn(*args, **kwargs)
-    except (ValueError, TypeError) as exc:
+    except (ValueError, TypeError, ArithmeticError) as exc:  # OverflowError is an ArithmeticError
         raise ScenarioError(f"{key}: {exc}") from None
+
+
+MAX_PSF_SIGMA_PX = 1000.0
+"""Widest PSF accepted [px]: its +-5 sigma window is rendered around every source and sample."""
+MAX_STARS = 1_000_000
+"""Most stars in a star field: each is a target rendered every sample."""
+MAX_SAMPLES = 10**9
+"""Most samples of the whole array, and most sub-samples per base sample, a scenario may imply."""
+MAX_PHOTON_RATE = 1e20
+"""The engine's largest photon rate per pixel [photons/s] (``Sensor::MAX_RATE``)."""
 
 
 def build(scenario: str | Path | dict, duration_s: float | None = None, seed: int | None = None) -> Scene:
@@ -387,8 +447,24 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     targets: list[Target] = []
     for i, table in enumerate(s["targets"]):
         targets.extend(_wrap(f"targets[{i}]", _target, table, optics, width, height))
+    sigma = float(optics.psf_sigma_px)
+    if not sigma <= MAX_PSF_SIGMA_PX:
+        raise ScenarioError(
+            f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "
+            f"optics.f_number and optics.extra_blur_sigma_px; got {s.get('optics', {})}"
+        )
     if "star_field" in s:
         sf = dict(s["star_field"])
+        n_stars = sf.get("n_stars")
+        if n_stars is None and "density_per_deg2" in sf:
+            px_deg = optics.plate_scale_arcsec_per_px / 3600.0
+            n_stars = sf["density_per_deg2"] * width * height * px_deg * px_deg
+        if n_stars is not None and not n_stars <= MAX_STARS:
+            raise ScenarioError(f"star_field gives {n_stars:.3g} stars (> {MAX_STARS:g}); got star_field={sf}")
+        slope = sf.get("counts_slope")
+        if slope is not None and not -5.0 <= slope <= 5.0:
+            raise ScenarioError(f"star_field.counts_slope must be in [-5, 5] (dex per magnitude; ~0.4 for stars); "
+                                f"got {slope!r}")
         targets.extend(_wrap("star_field", random_star_field, width, height, optics, **sf))
 
     bg = s.get("background", {})
@@ -396,7 +472,23 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         background = float(_wrap("background", optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
     else:
         background = float(bg.get("photon_rate_ph_s", 0.0))
+    if not background <= MAX_PHOTON_RATE:
+        raise ScenarioError(f"background gives {background:.3g} photons/s per pixel (> {MAX_PHOTON_RATE:g}, the "
+                            f"engine's limit); got background={dict(bg)}")
     sp = s["sampling"]
+    n_base = float(s["duration_s"]) * float(sp["rate_hz"])
+    if not n_base <= MAX_SAMPLES:
+        raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base:.3g} samples (> {MAX_SAMPLES:g}); "
+                            f"got duration_s={s['duration_s']!r}, sampling.rate_hz={sp['rate_hz']!r}")
+    for i, target in enumerate(targets):
+        speed = float(_wrap(f"targets[{i}]", target.max_speed_px_s, 0.0, float(s["duration_s"])))
+        n_sub = speed / float(sp["rate_hz"]) / float(sp["max_shift_px"])
+        if not n_sub <= MAX_SAMPLES:
+            raise ScenarioError(
+                f"targets[{i}] moves {speed:.3g} px/s: sub-sampling it to sampling.max_shift_px="
+                f"{sp['max_shift_px']!r} at sampling.rate_hz={sp['rate_hz']!r} takes {n_sub:.3g} samples a "
+                f"sample (> {MAX_SAMPLES:g})"
+            )
     return Scene(
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),

@@ -206,3 +206,41 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
     assert build(path).params.pr_pole is False  # an explicit choice is kept
     # A scenario based on a built-in inherits the built-in's value.
     assert load({"base": "mcreynolds"})["pixel"]["pr_pole"] is True
+
+
+@pytest.mark.parametrize(
+    ("assignment", "message"),
+    [
+        ("pixel=1", "pixel is a table"),
+        ("pixel.theta_on=1" + "0" * 400, "pixel.theta_on: 100000000000...(401 digits) does not fit"),
+        ("star_field.counts_slope=1e300", "star_field.counts_slope must be in [-5, 5]"),
+        ("optics.mean_wavelength_m=2", "PSF sigma of 1.95e+05 px"),
+        ("targets.0.wx_arcsec_s=1e300", "targets[0] moves 5.24e+299 px/s"),
+        ("sampling.max_shift_px=1e-300", "sampling.max_shift_px=1e-300"),
+        ("sampling.rate_hz=1e-300", "sampling.rate_hz=1e-300"),
+        ('sensor.width="abc"', "sensor.width must be an integer; got 'abc'"),
+        ("sensor.width=1.5", "sensor.width must be an integer; got 1.5"),
+        ("sensor.width=true", "sensor.width must be an integer; got True"),
+        ("targets.0.kind={a = 1}", "targets[0].kind must be one of"),
+        ("background.sky_mag_per_arcsec2=-30", "background gives 4.57e+21 photons/s per pixel"),
+        ("star_field.n_stars=1000000000", "star_field gives 1e+09 stars"),
+    ],
+)
+def test_bad_scenario_values_are_one_line_naming_the_key(tmp_path, capsys, assignment: str, message: str) -> None:
+    # Each used to end in a traceback (AttributeError, OverflowError, MemoryError after
+    # minutes) or in an error that did not name the key (issue 11).
+    from evstwin.cli import main
+
+    out = tmp_path / "o.h5"
+    assert main(["simulate", "geo-stare", "-o", str(out), "--duration", "0.01", "--no-progress",
+                 "--set", assignment]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+
+
+def test_pixel_params_overflow_is_a_value_error() -> None:
+    from evstwin import PixelParams
+
+    with pytest.raises(ValueError, match="theta_on must fit a 64-bit float"):
+        PixelParams(theta_on=10**400)
