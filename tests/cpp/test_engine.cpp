@@ -92,4 +92,16 @@ TEST(bad_input_throws_before_changing_state) {
     CHECK_THROWS(Sensor(0, 1, ideal()));
 }
 
+TEST(huge_mean_counts_stay_defined) {
+    // 1e20 photons/s over samples a year long: a Poisson mean far above 2^64 electrons. The
+    // count must saturate, not overflow (undefined behaviour, caught by the sanitizer build).
+    PixelParams p;  // photon shot noise and dark current on; eq. 12-15 noise off (it bounds dt)
+    p.shot_noise_rate_hz = 0.0;
+    Sensor s(2, 1, p, 3, 1);
+    const double rate[6] = {1e20, 1e20, 1e6, 1e20, 1e20, 1e20};
+    const double t[3] = {0.0, 3.2e7, 6.4e7};
+    auto ev = s.run(rate, t, 3);
+    for (auto& e : ev) CHECK(e.x < 2 && e.y == 0);
+}
+
 TEST_MAIN()

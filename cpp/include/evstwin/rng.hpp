@@ -132,11 +132,16 @@ public:
     /// One variate of mean mu >= 0. u is a uniform in (0, 1) used by inversion; the
     /// rejection sampler draws further uniforms from `more`, a CounterStream it builds only
     /// when needed (building one per call would cost the hot loop for nothing).
+    ///
+    /// The count is returned as a double: every caller turns it into a current at once, and a
+    /// mean above 2^64 (1e20 photons/s over a long sample) has no integer type to hold it.
+    /// Below 2^53 the double is the exact count; above, its rounding is far below the
+    /// variate's spread (sqrt(mu) > 9e7).
     template <class MakeStream>
-    inline std::uint64_t operator()(double mu, double u, MakeStream&& more) {
-        if (mu <= 0.0) return 0;
+    inline double operator()(double mu, double u, MakeStream&& more) {
+        if (mu <= 0.0) return 0.0;
         mu = quantised_mean(mu);
-        if (mu < POISSON_TABLE_MAX_MEAN) return invert(mu, u);
+        if (mu < POISSON_TABLE_MAX_MEAN) return static_cast<double>(invert(mu, u));
         auto stream = more();
         return ptrs(mu, stream);
     }
@@ -175,10 +180,10 @@ public:
 
     /// As operator(), from a 32-bit word instead of its uniform.
     template <class MakeStream>
-    EVSTWIN_ALWAYS_INLINE std::uint64_t from_word(double mu, std::uint32_t w, MakeStream&& more) {
-        if (mu <= 0.0) return 0;
+    EVSTWIN_ALWAYS_INLINE double from_word(double mu, std::uint32_t w, MakeStream&& more) {
+        if (mu <= 0.0) return 0.0;
         mu = quantised_mean(mu);
-        if (mu < POISSON_TABLE_MAX_MEAN) return invert_word(mu, w);
+        if (mu < POISSON_TABLE_MAX_MEAN) return static_cast<double>(invert_word(mu, w));
         auto stream = more();
         return ptrs(mu, stream);
     }
@@ -227,7 +232,7 @@ private:
     }
 
     template <class Stream>
-    static std::uint64_t ptrs(double lam, Stream& more) {
+    static double ptrs(double lam, Stream& more) {
         const double slam = std::sqrt(lam), loglam = std::log(lam);
         const double b = 0.931 + 2.53 * slam;
         const double a = -0.059 + 0.02483 * b;
@@ -238,11 +243,11 @@ private:
             const double V = more.uniform();
             const double us = 0.5 - std::fabs(U);
             const double kd = std::floor((2.0 * a / us + b) * U + lam + 0.43);
-            if (us >= 0.07 && V <= vr) return static_cast<std::uint64_t>(kd);
+            if (us >= 0.07 && V <= vr) return kd;
             if (kd < 0.0 || (us < 0.013 && V > us)) continue;
             if (std::log(V) + std::log(invalpha) - std::log(a / (us * us) + b) <=
                 -lam + kd * loglam - log_factorial(kd))
-                return static_cast<std::uint64_t>(kd);
+                return kd;
         }
     }
 
