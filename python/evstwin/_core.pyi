@@ -46,6 +46,8 @@ class Sensor:
     samples_seen: int
     last_time_s: float
     num_threads: int
+    max_events: int
+    DEFAULT_MAX_EVENTS: int
     def __init__(
         self, width: int, height: int, params: PixelParams, seed: int = 0, num_threads: int | None = None
     ) -> None: ...

@@ -33,6 +33,7 @@ class Sensor:
         params: PixelParams | None = None,
         seed: int = 0,
         num_threads: int | None = None,
+        max_events: int | None = None,
     ) -> None:
         params = PixelParams() if params is None else params
         if not isinstance(params, PixelParams):
@@ -46,6 +47,22 @@ class Sensor:
             num_threads = _as_int("num_threads", num_threads)
         self.params = params
         self._core = _core.Sensor(width, height, params.to_core(), seed, num_threads)
+        if max_events is not None:
+            self.max_events = max_events
+
+    @property
+    def max_events(self) -> int:
+        """Most events one ``run``/``run_pixels`` call may produce (default
+        ``DEFAULT_MAX_EVENTS``, 1e8: about 4 GB while collected). A call that passes it raises
+        ValueError while producing them, before memory runs out; ``reset()`` the sensor then."""
+        return int(self._core.max_events)
+
+    @max_events.setter
+    def max_events(self, value: int) -> None:
+        value = _as_int("max_events", value)
+        if value < 1:
+            raise ValueError(f"max_events must be >= 1; got max_events={value}")
+        self._core.max_events = value
 
     @property
     def width(self) -> int:

@@ -583,3 +583,26 @@ def test_float32_rates_meet_the_same_limit_as_float64() -> None:
 def test_run_pixels_refuses_times_beyond_int64_microseconds() -> None:
     with pytest.raises(ValueError, match=r"t_s must lie within \+-9.2e12 s"):
         Sensor(4, 4, PixelParams()).run_pixels(np.array([0]), np.full((1, 1), 1e6), np.array([1e13]))
+
+
+def test_an_event_flood_stops_at_max_events_before_memory_runs_out() -> None:
+    # Issue 11's flood: theta 1e-3, no refractory, rates alternating 1e-30 / 1e20 on 64 x 64
+    # pixels make ~4.7e8 events from 4 samples; the guard stops the call while producing them.
+    p = PixelParams(theta_on=1e-3, theta_off=1e-3, refractory_s=0.0, dark_model="none", photon_shot_noise=False,
+                    shot_noise_rate_hz=0.0, leak_rate_hz=0.0, cutoff_hz=None)
+    sensor = Sensor(64, 64, p, num_threads=2, max_events=200_000)
+    rates = np.empty((4, 64, 64))
+    rates[0::2], rates[1::2] = 1e-30, 1e20
+    with pytest.raises(ValueError, match=r"more than max_events=200000 events; use shorter chunks"):
+        sensor.run(rates, np.arange(1, 5) * 1e-3)
+    assert Sensor(4, 4, PixelParams()).max_events == evstwin._core.Sensor.DEFAULT_MAX_EVENTS == 100_000_000
+    with pytest.raises(ValueError, match="max_events must be >= 1"):
+        Sensor(4, 4, PixelParams(), max_events=0)
+    # Below the cap nothing changes: the same events with and without a (generous) guard.
+    coarse = p.replace(theta_on=0.05, theta_off=0.05)
+    few = np.full((3, 64, 64), 1e8)
+    few[1] = 3e8  # ln 3 / 0.05: 21 events a pixel each way, 180 k in all
+    t = np.arange(1, 4) * 1e-3
+    guarded = Sensor(64, 64, coarse, max_events=200_000).run(few, t)
+    assert 150_000 < len(guarded) < 200_000
+    assert np.array_equal(guarded, Sensor(64, 64, coarse).run(few, t))

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -37,6 +38,11 @@ public:
     /// Most engine threads accepted: far above any machine's cores, far below the counts
     /// (5000, 2^31 - 1) at which the OpenMP runtime exits or crashes.
     static constexpr int MAX_THREADS = 1024;
+    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 4 GB
+    /// while collected (24-byte working records plus the 16-byte output), far above any
+    /// real chunk (a long simulation is cut into short calls) and below a machine's memory.
+    /// Exceeding it throws std::length_error, raised while the events are produced.
+    static constexpr std::size_t DEFAULT_MAX_EVENTS = 100'000'000;
     /// Fewest pixel-updates (pixels x samples) in one call worth a parallel region: below it
     /// (~0.3 ms of work) waking the other threads and waiting at the join costs more than
     /// it saves, and on a loaded machine the join waits for a descheduled thread.
@@ -67,6 +73,13 @@ public:
     /// Time of the last sample consumed [s] (-inf before the first).
     double last_time_s() const { return last_t_; }
     int num_threads() const { return num_threads_; }
+    std::size_t max_events() const { return max_events_; }
+    /// Events one call may produce before it throws std::length_error (>= 1). After that
+    /// error the sensor's state is partly advanced: reset() before using it again.
+    void set_max_events(std::size_t n) {
+        if (n < 1) throw std::invalid_argument("max_events must be >= 1; got max_events=0");
+        max_events_ = n;
+    }
 
     void set_num_threads(int num_threads) {
         if (num_threads < 0 || num_threads > MAX_THREADS)
@@ -134,6 +147,7 @@ public:
         const std::size_t nblocks = (npix + BLOCK - 1) / BLOCK;
         block_events_.resize(nblocks);
         for (auto& b : block_events_) b.clear();
+        events_in_call_.store(0, std::memory_order_relaxed);
 
         for_each_block(nblocks, npix * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
@@ -203,6 +217,7 @@ public:
         const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
         block_events_.resize(std::max(block_events_.size(), nblocks));
         for (auto& b : block_events_) b.clear();
+        events_in_call_.store(0, std::memory_order_relaxed);
         for_each_block(nblocks, n_pixels * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
         });
@@ -359,8 +374,9 @@ private:
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
         double t1 = 0.0;
-        auto emit = [&out, &pixel, &t1](double t, Polarity pol) {
+        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
             out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
+            if ((out.size() & 0xFFFF) == 0) note_events(0xFFFF + 1);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
         std::uint32_t ids[BLOCK], active[BLOCK];
@@ -415,8 +431,9 @@ private:
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
         double t1 = 0.0;
-        auto emit = [&out, &pixel, &t1](double t, Polarity pol) {
+        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
             out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
+            if ((out.size() & 0xFFFF) == 0) note_events(0xFFFF + 1);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
         // (each sample reads one contiguous stretch of its row of rates) and scattered back.
@@ -457,9 +474,21 @@ private:
         for (std::size_t j = 0; j < m; ++j) state_[pixels[lo + j]] = local[j];
     }
 
+    /// Count n more events of this call; throw once the call passes max_events_ (whichever
+    /// thread gets there first; the exception is rethrown after the parallel region).
+    void note_events(std::size_t n) {
+        const std::size_t now = events_in_call_.fetch_add(n, std::memory_order_relaxed) + n;
+        if (now > max_events_)
+            throw std::length_error("a run call produced more than max_events=" + std::to_string(max_events_) +
+                                    " events; use shorter chunks, or raise max_events if memory allows");
+    }
+
     std::vector<Event> collect() {
         std::size_t total = 0;
         for (const auto& b : block_events_) total += b.size();
+        if (total > max_events_)
+            throw std::length_error("a run call produced " + std::to_string(total) + " events, more than max_events=" +
+                                    std::to_string(max_events_) + "; use shorter chunks, or raise max_events if memory allows");
         std::vector<RawEvent> all;
         all.reserve(total);
         for (const auto& b : block_events_) all.insert(all.end(), b.begin(), b.end());
@@ -494,6 +523,8 @@ private:
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
     std::vector<std::vector<RawEvent>> block_events_;
+    std::size_t max_events_ = DEFAULT_MAX_EVENTS;
+    std::atomic<std::size_t> events_in_call_{0};
 };
 
 }  // namespace evstwin
