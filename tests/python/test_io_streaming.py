@@ -354,3 +354,29 @@ def test_missing_extra_names_it(
         with pytest.raises(MissingExtraError, match=r"evstwin\[io\]"):
             io.write_events(tmp_path / f"f{suffix}", make_events(10), SIZE, raw_format="evt2")
     assert io.read_events(io.write_events(tmp_path / "core.h5", make_events(10)))[0].size == 10
+
+
+def test_a_second_writer_of_the_same_path_is_refused(tmp_path):
+    # Two runs writing one output used to both succeed, the last silently winning (issue 11).
+    import subprocess
+    import sys
+
+    from evstwin.io import open_event_writer
+
+    out = tmp_path / "o.h5"
+    meta = {"width": 8, "height": 8}
+    with open_event_writer(out, meta) as first:
+        with pytest.raises(FileExistsError, match="another writer is writing"):
+            open_event_writer(out, meta)
+        code = (
+            "import sys\nfrom evstwin.io import open_event_writer\n"
+            "try:\n    open_event_writer(sys.argv[1], {'width': 8, 'height': 8})\n"
+            "except FileExistsError as e:\n    print('refused')\n"
+        )
+        other = subprocess.run([sys.executable, "-c", code, str(out)], capture_output=True, text=True, timeout=60)
+        assert other.stdout.strip() == "refused"
+        assert first.count == 0
+    assert out.is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.h5"]  # lock file gone
+    with open_event_writer(out, meta):  # free again once the first closed
+        pass

@@ -33,8 +33,10 @@ def register(subparsers: Any) -> None:
     def execution(p: argparse.ArgumentParser, dask_workers_default: str) -> None:
         p.add_argument(
             "--scheduler",
-            help="Dask scheduler address (tcp://host:8786), or 'local' for an in-process "
-            "cluster; default: local worker processes",
+            help="Dask scheduler address (tcp://host:8786, or tls://host:8786 with Dask's TLS settings "
+            "from its config or DASK_DISTRIBUTED__COMM__TLS__* variables), or 'local' for an in-process "
+            "cluster; default: local worker processes. A scheduler and its workers run the pickled jobs "
+            "they are sent: use only a cluster you trust, and tls:// across untrusted networks",
         )
         p.add_argument("--workers", type=int, help=f"worker processes (default: {dask_workers_default})")
         p.add_argument("--no-progress", action="store_true", help="no progress bar")

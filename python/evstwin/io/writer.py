@@ -40,7 +40,9 @@ class EventWriter:
     truth and scenario are written then) and renames it onto ``path`` atomically. An exception
     inside ``with open_event_writer(...) as w:``, or :meth:`abort`, removes the temporary file:
     nothing appears under ``path`` (an existing file there is left untouched). Memory stays
-    O(chunk) for every format.
+    O(chunk) for every format. While it is open, a lock file beside ``path`` makes a second
+    writer of the same path (in this process or another) fail at once, rather than both
+    finishing and the last one silently winning.
     """
 
     def __init__(self, path: Path, fmt: FileFormat, spec: WriteSpec) -> None:
@@ -48,6 +50,7 @@ class EventWriter:
         self.path = path
         self.format = fmt.name
         self._spec = spec
+        self._lock = _lock_output(path)
         self._tmp = temporary_path(path)
         self._count = 0
         self._last_t: int | None = None
@@ -57,6 +60,7 @@ class EventWriter:
             self._encoder: ChunkEncoder = fmt.open_encoder(self._tmp, spec)
         except BaseException:
             remove_quietly(self._tmp)
+            self._unlock()
             raise
 
     @property
@@ -155,8 +159,15 @@ class EventWriter:
             raise
         finally:
             self._drop_spool()
+            self._unlock()
         self._open = False
         return self.path
+
+    def _unlock(self) -> None:
+        if self._lock is not None:
+            lock, self._lock = self._lock, None
+            remove_quietly(Path(lock.name))
+            lock.close()  # closing the descriptor releases the flock
 
     def _drop_spool(self) -> None:
         remove_quietly(*(c.path for track in self._truth_spool.values() for c in track.values()))
@@ -171,6 +182,7 @@ class EventWriter:
         finally:
             remove_quietly(self._tmp)
             self._drop_spool()
+            self._unlock()
 
     def _check_open(self) -> None:
         if not self._open:
@@ -186,6 +198,23 @@ class EventWriter:
             self.close()
         else:
             self.abort()
+
+
+def _lock_output(path: Path) -> Any:
+    """An exclusive advisory lock on ``.<name>.lock`` beside ``path`` (None where the platform
+    has no flock); FileExistsError if another writer holds it."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        return None
+    lock_path = path.with_name(f".{path.name}.lock")
+    fh = open(lock_path, "a+")  # noqa: SIM115 - held open while writing, closed by _unlock
+    try:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        fh.close()
+        raise FileExistsError(f"another writer is writing {str(path)!r} now; wait for it or choose another path") from None
+    return fh
 
 
 def open_event_writer(
