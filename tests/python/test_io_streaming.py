@@ -380,3 +380,14 @@ def test_a_second_writer_of_the_same_path_is_refused(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.h5"]  # lock file gone
     with open_event_writer(out, meta):  # free again once the first closed
         pass
+
+
+@pytest.mark.parametrize("suffix", [".h5", ".npz", ".txt", ".raw"])
+def test_big_endian_events_are_written_as_their_values(tmp_path, suffix):
+    big = np.zeros(3, [("t", ">i8"), ("x", ">u2"), ("y", ">u2"), ("p", "u1")])
+    big["t"], big["x"], big["y"], big["p"] = [0, 10, 20], [1, 2, 3], [1, 1, 2], [1, 0, 1]
+    from evstwin.io import read_events, write_events
+
+    write_events(tmp_path / f"e{suffix}", big, {"width": 8, "height": 8})
+    got, _ = read_events(tmp_path / f"e{suffix}")
+    assert got["t"].tolist() == [0, 10, 20] and got["x"].tolist() == [1, 2, 3] and got["p"].tolist() == [1, 0, 1]
