@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +49,14 @@ class RecordingStats:
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
 
+    @classmethod
+    def from_chunks(
+        cls, chunks: Iterable[np.ndarray], width: int | None, height: int | None, duration_s: float | None = None
+    ) -> RecordingStats:
+        """The statistics of a recording given as chunks of events (any number, any sizes:
+        the same numbers as from one array), via :class:`CountedRecording`."""
+        return CountedRecording.from_chunks(chunks, width, height).stats(duration_s)
+
 
 def _check_events(events: np.ndarray) -> np.ndarray:
     events = np.asarray(events)
@@ -77,36 +85,13 @@ def ratio(on: float, off: float) -> float:
 
 
 def stats(events: np.ndarray, width: int, height: int, duration_s: float | None = None) -> RecordingStats:
-    """Total, ON, OFF, ON/OFF ratio, time span and mean rate of a recording.
+    """Total, ON, OFF, ON/OFF ratio, time span and mean rate of a recording (the one-chunk
+    case of :meth:`RecordingStats.from_chunks`).
 
     duration_s: recording length [s]; default: (last - first event time), 0 for fewer than
         two events.
     """
-    events = _check_events(events)
-    width, height = _check_size(width, height)
-    total = int(events.size)
-    on = int(np.count_nonzero(events["p"])) if total else 0
-    off = total - on
-    t_start = int(events["t"][0]) if total else 0
-    t_end = int(events["t"][-1]) if total else 0
-    if duration_s is None:
-        duration_s = (t_end - t_start) * 1e-6
-    duration_s = float(duration_s)
-    if duration_s < 0:
-        raise ValueError(f"duration_s must be >= 0; got {duration_s}")
-    rate = total / duration_s if duration_s > 0 else math.nan
-    return RecordingStats(
-        total=total,
-        on=on,
-        off=off,
-        on_off_ratio=ratio(on, off),
-        duration_s=duration_s,
-        t_start_us=t_start,
-        t_end_us=t_end,
-        width=width,
-        height=height,
-        mean_rate_hz=rate,
-    )
+    return RecordingStats.from_chunks([_check_events(events)], *_check_size(width, height), duration_s)
 
 
 def event_rate(
@@ -135,22 +120,27 @@ def event_rate(
     return event_rate_chunks([events], bin_s, t0, t1)
 
 
+def _bin_us(bin_s: float) -> int:
+    """A bin width [s] as whole microseconds (event times are integer us), at least 1."""
+    if not bin_s > 0:
+        raise ValueError(f"bin_s must be > 0; got {bin_s}")
+    return max(1, round(bin_s * 1e6))
+
+
 def event_rate_chunks(
     chunks: Iterable[np.ndarray], bin_s: float, t_start_us: int, t_end_us: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`event_rate` of a recording given as time-ordered chunks, whose first event time
-    and last event time + 1 us are ``t_start_us`` and ``t_end_us`` (from a first pass, or
-    :class:`CountedRecording`); memory is one count per bin, whatever the length."""
-    if not bin_s > 0:
-        raise ValueError(f"bin_s must be > 0; got {bin_s}")
+    and last event time + 1 us are ``t_start_us`` and ``t_end_us``; memory is one count per
+    bin, whatever the length. Bin widths are whole microseconds (``round(bin_s * 1e6)``)."""
+    bin_us = _bin_us(bin_s)
     t0, t1 = int(t_start_us), int(t_end_us)
     if t1 <= t0:
         raise ValueError(f"t_end_us={t1} must be after t_start_us={t0}")
-    bin_us = bin_s * 1e6
-    n = int(np.floor((t1 - t0) / bin_us))
-    width_s = bin_s
+    n = (t1 - t0) // bin_us
+    width_us = bin_us
     if n == 0:
-        n, width_s = 1, (t1 - t0) * 1e-6
+        n, width_us = 1, t1 - t0
     on = np.zeros(n, np.int64)
     off = np.zeros(n, np.int64)
     for events in chunks:
@@ -158,22 +148,123 @@ def event_rate_chunks(
         if events.size == 0:
             continue
         t = events["t"].astype(np.int64)
-        if int(t[0]) < t0:
-            raise ValueError(f"t_start_us={t0} is after the first event (t={int(t[0])} us)")
-        idx = np.floor((t - t0) / bin_us).astype(np.int64)
+        if int(t.min()) < t0:
+            raise ValueError(f"t_start_us={t0} is after the first event (t={int(t.min())} us)")
+        idx = (t - t0) // width_us
         keep = idx < n
         is_on = events["p"] != 0
         on += np.bincount(idx[keep & is_on], minlength=n)[:n]
         off += np.bincount(idx[keep & ~is_on], minlength=n)[:n]
-    centres = (np.arange(n) + 0.5) * bin_s if width_s == bin_s else np.array([0.5 * width_s])
-    return centres, on / width_s, off / width_s
+    return _rate_curve(on, off, width_us)
+
+
+def _rate_curve(on: np.ndarray, off: np.ndarray, width_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    width_s = width_us * 1e-6
+    return (np.arange(on.size) + 0.5) * width_s, on / width_s, off / width_s
+
+
+def nice_bin_s(duration_s: float, target_bins: int = 100) -> float:
+    """The event-rate bin width chosen when none is given: the 1-2-5 multiple of a power of
+    ten [s] closest above ``duration_s / target_bins`` (about 100 bins over the recording),
+    at least 1 us; 1 ms for an empty or instantaneous recording."""
+    if not duration_s > 0:
+        return 1e-3
+    raw = max(duration_s / target_bins, 1e-6)
+    exp = math.floor(math.log10(raw))
+    for m in (1, 2, 5, 10):
+        if m * 10.0**exp >= raw * (1 - 1e-12):
+            return float(f"{m * 10.0**exp:.12g}")
+    return 10.0 ** (exp + 1)  # pragma: no cover - m = 10 always suffices
+
+
+class RateBins:
+    """ON and OFF event counts in time bins, fed chunk by chunk (:meth:`add`) in one pass.
+
+    With ``bin_us`` given, the bins have that width. Without it the bin width is chosen as
+    the recording goes: it starts at 1 us and grows tenfold (10 neighbouring bins merged)
+    whenever more than :attr:`MAX_BINS` would be needed, so memory stays below MAX_BINS
+    counts however long the recording, and the kept width is a power of ten [us] at most
+    1/20,000 of the span. :meth:`curve` then gives any multiple of it, by default
+    :func:`nice_bin_s` of the span (about 100 bins, always a multiple). Bins start at the
+    first event; events earlier than it (a file not sorted by time) extend them backwards
+    by whole bins."""
+
+    MAX_BINS = 200_000
+
+    def __init__(self, bin_us: int | None = None) -> None:
+        if bin_us is not None and not (isinstance(bin_us, (int, np.integer)) and bin_us >= 1):
+            raise ValueError(f"bin_us must be a positive int [us]; got {bin_us!r}")
+        self.fixed = bin_us is not None
+        self.bin_us = int(bin_us) if bin_us is not None else 1
+        self.origin_us: int | None = None
+        self.on = np.zeros(0, np.int64)
+        self.off = np.zeros(0, np.int64)
+
+    def add(self, t: np.ndarray, p: np.ndarray) -> None:
+        """Count events of times ``t`` [us] and polarities ``p`` (1 ON, 0 OFF)."""
+        if t.size == 0:
+            return
+        t = t.astype(np.int64)
+        lo, hi = int(t.min()), int(t.max())
+        if self.origin_us is None:
+            self.origin_us = lo
+        if lo < self.origin_us:
+            pad = -(-(self.origin_us - lo) // self.bin_us)
+            self.on = np.concatenate([np.zeros(pad, np.int64), self.on])
+            self.off = np.concatenate([np.zeros(pad, np.int64), self.off])
+            self.origin_us -= pad * self.bin_us
+        while not self.fixed and (hi - self.origin_us) // self.bin_us + 1 > self.MAX_BINS:
+            self._coarsen()
+        n = (hi - self.origin_us) // self.bin_us + 1
+        if n > self.on.size:
+            grow = max(n, 2 * self.on.size) - self.on.size  # amortised growth
+            self.on = np.concatenate([self.on, np.zeros(grow, np.int64)])
+            self.off = np.concatenate([self.off, np.zeros(grow, np.int64)])
+        idx = (t - self.origin_us) // self.bin_us
+        is_on = np.asarray(p) != 0
+        self.on[: n] += np.bincount(idx[is_on], minlength=n)[:n]
+        self.off[: n] += np.bincount(idx[~is_on], minlength=n)[:n]
+
+    def _coarsen(self) -> None:
+        size = -(-self.on.size // 10) * 10
+        self.on = np.pad(self.on, (0, size - self.on.size)).reshape(-1, 10).sum(axis=1)
+        self.off = np.pad(self.off, (0, size - self.off.size)).reshape(-1, 10).sum(axis=1)
+        self.bin_us *= 10
+
+    def curve(self, t_end_us: int, bin_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t_centres_s, on_rate_hz, off_rate_hz) as :func:`event_rate`: whole bins of
+        ``bin_s`` (default :func:`nice_bin_s` of the span) from the first event to
+        ``t_end_us`` (the last event + 1 us), a single bin of the span when it is shorter."""
+        if self.origin_us is None:
+            empty = np.zeros(0)
+            return empty, empty.copy(), empty.copy()
+        span_us = int(t_end_us) - self.origin_us
+        if span_us <= 0:
+            raise ValueError(f"t_end_us={t_end_us} must be after the first event ({self.origin_us} us)")
+        bin_us = _bin_us(bin_s if bin_s is not None else nice_bin_s(span_us * 1e-6))
+        if bin_us % self.bin_us:
+            raise ValueError(
+                f"bin_s={bin_us * 1e-6:g} s is not a multiple of the {self.bin_us} us bins counted; "
+                f"count with RateBins(bin_us={bin_us}) for it"
+            )
+        group = bin_us // self.bin_us
+        n = span_us // bin_us
+        if n == 0:
+            return _rate_curve(np.array([self.on.sum()]), np.array([self.off.sum()]), span_us)
+        m = n * group
+        on = np.pad(self.on[:m], (0, max(0, m - self.on.size))).reshape(n, group).sum(axis=1)
+        off = np.pad(self.off[:m], (0, max(0, m - self.off.size))).reshape(n, group).sum(axis=1)
+        return _rate_curve(on, off, bin_us)
 
 
 @dataclass
 class CountedRecording:
-    """A recording reduced to what a comparison needs, built chunk by chunk
-    (:meth:`add`): per-pixel ON and OFF counts (flat, row-major) and the first and last
-    event times. Memory is two integers per pixel however long the recording."""
+    """A recording reduced to its statistics, built chunk by chunk (:meth:`add`, in one
+    pass): per-pixel ON and OFF counts (flat, row-major), the first and last event times
+    (smallest and largest), and the event rate in time bins (:class:`RateBins`). Memory is two
+    integers per pixel plus at most ``RateBins.MAX_BINS`` rate bins, however long the
+    recording. ``width``/``height`` None: the size grows to the events' extent (a text file
+    without a size header), known once every chunk has been added."""
 
     width: int
     height: int
@@ -181,29 +272,53 @@ class CountedRecording:
     off: np.ndarray
     t_start_us: int | None = None
     t_end_us: int = 0
+    rate: RateBins = field(default_factory=RateBins)
+    size_known: bool = True
 
     @classmethod
-    def empty(cls, width: int, height: int) -> CountedRecording:
-        width, height = _check_size(width, height)
+    def empty(cls, width: int | None, height: int | None, rate_bin_us: int | None = None) -> CountedRecording:
+        """No events yet; ``rate_bin_us``: a fixed event-rate bin [us] (default: chosen as it goes)."""
+        known = width is not None and height is not None
+        width, height = _check_size(width, height) if known else (0, 0)  # type: ignore[arg-type]
         n = width * height
-        return cls(width, height, np.zeros(n, np.int64), np.zeros(n, np.int64))
+        return cls(width, height, np.zeros(n, np.int64), np.zeros(n, np.int64),
+                   rate=RateBins(rate_bin_us), size_known=known)
 
     @classmethod
-    def from_chunks(cls, chunks: Iterable[np.ndarray], width: int, height: int) -> CountedRecording:
-        rec = cls.empty(width, height)
+    def from_chunks(cls, chunks: Iterable[np.ndarray], width: int | None, height: int | None,
+                    rate_bin_us: int | None = None) -> CountedRecording:
+        rec = cls.empty(width, height, rate_bin_us)
         for chunk in chunks:
             rec.add(chunk)
         return rec
 
     def add(self, events: np.ndarray) -> None:
-        """Count one chunk (time-ordered, after the previous one)."""
+        """Count one chunk (any order within and between chunks)."""
+        events = _check_events(events)
+        if events.size == 0:
+            return
+        if not self.size_known:
+            self._grow(int(events["x"].max()) + 1, int(events["y"].max()) + 1)
         counts = pixel_counts(events, self.width, self.height)  # checks the coordinates
         self.on += counts["on"].reshape(-1)
         self.off += counts["off"].reshape(-1)
-        if events.size:
-            if self.t_start_us is None:
-                self.t_start_us = int(events["t"][0])
-            self.t_end_us = int(events["t"][-1])
+        t = events["t"]
+        lo, hi = int(t.min()), int(t.max())
+        first = self.t_start_us is None
+        self.t_start_us = lo if self.t_start_us is None else min(self.t_start_us, lo)
+        self.t_end_us = hi if first else max(self.t_end_us, hi)
+        self.rate.add(t, events["p"])
+
+    def _grow(self, width: int, height: int) -> None:
+        width, height = max(width, self.width), max(height, self.height)
+        if (width, height) == (self.width, self.height):
+            return
+        for name in ("on", "off"):
+            old = getattr(self, name).reshape(self.height, self.width)
+            new = np.zeros((height, width), np.int64)
+            new[: self.height, : self.width] = old
+            setattr(self, name, new.reshape(-1))
+        self.width, self.height = width, height
 
     @property
     def total(self) -> int:
@@ -214,6 +329,11 @@ class CountedRecording:
         on = self.on.reshape(self.height, self.width)
         off = self.off.reshape(self.height, self.width)
         return {"total": on + off, "on": on, "off": off}
+
+    def event_rate(self, bin_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :func:`event_rate` of the whole recording (``bin_s`` default: :func:`nice_bin_s`
+        of the span, about 100 bins)."""
+        return self.rate.curve(self.t_end_us + 1, bin_s)
 
     def stats(self, duration_s: float | None = None) -> RecordingStats:
         """As :func:`stats` of the whole recording."""

@@ -175,3 +175,64 @@ def test_vectorised_on_a_million_events():
     t, on, off = analysis.event_rate(ev, 0.01)
     whole = np.count_nonzero(ev["t"] < ev["t"][0] + t.size * 10_000)  # events in whole bins
     assert (on.sum() + off.sum()) * 0.01 == pytest.approx(whole)
+
+
+def _random_recording(n: int, w: int, h: int, seed: int, t_end_us: int = 3_000_000) -> np.ndarray:
+    r = np.random.default_rng(seed)
+    ev = np.zeros(n, EVENT_DTYPE)
+    ev["t"] = np.sort(r.integers(0, t_end_us, n)) + 123_456
+    ev["x"], ev["y"], ev["p"] = r.integers(0, w, n), r.integers(0, h, n), r.integers(0, 2, n)
+    return ev
+
+
+def test_statistics_from_one_chunk_equal_statistics_from_seven_uneven_chunks():
+    ev = _random_recording(20_000, 17, 11, seed=3)
+    cuts = [0, 1, 1, 4000, 4001, 13_000, 19_999, 20_000]  # 7 chunks, two of them empty or single
+    chunks = [ev[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
+    assert len(chunks) == 7
+    one = analysis.CountedRecording.from_chunks([ev], 17, 11)
+    seven = analysis.CountedRecording.from_chunks(chunks, 17, 11)
+    assert seven.stats() == one.stats() == analysis.stats(ev, 17, 11)
+    assert analysis.RecordingStats.from_chunks(chunks, 17, 11, duration_s=3.0) == analysis.stats(ev, 17, 11, 3.0)
+    for k in analysis.KINDS:
+        np.testing.assert_array_equal(seven.pixel_counts()[k], analysis.pixel_counts(ev, 17, 11)[k])
+    # The event rate from the chunks is event_rate of the whole array, at its default bin
+    # (nice_bin_s of the ~3 s span: 3 s / 100 = 30 ms, rounded up to 1-2-5: 50 ms) and others.
+    assert analysis.nice_bin_s(ev["t"][-1] * 1e-6 - ev["t"][0] * 1e-6) == 0.05
+    for bin_s in (None, 0.05, 0.001, 10.0):
+        expected = analysis.event_rate(ev, bin_s if bin_s is not None else 0.05)
+        for got in (seven.event_rate(bin_s), one.event_rate(bin_s)):
+            for a, b in zip(got, expected):
+                np.testing.assert_allclose(a, b, rtol=1e-12)
+
+
+def test_rate_bins_grow_tenfold_and_keep_the_counts(monkeypatch):
+    # With at most 50 bins kept, 1 us bins over a 1,000 us span become 100 us bins (10 of them);
+    # the counts are the same as binning at 100 us from the start.
+    monkeypatch.setattr(analysis.RateBins, "MAX_BINS", 50)
+    ev = make_events([(t, 0, 0, t % 3 == 0) for t in range(1000, 2000, 7)])
+    bins = analysis.RateBins()
+    for part in np.array_split(ev, 5):
+        bins.add(part["t"], part["p"])
+    assert bins.bin_us == 100 and bins.origin_us == 1000
+    on = [sum(1 for t in range(1000 + 100 * i, 1100 + 100 * i) if (t - 1000) % 7 == 0 and t % 3 == 0)
+          for i in range(9)]
+    t_c, on_hz, _ = bins.curve(int(ev["t"][-1]) + 1, 100e-6)
+    np.testing.assert_allclose(on_hz * 100e-6, on)
+    np.testing.assert_allclose(t_c, (np.arange(9) + 0.5) * 100e-6)
+    with pytest.raises(ValueError, match="not a multiple of the 100 us bins"):
+        bins.curve(int(ev["t"][-1]) + 1, 150e-6)
+
+
+def test_counted_recording_of_unknown_size_grows_to_the_events_extent():
+    rec = analysis.CountedRecording.from_chunks([SMALL[:3], SMALL[3:]], None, None)
+    assert (rec.width, rec.height) == (3, 2)  # max x + 1, max y + 1
+    np.testing.assert_array_equal(rec.pixel_counts()["on"], [[2, 0, 1], [0, 0, 1]])
+    np.testing.assert_array_equal(rec.pixel_counts()["off"], [[1, 0, 0], [0, 3, 1]])
+
+
+def test_nice_bin_s_by_hand():
+    assert analysis.nice_bin_s(2.36) == 0.05  # 23.6 ms -> 50 ms
+    assert analysis.nice_bin_s(0.049926) == 0.0005  # 0.499 ms -> 0.5 ms
+    assert analysis.nice_bin_s(1.0) == 0.01
+    assert analysis.nice_bin_s(0.0) == 1e-3

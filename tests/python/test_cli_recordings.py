@@ -104,3 +104,22 @@ def test_every_argument_has_help_that_states_its_default() -> None:
             elif action.default not in (None, False, [], argparse.SUPPRESS) and "default" not in action.help:
                 missing.append(f"{name} {action.dest}: default {action.default!r} not stated")
     assert not missing, missing
+
+
+def test_size_reaches_the_readers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", str(DAVIS), "--size", "400,300"]) == 0
+    assert "400 x 300 px (120000 pixels) (--size)" in capsys.readouterr().out
+    for argv in (["info", str(EVK4), "--size", "346,260"],
+                 ["show", str(EVK4), "--size", "346,260", "--out", str(tmp_path / "s")],
+                 ["compare", str(EVK4), str(DAVIS), "--size", "346,260", "--out", str(tmp_path / "c")]):
+        assert main(argv) == 2
+        assert "outside the size given 346x260" in one_line_error(capsys)
+    assert not (tmp_path / "s").exists() and not (tmp_path / "c").exists()
+
+
+def test_compare_states_the_simulated_duration_in_its_report(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "cmp"
+    assert main(["compare", str(DAVIS), "mcreynolds", "--out", str(out), "--duration", "0.02"]) == 0
+    assert "simulating 0.02 s per run (--duration)" in capsys.readouterr().err
+    assert json.loads((out / "compare.json").read_text())["simulated_duration_s"] == 0.02

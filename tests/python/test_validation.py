@@ -435,3 +435,64 @@ def test_compare_from_chunks_equals_compare_in_memory(tmp_path, monkeypatch):
     a, b = big.to_json_dict(), small.to_json_dict()
     a.pop("outputs", None), b.pop("outputs", None)
     assert a == b
+
+
+TEST_DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+@pytest.mark.parametrize("name", ["davis346_road_cut.aedat4", "imx636_cut_evt3.raw"])
+def test_info_is_the_same_whatever_the_chunk(name):
+    path = TEST_DATA / name
+    text = validation.info(path, chunk=1000)
+    assert text == validation.info(path, chunk=10**6)
+    from evstwin.io import read_events
+
+    events, meta = read_events(path)
+    assert text == validation.format_info(events, meta)  # the in-memory path: one chunk
+    assert f"events        {len(events)} " in text
+
+
+def test_info_of_a_text_file_without_size_reads_in_chunks(tmp_path):
+    # No width= header: the size is the events' extent, known only after the last chunk.
+    ev = np.zeros(5, EVENT_DTYPE)
+    ev["t"], ev["x"], ev["y"], ev["p"] = [10, 20, 30, 40, 1_000_010], [0, 6, 2, 1, 3], [0, 1, 4, 2, 0], [1, 0, 1, 1, 0]
+    path = tmp_path / "e.txt"
+    path.write_text("".join(f"{t} {x} {y} {p}\n" for t, x, y, p in ev))
+    text = validation.info(path, chunk=2)
+    assert text == validation.info(path, chunk=10**6)
+    assert "sensor        7 x 5 px (35 pixels) (from the events' extent)" in text
+    assert "events        5 (ON 3, OFF 2)" in text and "duration 1 s" in text
+    assert "5 pixels (14.29 %) have events" in text
+
+
+def test_statistics_modules_import_without_matplotlib():
+    code = (
+        "import sys; sys.modules['matplotlib'] = None\n"
+        "import evstwin.analysis, evstwin.validation\n"
+        "from evstwin.validation import comparison, montecarlo, timing, report\n"
+        "assert 'evstwin.plots' not in sys.modules, 'validation imported plots'\n"
+        "try:\n"
+        "    import evstwin.plots\n"
+        "except ImportError as exc:\n"
+        "    assert 'evstwin[plot]' in str(exc), exc\n"
+        "else:\n"
+        "    raise AssertionError('plots imported without matplotlib')\n"
+    )
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+
+
+def test_statistics_modules_never_import_plotting():
+    # Compute returns data, drawing is separate: only report.py (orchestration) imports plots.
+    import ast
+
+    root = Path(validation.__file__).parent
+    for module in [root.parent / "analysis.py", *root.glob("*.py")]:
+        tree = ast.parse(module.read_text())
+        names = {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+        names |= {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
+        names |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        draws = {n for n in names if "plots" in n or "matplotlib" in n}
+        assert not draws or module.name == "report.py", (module.name, draws)

@@ -85,11 +85,10 @@ def _is_event_file(text: str) -> bool:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from .. import plots
-    from ..io import read_events, write_events
+    from ..io import write_events
     from ..scenario import build
     from ..simulate import resolve_scenario, run_many
-    from ..validation import aggregate, compare, compare_files
+    from ..validation import compare_files, compare_runs
     from ..validation.report import scan_recording
 
     if args.runs < 1:
@@ -106,6 +105,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     duration_s = args.duration if args.duration is not None else _span_s(real_rec, real_meta)
     for sim in args.sims:
         if _is_event_file(sim):
+            scan_recording(sim, None, 0.0, 0.0)  # readable, before anything is simulated
             continue
         scene = build(resolve_scenario(sim, args.sets), duration_s=duration_s)
         if (scene.width, scene.height) != (width, height):
@@ -113,12 +113,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
                 f"scenario {sim!r} simulates a {scene.width}x{scene.height} sensor but {args.real} is "
                 f"{width}x{height}: set sensor.width/height (--set) or compare another scenario"
             )
-    if not any(_is_event_file(sim) for sim in args.sims):
-        print(f"simulating {duration_s:.6g} s per run (the real recording's span; --duration to change)",
-              file=sys.stderr)
+    if not all(_is_event_file(sim) for sim in args.sims):
+        source = "--duration" if args.duration is not None else "the real recording's span; --duration to change"
+        print(f"simulating {duration_s:.6g} s per run ({source})", file=sys.stderr)
     out.mkdir(parents=True, exist_ok=True)
-    # Scenario SIMs are simulated (--runs seeds each, in parallel processes) and written
-    # beside the figures, so every number in compare.json points at a file.
+    # Scenario SIMs are simulated (--runs seeds each, in parallel processes, a progress bar
+    # counting finished runs) and written beside the figures, so every number in
+    # compare.json points at a file.
     runs: list[list[Path]] = [[] for _ in range(args.runs)]
     labels: list[str] = []  # what each SIM is called in the Monte Carlo summary
     for sim in args.sims:
@@ -134,18 +135,16 @@ def cmd_compare(args: argparse.Namespace) -> int:
             path = out / f"{stem}_seed{seed}.h5"
             write_events(path, res.events, res.meta)
             runs[seed].append(path)
-        print(f"simulated {sim}: {args.runs} run(s) in {time.perf_counter() - start:.1f} s", file=sys.stderr)
+        print(f"simulated {sim}: {args.runs} run(s) of {duration_s:.6g} s in {time.perf_counter() - start:.1f} s",
+              file=sys.stderr)
     comparison = compare_files(args.real, runs[0], out, bin_width=args.bin_width, size=args.size)
     report = comparison.to_json_dict()
+    report["simulated_duration_s"] = duration_s
     print(comparison.to_text())
     if args.runs > 1:
-        comparisons = [compare(real_rec, dict(real_meta, path=args.real),
-                               [_with_path(read_events(p), label) for p, label in zip(paths, labels)],
+        summary = compare_runs((real_rec, dict(real_meta, path=args.real)), runs, labels, out,
                                bin_width=args.bin_width)
-                       for paths in runs]
-        summary = aggregate(comparisons)
         report["monte_carlo"] = summary.to_json_dict()
-        plots.plot_monte_carlo(summary, out)
         print(summary.to_text())
     with open(out / "compare.json", "w", encoding="utf-8") as fh:
         json.dump(report, fh, indent=1, allow_nan=False)
@@ -162,60 +161,15 @@ def _span_s(rec: Any, meta: dict) -> float:
     return max(1e-3, (rec.t_end_us - rec.t_start_us) * 1e-6)
 
 
-def _with_path(pair: Any, label: str) -> Any:
-    events, meta = pair
-    return events, dict(meta, path=label)
-
-
 def cmd_timing(args: argparse.Namespace) -> int:
-    from .. import plots
-    from ..io import read_events
-    from ..validation import format_timing_bias_summary, timing_bias, timing_bias_summary
+    from ..validation import timing_report
 
     if not args.radius_px > 0:
         raise ValueError(f"--radius-px must be > 0 px; got {args.radius_px}")
     if not args.max_delay_s > 0:
         raise ValueError(f"--max-delay-s must be > 0 s; got {args.max_delay_s}")
     out = check_output_dir(args.out, args.force)
-    tables: list[tuple[str, Any]] = []
-    for path in args.files:
-        events, meta = read_events(path)
-        truth = meta.get("truth") or {}
-        if not truth:
-            raise ValueError(f"{path} holds no ground truth (/truth): simulate to .h5 or .npz first")
-        tables.append((_setting_label(path, meta), timing_bias(events, truth, radius_px=args.radius_px,
-                                                                max_abs_delay_s=args.max_delay_s)))
-    out.mkdir(parents=True, exist_ok=True)
-    report: dict[str, Any] = {}
-    for label, table in tables:
-        rows = {by: timing_bias_summary(table, by=by, split_polarity=True)
-                for by in ("target", "polarity", "flux", "speed")}
-        report[label] = rows
-        print(f"== {label}: {len(table)} events attributed to a crossing")
-        for by, r in rows.items():
-            print(format_timing_bias_summary(r, by=by))
-            print()
-    if len(tables) == 1:
-        png = plots.plot_timing_bias(tables[0][1], out / "timing_bias.png")
-        report = report[tables[0][0]]
-    else:
-        png = plots.plot_timing_by_setting(tables, out / "timing_by_setting.png")
-    with open(out / "timing_bias.json", "w", encoding="utf-8") as fh:
-        json.dump(report, fh, indent=1, default=float)
+    _, text, png = timing_report(args.files, out, radius_px=args.radius_px, max_delay_s=args.max_delay_s)
+    print(text)
     print(f"wrote {png} and {out / 'timing_bias.json'}")
     return 0
-
-
-def _setting_label(path: str, meta: dict) -> str:
-    """A file's name and the thresholds it was simulated with, when its scenario says."""
-    scenario = meta.get("scenario")
-    name = Path(path).name
-    if isinstance(scenario, dict):
-        try:
-            from ..scenario import build
-
-            p = build(scenario).params
-            return f"{name}\ntheta {p.theta_on:.3g}/{p.theta_off:.3g}"
-        except ValueError:
-            return name
-    return name

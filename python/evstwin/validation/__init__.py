@@ -4,8 +4,9 @@
   their per-bin error and percent error (Fig. 8), the error as a share of the sensor's pixels
   (Fig. 9), and one summary ``distance`` a tuner can minimise.
 * :func:`aggregate` -- mean and spread of every number over N Monte Carlo runs (the paper's 20).
-* :func:`compare_files`, :func:`info`, :func:`show` -- the file-level entry points the CLI uses
-  (:mod:`.report`, the one module here that draws); they return values or text and print nothing.
+* :func:`compare_files`, :func:`compare_runs`, :func:`info`, :func:`show`, :func:`timing_report`
+  -- the file-level entry points the CLI uses (:mod:`.report`, the one module here that draws);
+  they read recordings in chunks and return values or text, printing nothing.
 * :func:`timing_bias`, :func:`timing_bias_summary` -- delay of each event after the true
   crossing of a source over its pixel, against brightness and speed (the astrometry obstacle
   the paper names).
@@ -20,9 +21,10 @@ limit of the Fig. 7 histograms) and m_real is the real recording's mean per-pixe
 
 from __future__ import annotations
 
+from ..analysis import nice_bin_s
 from .comparison import DISTANCE_FORMULA, Comparison, PathLike, Recording, SimComparison, compare
 from .montecarlo import MonteCarloSummary, aggregate
-from .report import compare_files, format_info, info, nice_bin_s, show
+from .report import compare_files, compare_runs, format_info, info, show, timing_report
 from .timing import TruthTrack, format_timing_bias_summary, timing_bias, timing_bias_summary
 
 __all__ = [
@@ -36,6 +38,7 @@ __all__ = [
     "aggregate",
     "compare",
     "compare_files",
+    "compare_runs",
     "format_info",
     "format_timing_bias_summary",
     "info",
@@ -43,4 +46,5 @@ __all__ = [
     "show",
     "timing_bias",
     "timing_bias_summary",
+    "timing_report",
 ]

@@ -1,9 +1,14 @@
-"""File-level entry points that compute, draw and write: compare_files, info, show. The only validation module that imports plots."""
+"""File-level entry points that read, compute, draw and write: :func:`compare_files`,
+:func:`compare_runs` (a Monte Carlo of N runs), :func:`info`, :func:`show` and
+:func:`timing_report`. The only validation module that imports :mod:`evstwin.plots`.
+
+Every recording is read once, chunk by chunk (:data:`READ_CHUNK` events at a time), into a
+:class:`evstwin.analysis.CountedRecording` (per-pixel counts, first and last times, event
+rate) plus the events of the figures' time slice: memory does not grow with its length."""
 
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -11,30 +16,10 @@ from typing import Any
 import numpy as np
 
 from .. import analysis
-from ..analysis import KINDS
+from ..analysis import KINDS, nice_bin_s
 from ..sensor import EVENT_DTYPE
 from .comparison import Comparison, PathLike, _duration, _fmt, _label, _size, compare
-
-
-def _read(path: PathLike, size: tuple[int, int] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-    from ..io import read_events  # lazy: io is optional at import time
-
-    events, meta = read_events(path, size=size)
-    meta = dict(meta)
-    meta.setdefault("path", str(path))
-    return events, meta
-
-
-def nice_bin_s(duration_s: float, target_bins: int = 100) -> float:
-    """A 1-2-5 bin width [s] giving about ``target_bins`` bins over ``duration_s``."""
-    if not duration_s > 0:
-        return 1e-3
-    raw = duration_s / target_bins
-    exp = math.floor(math.log10(raw))
-    for m in (1, 2, 5, 10):
-        if m * 10.0**exp >= raw:
-            return m * 10.0**exp
-    return 10.0 ** (exp + 1)
+from .montecarlo import MonteCarloSummary, aggregate
 
 
 def compare_files(
@@ -49,34 +34,33 @@ def compare_files(
     rate_bin_s: float | None = None,
     size: tuple[int, int] | None = None,
 ) -> Comparison:
-    """Read the recordings (any format :func:`evstwin.io.read_events` takes), compare them,
-    and write ``out_dir/compare.json`` (every number) and the figures:
+    """Read the recordings (any format :func:`evstwin.io.read_events` takes, in chunks),
+    compare them, and write ``out_dir/compare.json`` (every number) and the figures:
 
     frames.png (Fig. 5: ``n_windows`` successive ``window_s`` windows overlaid, from
-    ``t_offset_s`` after each recording's start), xyt.png (Fig. 6, the same time slice),
+    ``t_offset_s`` after each recording's first event), xyt.png (Fig. 6, the same time slice),
     histograms.png (Fig. 7), percent_error.png (Fig. 8), bin_error.png (Fig. 9) and
-    event_rate.png (bins of ``rate_bin_s``, default about 1/100 of the real duration).
+    event_rate.png (bins of ``rate_bin_s`` [s]; default :func:`evstwin.analysis.nice_bin_s`
+    of the real recording's span, about 100 bins, over the real recording's span).
     The written paths are in ``Comparison.outputs``. ``size`` (W, H) is the real recording's
     sensor size where its header has none. Every input is read and compared before
     ``out_dir`` is created.
     """
     from .. import plots
 
-    # Every recording is read once in chunks for its counts and the events of the figures'
-    # time slice, and once more for its event rate: memory does not grow with its length.
     span_s = window_s * n_windows
-    real_rec, real_meta, real_slice = scan_recording(real_path, size, t_offset_s, span_s)
-    sims = [scan_recording(p, None, t_offset_s, span_s) for p in sim_paths]
+    rate_bin_us = None if rate_bin_s is None else analysis._bin_us(rate_bin_s)
+    real_rec, real_meta, real_slice = scan_recording(real_path, size, t_offset_s, span_s, rate_bin_us=rate_bin_us)
+    sims = [scan_recording(p, None, t_offset_s, span_s, rate_bin_us=rate_bin_us) for p in sim_paths]
     comp = compare(real_rec, real_meta, [(rec, meta) for rec, meta, _ in sims], bin_width=bin_width)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     w, h = comp.real.width, comp.real.height
     recs = [(comp.real_label + " (real)", real_slice)] + [(s.label, sl) for s, (_, _, sl) in zip(comp.sims, sims)]
-    bin_s = rate_bin_s if rate_bin_s is not None else nice_bin_s(comp.real.duration_s)
-    rates = [_rate(p, r, bin_s, sz) for p, r, sz in [(real_path, real_rec, size)]
-             + [(p, rec, None) for p, (rec, _, _) in zip(sim_paths, sims)]]
-    real_span = (real_rec.t_end_us - real_rec.t_start_us + 1) * 1e-6 if real_rec.t_start_us is not None else None
-    outputs = _recording_figures(recs, w, h, out, window_s, n_windows, t_offset_s, bin_s, rates, real_span)
+    counted = [real_rec] + [rec for rec, _, _ in sims]
+    bin_s = rate_bin_s if rate_bin_s is not None else common_rate_bin_s(counted)
+    rates = [rec.event_rate(bin_s) for rec in counted]
+    outputs = _recording_figures(recs, w, h, out, window_s, n_windows, t_offset_s, bin_s, rates, _span_s(real_rec))
     outputs["histograms"] = plots.plot_comparison_histograms(comp, out / "histograms.png")
     outputs["percent_error"] = plots.plot_comparison_percent_error(comp, out / "percent_error.png")
     outputs["bin_error"] = plots.plot_comparison_bin_error(comp, out / "bin_error.png")
@@ -87,27 +71,68 @@ def compare_files(
     return comp
 
 
+def compare_runs(
+    real: tuple[analysis.CountedRecording, Mapping[str, Any]],
+    runs: Sequence[Sequence[PathLike]],
+    labels: Sequence[str],
+    out_dir: PathLike,
+    bin_width: float = 2,
+) -> MonteCarloSummary:
+    """The Monte Carlo of N runs (the paper's 20 seeds): compare the real recording (read by
+    :func:`scan_recording`) with each run's simulated files (``runs[i]``: one path per
+    simulation, called ``labels[j]``), aggregate, and draw ``out_dir/percent_error_mc.png``
+    and ``bin_error_mc.png`` (mean +- 1 std). Returns the summary."""
+    from .. import plots
+
+    rec, meta = real
+    comparisons = []
+    for paths in runs:
+        sims = []
+        for path, label in zip(paths, labels):
+            sim_rec, sim_meta, _ = scan_recording(path, None, 0.0, 0.0)
+            sims.append((sim_rec, dict(sim_meta, path=label)))
+        comparisons.append(compare(rec, meta, sims, bin_width=bin_width))
+    summary = aggregate(comparisons)
+    plots.plot_monte_carlo(summary, Path(out_dir))
+    return summary
+
+
+def common_rate_bin_s(recs: Sequence[analysis.CountedRecording]) -> float:
+    """One event-rate bin [s] for recordings drawn together: :func:`evstwin.analysis.nice_bin_s`
+    of the first (real) recording's span, or the coarsest bin a longer one kept if that is
+    larger (a power of ten [us]; either is a multiple of every kept bin)."""
+    coarsest = max(rec.rate.bin_us for rec in recs) * 1e-6
+    return max(nice_bin_s(_span_s(recs[0]) or 0.0), coarsest)
+
+
+def _span_s(rec: analysis.CountedRecording) -> float | None:
+    """First to last event + 1 us [s]; None for an empty recording."""
+    return None if rec.t_start_us is None else (rec.t_end_us - rec.t_start_us + 1) * 1e-6
+
+
 READ_CHUNK = 1_000_000
 """Events read at a time by the file-level functions (about 13 MB)."""
 
 
 def scan_recording(
-    path: PathLike, size: tuple[int, int] | None, t_offset_s: float, span_s: float
+    path: PathLike,
+    size: tuple[int, int] | None,
+    t_offset_s: float,
+    span_s: float,
+    *,
+    chunk: int | None = None,
+    rate_bin_us: int | None = None,
 ) -> tuple[analysis.CountedRecording, dict[str, Any], np.ndarray]:
-    """One pass over a recording: its per-pixel counts, its meta, and the events of the
-    figures' slice [first + t_offset_s, first + t_offset_s + span_s), preceded by the first
-    event (the figures measure their offset from a recording's first event)."""
+    """One pass over a recording, ``chunk`` events (default :data:`READ_CHUNK`) at a time:
+    its :class:`~evstwin.analysis.CountedRecording` (event-rate bins of ``rate_bin_us``,
+    default chosen as it goes), its meta (with the size found from the events where the file
+    has none), and the events of the figures' slice [first + t_offset_s, first + t_offset_s +
+    span_s), preceded by the first event (the figures measure their offset from it)."""
     from ..io import iter_events
 
-    stream = iter_events(path, chunk=READ_CHUNK, size=size)
+    stream = iter_events(path, chunk=chunk or READ_CHUNK, size=size)
     meta = dict(stream.meta)
-    meta.setdefault("path", str(path))
-    if not (meta.get("width") and meta.get("height")):  # a text file without a size header
-        events, meta = _read(path, size)
-        width, height = _size(meta, str(path))
-        return analysis.CountedRecording.from_chunks([events], width, height), meta, events
-    width, height = _size(meta, str(path))
-    rec = analysis.CountedRecording.empty(width, height)
+    rec = analysis.CountedRecording.empty(meta.get("width"), meta.get("height"), rate_bin_us)
     parts: list[np.ndarray] = []
     lo = hi = 0
     for ev in stream:
@@ -119,75 +144,50 @@ def scan_recording(
             if int(ev["t"][0]) < lo:
                 parts.append(ev[:1])
         rec.add(ev)
-        parts.append(ev[(ev["t"] >= lo) & (ev["t"] < hi)])
+        if span_s > 0:
+            parts.append(ev[(ev["t"] >= lo) & (ev["t"] < hi)])
+    meta = dict(stream.meta)  # with the size found from the events where the file has none
+    meta.setdefault("path", str(path))
+    width, height = _size(meta, str(path))
+    if width < 1 or height < 1:
+        raise ValueError(f"{path}: no events and no sensor size in the file; give the size (--size W,H)")
+    if (rec.width, rec.height) != (width, height):  # the size came from the events
+        rec._grow(width, height)
     events = np.concatenate(parts) if parts else np.zeros(0, EVENT_DTYPE)
+    if len(events) > 1 and bool(np.any(events["t"][1:] < events["t"][:-1])):
+        events = events[np.argsort(events["t"], kind="stable")]
     return rec, meta, events
 
 
-def _rate(
-    path: PathLike, rec: analysis.CountedRecording, bin_s: float, size: tuple[int, int] | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The event-rate curve of a recording, in a second pass over its chunks."""
-    from ..io import iter_events
-
-    if rec.t_start_us is None:
-        empty = np.zeros(0)
-        return empty, empty.copy(), empty.copy()
-    return analysis.event_rate_chunks(iter_events(path, chunk=READ_CHUNK, size=size), bin_s,
-                                      rec.t_start_us, rec.t_end_us + 1)
-
-
-def info(path: PathLike, *, size: tuple[int, int] | None = None, chunk: int = 1_000_000) -> str:
+def info(path: PathLike, *, size: tuple[int, int] | None = None, chunk: int = READ_CHUNK) -> str:
     """A summary of one recording, as text, read ``chunk`` events at a time: memory does not
-    grow with the recording (per-pixel counts and running totals are all it keeps). A text
-    file without a size header is read whole, its size being known only from its events."""
-    from ..io import iter_events
-
-    stream = iter_events(path, chunk=chunk, size=size)
-    meta = dict(stream.meta)
-    meta.setdefault("path", str(path))
-    if not (meta.get("width") and meta.get("height")):
-        events, meta = _read(path, size)
-        return format_info(events, meta)
-    width, height = _size(meta, str(path))
-    counts = np.zeros(width * height, np.int64)
-    total = on = 0
-    t_first: int | None = None
-    t_last = 0
-    for ev in stream:
-        if len(ev) == 0:
-            continue
-        counts += np.bincount(ev["y"].astype(np.int64) * width + ev["x"], minlength=counts.size)
-        total += len(ev)
-        on += int(np.count_nonzero(ev["p"]))
-        t_first = int(ev["t"][0]) if t_first is None else t_first
-        t_last = int(ev["t"][-1])
-    duration = meta.get("duration_s")
-    if duration is None:
-        duration = (t_last - t_first) * 1e-6 if t_first is not None else 0.0
-    return _info_text(meta, width, height, total, on, t_first or 0, t_last, float(duration), counts)
+    grow with the recording (per-pixel counts and running totals are all it keeps), and the
+    text is the same whatever ``chunk`` (a text file without a size header included: its
+    size is the events' extent, known at the end)."""
+    rec, meta, _ = scan_recording(path, size, 0.0, 0.0, chunk=chunk)
+    return _info_text(meta, rec, _duration(rec, meta))
 
 
 def format_info(events: np.ndarray, meta: Mapping[str, Any]) -> str:
-    """The text of :func:`info` for events already in memory."""
+    """The text of :func:`info` for events already in memory (the one-chunk case)."""
     width, height = _size(meta, str(meta.get("path", "recording")))
-    st = analysis.stats(events, width, height, _duration(events, meta))
-    counts = analysis.pixel_counts(events, width, height)["total"].reshape(-1)
-    return _info_text(meta, width, height, st.total, st.on, st.t_start_us, st.t_end_us, st.duration_s, counts)
+    rec = analysis.CountedRecording.from_chunks([events], width, height)
+    return _info_text(meta, rec, _duration(events, meta))
 
 
-def _info_text(meta: Mapping[str, Any], width: int, height: int, total: int, on: int, t_start_us: int,
-               t_end_us: int, duration_s: float, counts: np.ndarray) -> str:
-    off = total - on
-    pixels = width * height
-    rate = total / duration_s if duration_s > 0 else math.nan
+def _info_text(meta: Mapping[str, Any], rec: analysis.CountedRecording, duration_s: float) -> str:
+    st = rec.stats(duration_s)
+    counts = rec.pixel_counts()["total"].reshape(-1)
+    pixels = st.pixel_count
     active = int(np.count_nonzero(counts))
+    size_note = {"events": " (from the events' extent)", "argument": " (--size)",
+                 "plugin": " (from the camera plugin)"}.get(str(meta.get("size_source")), "")
     lines = [
         f"file          {meta.get('path', '')}",
-        f"sensor        {width} x {height} px ({pixels} pixels)",
-        f"events        {total} (ON {on}, OFF {off}), ON/OFF {_fmt(analysis.ratio(on, off), 4)}",
-        f"time          {t_start_us} .. {t_end_us} us, duration {duration_s:.6g} s",
-        f"mean rate     {_fmt(rate, 1)} events/s, {_fmt(rate / pixels, 4)} events/s per pixel",
+        f"sensor        {st.width} x {st.height} px ({pixels} pixels){size_note}",
+        f"events        {st.total} (ON {st.on}, OFF {st.off}), ON/OFF {_fmt(st.on_off_ratio, 4)}",
+        f"time          {st.t_start_us} .. {st.t_end_us} us, duration {st.duration_s:.6g} s",
+        f"mean rate     {_fmt(st.mean_rate_hz, 1)} events/s, {_fmt(st.mean_rate_hz / pixels, 4)} events/s per pixel",
         (
             f"per pixel     mean {counts.mean():.4g}, max {int(counts.max()) if counts.size else 0} events; "
             f"{active} pixels ({100 * active / pixels:.2f} %) have events"
@@ -211,19 +211,20 @@ def show(
     event_rate.png (options as in :func:`compare_files`). Returns {figure: path}."""
     from .. import plots
 
-    events, meta = _read(path, size)
-    width, height = _size(meta, str(path))
+    rec, meta, events = scan_recording(path, size, t_offset_s, window_s * n_windows,
+                                       rate_bin_us=None if rate_bin_s is None else analysis._bin_us(rate_bin_s))
+    width, height = rec.width, rec.height
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    st = analysis.stats(events, width, height, _duration(events, meta))
     recs = [(_label(str(meta["path"])), events)]
-    counts = analysis.pixel_counts(events, width, height)
+    counts = rec.pixel_counts()
     hists = {}
     edges = {}
     for k in KINDS:
         edges[k], hists[k] = analysis.count_histogram(counts[k], bin_width)
-    bin_s = rate_bin_s if rate_bin_s is not None else nice_bin_s(st.duration_s)
-    outputs = _recording_figures(recs, width, height, out, window_s, n_windows, t_offset_s, bin_s)
+    bin_s = rate_bin_s if rate_bin_s is not None else common_rate_bin_s([rec])
+    outputs = _recording_figures(recs, width, height, out, window_s, n_windows, t_offset_s, bin_s,
+                                 [rec.event_rate(bin_s)], _span_s(rec))
     outputs["histograms"] = plots.plot_count_histograms(edges, [(recs[0][0], hists)], out / "histograms.png")
     return {k: str(v) for k, v in outputs.items()}
 
@@ -254,3 +255,67 @@ def _recording_figures(
         ),
         "event_rate": plots.plot_event_rate(recs, out / "event_rate.png", bin_s=bin_s, curves=rates, span_s=span_s),
     }
+
+
+def timing_report(
+    files: Sequence[PathLike],
+    out_dir: PathLike,
+    *,
+    radius_px: float = 1.0,
+    max_delay_s: float = 0.3,
+    labels: Sequence[str] | None = None,
+) -> tuple[dict[str, Any], str, Path]:
+    """Event-timing bias of simulated files with ground truth (``.h5``/``.npz``): the
+    :func:`timing_bias` table of each file, summarised per target, polarity, flux and speed
+    with ON and OFF apart, written to ``out_dir/timing_bias.json`` and drawn as
+    ``timing_bias.png`` (one file) or ``timing_by_setting.png`` (one row per file, called
+    ``labels[i]``, default the file's name and the thresholds its scenario sets). Every file is read and checked before ``out_dir``
+    is created. Returns (report, text, figure path)."""
+    from .. import plots
+    from ..io import read_events
+    from .timing import format_timing_bias_summary, timing_bias, timing_bias_summary
+
+    if not radius_px > 0:
+        raise ValueError(f"radius_px must be > 0 px; got {radius_px}")
+    if not max_delay_s > 0:
+        raise ValueError(f"max_delay_s must be > 0 s; got {max_delay_s}")
+    tables: list[tuple[str, np.ndarray]] = []
+    for i, path in enumerate(files):
+        events, meta = read_events(path)
+        truth = meta.get("truth") or {}
+        if not truth:
+            raise ValueError(f"{path} holds no ground truth (/truth): simulate to .h5 or .npz first")
+        label = labels[i] if labels is not None else _setting_label(path, meta)
+        tables.append((label, timing_bias(events, truth, radius_px=radius_px, max_abs_delay_s=max_delay_s)))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report: dict[str, Any] = {}
+    text: list[str] = []
+    for label, table in tables:
+        rows = {by: timing_bias_summary(table, by=by, split_polarity=True) for by in ("target", "polarity", "flux", "speed")}
+        report[label] = rows
+        text.append(f"== {label}: {len(table)} events attributed to a crossing")
+        text.extend(format_timing_bias_summary(r, by=by) + "\n" for by, r in rows.items())
+    if len(tables) == 1:
+        png = plots.plot_timing_bias(tables[0][1], out / "timing_bias.png")
+        report = report[tables[0][0]]
+    else:
+        png = plots.plot_timing_by_setting(tables, out / "timing_by_setting.png")
+    with open(out / "timing_bias.json", "w", encoding="utf-8") as fh:
+        json.dump(report, fh, indent=1, default=float)
+    return report, "\n".join(text), png
+
+
+def _setting_label(path: PathLike, meta: Mapping[str, Any]) -> str:
+    """A file's name and the thresholds it was simulated with, when its scenario says."""
+    scenario = meta.get("scenario")
+    name = Path(path).name
+    if isinstance(scenario, dict):
+        try:
+            from ..scenario import build
+
+            p = build(scenario).params
+            return f"{name}\ntheta {p.theta_on:.3g}/{p.theta_off:.3g}"
+        except ValueError:
+            return name
+    return name
