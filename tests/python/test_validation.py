@@ -496,3 +496,20 @@ def test_statistics_modules_never_import_plotting():
         names |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
         draws = {n for n in names if "plots" in n or "matplotlib" in n}
         assert not draws or module.name == "report.py", (module.name, draws)
+
+
+def test_timing_bias_summary_groups_a_few_values_by_value():
+    # Five LEDs at five speeds, binned into 5 bins, are five rows named by their speed, not
+    # ranges like 141.8..274.2 between two of them.
+    tab = np.zeros(10, dtype=[("delay_s", "f8"), ("p", "u1"), ("flux_ph_s", "f8"), ("speed_px_s", "f8"),
+                              ("target", "U8")])
+    speeds = np.array([141.8, 307.3, 472.8, 638.3, 803.8])
+    tab["speed_px_s"] = np.repeat(speeds, 2) * (1 + np.tile([0, 1e-12], 5))  # the same value, computed twice
+    tab["delay_s"] = np.arange(10) * 1e-3
+    tab["flux_ph_s"] = 1e9
+    rows = validation.timing_bias_summary(tab, by="speed")
+    assert [r["group"] for r in rows] == pytest.approx(list(speeds))
+    assert [r["p50_s"] for r in rows] == pytest.approx([0.5e-3, 2.5e-3, 4.5e-3, 6.5e-3, 8.5e-3])
+    # Six values for 5 bins: binned as before.
+    tab["speed_px_s"][0] = 100.0
+    assert isinstance(validation.timing_bias_summary(tab, by="speed")[0]["group"], list)

@@ -172,6 +172,14 @@ def _bin_edges(values: np.ndarray, bins: int | Sequence[float] | np.ndarray, log
     return np.linspace(lo, hi, n + 1)
 
 
+def _rounded(values: np.ndarray) -> np.ndarray:
+    """``values`` to 9 significant digits, so a value computed twice is one value."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = 10.0 ** (8 - np.floor(np.log10(np.abs(values))))
+    scale[~np.isfinite(scale)] = 1.0
+    return np.round(values * scale) / scale
+
+
 def timing_bias_summary(
     table: np.ndarray,
     by: str = "target",
@@ -184,7 +192,8 @@ def timing_bias_summary(
     by: 'target' (one group per name), 'polarity' (ON, OFF), 'flux' (``bins`` log-spaced
         flux bins [photons/s] between the smallest and largest, or explicit edges) or 'speed'
         (``bins`` linear speed bins [px/s], or edges). Bins are [lo, hi), the last [lo, hi];
-        a flux or speed with a single value is one group named by that value (not a bin).
+        a flux or speed taking no more than ``bins`` values (to 9 significant digits) has one
+        group per value, named by it (a single speed is one row, not a 7.883..7.883 bin).
     split_polarity: one row per group and polarity (key ``polarity``, 'ON'/'OFF'): ON and OFF
         delays differ by an order of magnitude in the dark, and a median of both describes
         neither.
@@ -205,8 +214,10 @@ def timing_bias_summary(
     else:
         col = "flux_ph_s" if by == "flux" else "speed_px_s"
         vals = np.asarray(table[col], dtype=np.float64)
-        if np.ndim(bins) == 0 and vals.max() - vals.min() <= 1e-9 * abs(vals.max()):
-            groups = [(float(np.median(vals)), np.ones(vals.size, bool))]  # one value, one group
+        distinct, which = np.unique(_rounded(vals),
+                                    return_inverse=True)
+        if np.ndim(bins) == 0 and distinct.size <= int(bins):  # type: ignore[arg-type]  # a few values: one group each
+            groups = [(float(np.median(vals[which == i])), which == i) for i in range(distinct.size)]
         else:
             edges = _bin_edges(vals, bins, log=(by == "flux"))
             idx = np.searchsorted(edges, vals, side="right") - 1
