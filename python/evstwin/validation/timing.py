@@ -216,7 +216,8 @@ def timing_bias_summary(
         vals = np.asarray(table[col], dtype=np.float64)
         distinct, which = np.unique(_rounded(vals),
                                     return_inverse=True)
-        if np.ndim(bins) == 0 and distinct.size <= int(bins):  # type: ignore[arg-type]  # a few values: one group each
+        # A few values (at most ``bins``): one group each.
+        if np.ndim(bins) == 0 and distinct.size <= int(bins):  # type: ignore[arg-type]
             groups = [(float(np.median(vals[which == i])), which == i) for i in range(distinct.size)]
         else:
             edges = _bin_edges(vals, bins, log=(by == "flux"))
