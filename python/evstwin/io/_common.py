@@ -413,15 +413,39 @@ def remove_quietly(*paths: Path) -> None:
             path.unlink()
 
 
+def one_line(err: BaseException | str, limit: int = 400) -> str:
+    """An error's message on one line (whitespace runs collapsed), at most ``limit`` characters."""
+    text = " ".join(str(err).split()) if not isinstance(err, BaseException) or str(err) else type(err).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 @contextlib.contextmanager
 def decoding(path: Path, library: str) -> Iterator[None]:
-    """Turn a decoding library's errors into ValueError naming the file."""
+    """Turn whatever a decoding library raises into one-line ValueError naming the file.
+
+    evstwin's own one-line ValueErrors naming the file, and the OSErrors of a missing or
+    unreadable file, pass as they are; anything else (RuntimeError, EOFError, MemoryError for
+    a size read from a corrupted header, zlib.error, and BaseExceptions such as pyo3's
+    ``PanicException``) becomes ValueError. KeyboardInterrupt, SystemExit and GeneratorExit pass through.
+    """
     try:
         yield
-    except (ValueError, TypeError, FileNotFoundError, MemoryError):
+    except (KeyboardInterrupt, SystemExit, GeneratorExit):
         raise
-    except Exception as err:  # the libraries raise RuntimeError, OSError, EOFError, bare Exception...
-        raise ValueError(f"{str(path)!r}: {library} could not decode the file: {err}") from err
+    except (FileNotFoundError, PermissionError, IsADirectoryError) as err:  # access, not content
+        if "\n" in str(err):
+            raise type(err)(err.errno, one_line(err)) from err
+        raise
+    except ValueError as err:  # evstwin's own checks name the file; a library's may not
+        if type(err) is ValueError and "\n" not in str(err) and str(path) in str(err):
+            raise
+        raise ValueError(f"{str(path)!r}: {library} could not decode the file: {one_line(err)}") from err
+    except BaseException as err:  # noqa: BLE001 - the libraries raise RuntimeError, EOFError, PanicException...
+        if type(err).__name__ == "MissingExtraError":
+            raise
+        raise ValueError(
+            f"{str(path)!r}: {library} could not decode the file: {type(err).__name__}: {one_line(err)}"
+        ) from err
 
 
 def decoded(path: Path, library: str, packets: Iterator[np.ndarray]) -> Iterator[np.ndarray]:

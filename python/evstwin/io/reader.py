@@ -12,8 +12,19 @@ from typing import Any
 import numpy as np
 
 from ..sensor import EVENT_DTYPE
-from . import hdf5
-from ._common import SIZE_MAX, EventSource, FileFormat, Meta, PathLike, Size, check_header_size, rechunk
+from . import _isolation, hdf5
+from ._common import (
+    SIZE_MAX,
+    EventSource,
+    FileFormat,
+    Meta,
+    PathLike,
+    Size,
+    check_header_size,
+    decoded,
+    decoding,
+    rechunk,
+)
 from ._registry import format_for
 
 
@@ -63,7 +74,13 @@ class EventStream:
 
     def _open(self) -> EventSource:
         assert self._format.open_source is not None
-        source = self._format.open_source(self.path, self._chunk)
+        library = _isolation.LIBRARIES.get(self._format.name, self._format.name)
+        if _isolation.isolated(self._format):
+            source = _isolation.open_source(self._format, self.path, self._chunk)
+        else:
+            with decoding(self.path, library):
+                source = self._format.open_source(self.path, self._chunk)
+            source.packets = decoded(self.path, library, source.packets)
         meta = source.meta
         meta.update(format=self._format.name, path=str(self.path))
         if self._size is not None:
@@ -178,6 +195,8 @@ def read_time_window(path: PathLike, t_start_us: int, t_end_us: int) -> np.ndarr
         raise ValueError(f"t_end_us = {t_end_us} is before t_start_us = {t_start_us}")
     p, fmt = _existing(path)
     if fmt.name == "hdf5":
+        if _isolation.isolated(fmt):
+            return _isolation.read_window(fmt, p, int(t_start_us), int(t_end_us))
         return hdf5.read_window(p, int(t_start_us), int(t_end_us))
     parts = [c[(c["t"] >= t_start_us) & (c["t"] < t_end_us)] for c in iter_events(p)]
     events = np.concatenate(parts) if parts else np.empty(0, EVENT_DTYPE)
