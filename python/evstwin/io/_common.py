@@ -235,7 +235,7 @@ def validate_truth(truth: Any) -> Truth:
                 raise TypeError(
                     f"meta['truth'][{name!r}][{field!r}] must be a numeric array; got dtype {arr.dtype}"
                 )
-            out[name][field] = arr
+            out[name][field] = arr.astype(arr.dtype.newbyteorder("="), copy=False)  # native byte order
     return out
 
 
@@ -373,7 +373,8 @@ def check_header_size(where: Path, width: Any, height: Any, limit: int = SIZE_MA
             value = value.item()
         if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= int(value) <= limit:
             raise ValueError(
-                f"{str(where)!r}: the header's {name} = {value!r} is not an integer in [1, {limit}]"
+                f"{str(where)!r}: the header's {name} = {one_line(repr(value), 80)} is not an integer "
+                f"in [1, {limit}]"
             )
         out.append(int(value))
     return out[0], out[1]

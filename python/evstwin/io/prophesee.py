@@ -328,6 +328,9 @@ def open_raw_source(path: Path, chunk: int) -> EventSource:
 
 def open_dat_source(path: Path, chunk: int) -> EventSource:
     faery = require("faery")
+    declared = header_size(prophesee_header(path))
+    if declared is not None:  # faery drops a size it cannot use: name it here instead
+        check_header_size(path, *declared)
     with decoding(path, "faery"), faery.dat.Decoder(path, None, "dat2") as decoder:
         dimensions = decoder.dimensions
         event_type = decoder.event_type

@@ -3,7 +3,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
+import re
+import weakref
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
@@ -33,6 +37,73 @@ def _destination(path: PathLike) -> tuple[Path, FileFormat]:
     return p, fmt
 
 
+SPACE_MARGIN_BYTES = 512 * 1024
+"""Free space [bytes] a writer leaves on the destination's file system beyond what the next
+chunk (or the close) may need: a write that would go below it raises OSError(ENOSPC) first."""
+
+# Upper bounds of the bytes an encoder writes per event and per microsecond of recording, and
+# of what it holds in memory before writing (HDF5's chunk cache: one 64 Ki-event chunk of each
+# column; AEDAT: one pending packet). Text: a 20-digit t, two 5-digit coordinates, p, 4 separators.
+_BYTES_PER_EVENT = {"hdf5": 16, "npz": 16, "txt": 36, "csv": 36, "aedat4": 17, "raw": 8, "dat": 8, "es": 8}
+_BYTES_PER_US = {"hdf5": 8 / 1000, "raw": 2 / 4096, "es": 1 / 1000}
+_BUFFERED = {"hdf5": 1 << 20, "aedat4": 17 << 16}
+_BUFFERED_DEFAULT = 64 * 1024
+
+
+class _Held:
+    """What an open writer must release: its lock, its encoder and its temporary files."""
+
+    def __init__(self, lock: Any) -> None:
+        self.lock = lock
+        self.encoder: ChunkEncoder | None = None
+        self.paths: list[Path] = []
+
+    def release(self) -> None:
+        encoder, self.encoder = self.encoder, None
+        try:
+            if encoder is not None:
+                with contextlib.suppress(Exception):
+                    encoder.abort()
+        finally:
+            remove_quietly(*self.paths)
+            self.paths.clear()
+            lock, self.lock = self.lock, None
+            if lock is not None:
+                remove_quietly(Path(lock.name))
+                lock.close()  # closing the descriptor releases the flock
+
+
+_TEMPORARY = re.compile(r"^\.\.?(?P<name>.+)\.tmp-(?P<pid>\d+)-[0-9a-f]{8}(?:\.[a-z0-9-]+-\d+-[0-9a-f]{8})?$")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: alive, another user's
+        return True
+    return True
+
+
+def remove_orphans(path: Path) -> list[Path]:
+    """Remove the temporary files that a dead writer of ``path`` left beside it (the pid in
+    their name is no longer running: killed, out of memory, power cut); return them. Called by
+    every writer of ``path`` while it holds the lock, so no live writer of ``path`` can own
+    them; files of a pid that is alive are left (the pid may have been reused)."""
+    removed = []
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(path.parent):
+            match = _TEMPORARY.match(entry.name)
+            if match is None or match["name"] != path.name or int(match["pid"]) == os.getpid():
+                continue
+            if not _pid_alive(int(match["pid"])):
+                orphan = path.with_name(entry.name)
+                remove_quietly(orphan)
+                removed.append(orphan)
+    return removed
+
+
 class EventWriter:
     """An event file being written chunk by chunk; make one with :func:`open_event_writer`.
 
@@ -50,17 +121,26 @@ class EventWriter:
         self.path = path
         self.format = fmt.name
         self._spec = spec
-        self._lock = _lock_output(path)
-        self._tmp = temporary_path(path)
         self._count = 0
+        self._first_t: int | None = None
         self._last_t: int | None = None
         self._open = True
         self._truth_spool: dict[str, dict[str, SpooledColumn]] = {}
+        self._spooled_bytes = 0
+        # What a failure, abort() or the garbage collector must undo; the finalizer holds this,
+        # not the writer, so an abandoned writer still removes its files (at the latest at exit).
+        self._held = _Held(_lock_output(path))
+        self._finalizer = weakref.finalize(self, self._held.release)
         try:
+            remove_orphans(path)
+            self._tmp = temporary_path(path)
+            self._held.paths.append(self._tmp)
+            self._check_space(_BUFFERED.get(self.format, _BUFFERED_DEFAULT), "opening it")
             self._encoder: ChunkEncoder = fmt.open_encoder(self._tmp, spec)
+            self._held.encoder = self._encoder
         except BaseException:
-            remove_quietly(self._tmp)
-            self._unlock()
+            self._open = False
+            self._finalizer()
             raise
 
     @property
@@ -78,7 +158,9 @@ class EventWriter:
         width) sorted by ``t``, none earlier than the previous chunk's last event, with
         coordinates inside the sensor. A chunk that fails these checks raises ValueError/
         TypeError and writes nothing (the writer stays usable); an error of the encoder aborts
-        the writer."""
+        the writer, as does a chunk the destination has no space for (OSError ENOSPC, checked
+        before writing with :data:`SPACE_MARGIN_BYTES` to spare). Big-endian and other
+        non-native arrays are converted to their values."""
         self._check_open()
         ev = as_event_array(events)
         if len(ev) == 0:
@@ -92,12 +174,45 @@ class EventWriter:
                 f"(max x = {x_max}, max y = {y_max}); fix meta['width']/meta['height']"
             )
         try:
+            self._check_space(self._chunk_bytes(ev), f"the next {len(ev)} events")
             self._encoder.write(ev)
         except BaseException:
             self.abort()
             raise
+        if self._first_t is None:
+            self._first_t = int(ev["t"][0])
         self._count += len(ev)
         self._last_t = int(ev["t"][-1])
+
+    def _chunk_bytes(self, ev: np.ndarray) -> int:
+        """About the most bytes the encoder may write for ``ev`` (an upper bound, not a guess):
+        the records, the time-driven words (HDF5's millisecond index, EVT 3.0's TIME_HIGH, ES
+        overflow bytes) and what the encoder may hold unwritten."""
+        start = self._last_t if self._last_t is not None else int(ev["t"][0])
+        span_us = max(0, int(ev["t"][-1]) - start)
+        per_us = _BYTES_PER_US.get(self.format, 0.0)
+        return (
+            len(ev) * _BYTES_PER_EVENT.get(self.format, 40)
+            + int(span_us * per_us)
+            + _BUFFERED.get(self.format, _BUFFERED_DEFAULT)
+        )
+
+    def _check_space(self, needed: int, what: str) -> None:
+        """OSError(ENOSPC) naming the path unless the destination's file system has ``needed``
+        bytes plus :data:`SPACE_MARGIN_BYTES` free (libhdf5 crashes the process in its close
+        once a write has hit ENOSPC, so the writer must stop before the disk is full)."""
+        try:
+            stat = os.statvfs(self.path.parent)
+        except (AttributeError, OSError):  # pragma: no cover - no statvfs (Windows) or a vanished dir
+            return
+        free = stat.f_bavail * stat.f_frsize
+        wanted = needed + SPACE_MARGIN_BYTES
+        if free < wanted:
+            raise OSError(
+                errno.ENOSPC,
+                f"no space left to write {str(self.path)!r}: {free} bytes free on its file system, "
+                f"about {wanted} needed for {what} (margin included); the partial file was removed",
+            )
 
     def append_truth(self, name: str, fields: Mapping[str, Any]) -> None:
         """Append rows to the ground-truth track ``name`` (field -> 1-D numeric array, all of
@@ -117,7 +232,7 @@ class EventWriter:
             arr = np.asarray(values)
             if arr.ndim != 1 or arr.dtype.kind not in "biuf":
                 raise TypeError(f"truth {name!r}[{field!r}] must be a 1-D numeric array; got {arr.dtype} {arr.shape}")
-            arrays[field] = arr
+            arrays[field] = arr.astype(arr.dtype.newbyteorder("="), copy=False)  # native byte order
         lengths = {len(a) for a in arrays.values()}
         if len(lengths) != 1:
             raise ValueError(f"truth {name!r}: fields must have one length; got {sorted(lengths)}")
@@ -128,10 +243,23 @@ class EventWriter:
                                      arr.dtype.newbyteorder("="))
                 for i, (field, arr) in enumerate(arrays.items())
             }
+            self._held.paths.extend(column.path for column in track.values())
         elif set(track) != set(arrays):
             raise ValueError(f"truth {name!r}: fields must be {sorted(track)} every time; got {sorted(arrays)}")
-        for field, arr in arrays.items():
-            track[field].append(arr)
+        else:
+            lossy = {f: f"{a.dtype} into {track[f].dtype}" for f, a in arrays.items()
+                     if not np.can_cast(a.dtype, track[f].dtype, casting="safe")}
+            if lossy:
+                raise TypeError(f"truth {name!r}: the first rows fixed the fields' dtypes; cannot append {lossy}")
+        nbytes = sum(arr.nbytes for arr in arrays.values())
+        try:
+            self._check_space(nbytes, f"{len(next(iter(arrays.values())))} rows of truth {name!r}")
+            for field, arr in arrays.items():
+                track[field].append(arr)
+        except BaseException:
+            self.abort()
+            raise
+        self._spooled_bytes += nbytes
 
     def update_meta(self, meta: Mapping[str, Any]) -> None:
         """Replace ``scenario``/``truth`` and add extra scalars before :meth:`close` (for
@@ -143,46 +271,43 @@ class EventWriter:
         self._spec.update(meta)
 
     def close(self) -> Path:
-        """Finish the file and rename it onto ``path``; return ``path``. Closing twice is a no-op."""
+        """Finish the file and rename it onto ``path``; return ``path``. Closing twice is a no-op.
+        On any failure the temporary files are removed and nothing appears under ``path``."""
         if not self._open:
             return self.path
+        self._open = False
         try:
             for name, track in self._truth_spool.items():
                 if name in self._spec.truth:
                     raise ValueError(f"truth {name!r} was given both by append_truth and meta['truth']")
                 self._spec.truth[name] = dict(track)  # type: ignore[arg-type]  # encoders copy them in blocks
+            self._check_space(self._closing_bytes(), "finishing it")
             self._encoder.close(self._spec)
+            self._held.encoder = None
             os.replace(self._tmp, self.path)
-        except BaseException:
-            self._open = False
-            remove_quietly(self._tmp)
-            raise
         finally:
-            self._drop_spool()
-            self._unlock()
-        self._open = False
+            self._finalizer()  # on success the temporary name is gone already
         return self.path
 
-    def _unlock(self) -> None:
-        if self._lock is not None:
-            lock, self._lock = self._lock, None
-            remove_quietly(Path(lock.name))
-            lock.close()  # closing the descriptor releases the flock
-
-    def _drop_spool(self) -> None:
-        remove_quietly(*(c.path for track in self._truth_spool.values() for c in track.values()))
+    def _closing_bytes(self) -> int:
+        """About the most bytes :meth:`close` writes: the truth (spooled and given in meta), and
+        for NPZ the whole archive (the records are compressed into it at close)."""
+        given = sum(
+            np.asarray(v).nbytes
+            for fields in self._spec.truth.values()
+            for v in fields.values()
+            if not isinstance(v, SpooledColumn)
+        )
+        archive = self._count * _BYTES_PER_EVENT["npz"] if self.format == "npz" else 0
+        scenario = len(self._spec.scenario or "")
+        return self._spooled_bytes + given + archive + scenario + _BUFFERED.get(self.format, _BUFFERED_DEFAULT)
 
     def abort(self) -> None:
-        """Drop the file being written: the temporary file is removed, ``path`` is not touched."""
+        """Drop the file being written: the temporary files are removed, ``path`` is not touched."""
         if not self._open:
             return
         self._open = False
-        try:
-            self._encoder.abort()
-        finally:
-            remove_quietly(self._tmp)
-            self._drop_spool()
-            self._unlock()
+        self._finalizer()
 
     def _check_open(self) -> None:
         if not self._open:
@@ -202,19 +327,33 @@ class EventWriter:
 
 def _lock_output(path: Path) -> Any:
     """An exclusive advisory lock on ``.<name>.lock`` beside ``path`` (None where the platform
-    has no flock); FileExistsError if another writer holds it."""
+    has no flock); FileExistsError if another writer holds it. The lock file is removed at
+    close; a lock taken on a file another writer was removing at that moment is taken again."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
         return None
     lock_path = path.with_name(f".{path.name}.lock")
-    fh = open(lock_path, "a+")  # noqa: SIM115 - held open while writing, closed by _unlock
-    try:
-        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        fh.close()
-        raise FileExistsError(f"another writer is writing {str(path)!r} now; wait for it or choose another path") from None
-    return fh
+    for _ in range(100):
+        fh = open(lock_path, "a+")  # noqa: SIM115 - held open while writing, closed by _Held.release
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.close()
+            raise FileExistsError(
+                f"another writer is writing {str(path)!r} now; wait for it or choose another path"
+            ) from None
+        except OSError:  # pragma: no cover - a file system without flock
+            fh.close()
+            return None
+        try:
+            same = os.stat(lock_path).st_ino == os.fstat(fh.fileno()).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            return fh
+        fh.close()  # the previous writer removed this file after we opened it: lock the new one
+    raise FileExistsError(f"cannot lock {str(lock_path)!r}: it keeps being replaced")  # pragma: no cover
 
 
 def open_event_writer(
