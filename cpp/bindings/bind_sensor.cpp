@@ -166,6 +166,8 @@ void register_sensor(py::module_& m) {
         .def_property_readonly("last_time_s", &Sensor::last_time_s)
         .def_property("max_events", &Sensor::max_events, &Sensor::set_max_events)
         .def_readonly_static("DEFAULT_MAX_EVENTS", &Sensor::DEFAULT_MAX_EVENTS)
+        .def_readonly_static("MAX_THREADS", &Sensor::MAX_THREADS)
+        .def_readonly_static("MAX_PIXELS", &Sensor::MAX_PIXELS)
         .def_property("num_threads", &Sensor::num_threads,
                       [](Sensor& s, std::optional<int> n) { s.set_num_threads(threads_arg(n)); });
 }

@@ -48,6 +48,8 @@ class Sensor:
     num_threads: int
     max_events: int
     DEFAULT_MAX_EVENTS: int
+    MAX_THREADS: int
+    MAX_PIXELS: int
     def __init__(
         self, width: int, height: int, params: PixelParams, seed: int = 0, num_threads: int | None = None
     ) -> None: ...

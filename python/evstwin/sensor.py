@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import operator
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -16,6 +17,19 @@ EVENT_DTYPE: np.dtype = _core.EVENT_DTYPE
 
 TRACE_DTYPE: np.dtype = _core.TRACE_DTYPE
 """Probe record: current_a [A], log_current, filtered, reference [ln(I / 1 A)]."""
+
+MAX_THREADS: int = int(_core.Sensor.MAX_THREADS)
+"""Most engine threads (1024): far above any machine's cores, far below the few thousand at
+which the OpenMP runtime exits or crashes."""
+
+MAX_PIXELS: int = int(_core.Sensor.MAX_PIXELS)
+"""Most pixels of one sensor (2**26, 8192 x 8192; 5.9 GB of pixel state), refused up front."""
+
+DEFAULT_MAX_EVENTS: int = int(_core.Sensor.DEFAULT_MAX_EVENTS)
+"""Events one ``run`` call may produce by default (1e8, about 5 GB while collected)."""
+
+MAX_MAX_EVENTS = 2**32 - 1
+"""Largest ``max_events`` (the engine sorts one call's events with 32-bit indices)."""
 
 
 class Sensor:
@@ -38,13 +52,18 @@ class Sensor:
         params = PixelParams() if params is None else params
         if not isinstance(params, PixelParams):
             raise TypeError(f"params must be an evstwin.PixelParams; got {type(params).__name__}")
-        width = _as_int("width", width)
-        height = _as_int("height", height)
+        width = _in_range("width", _as_int("width", width), 1, 65535)
+        height = _in_range("height", _as_int("height", height), 1, 65535)
+        if width * height > MAX_PIXELS:
+            raise ValueError(
+                f"width * height must be at most {MAX_PIXELS} pixels (8192 x 8192); got width={width}, "
+                f"height={height}: {width * height} pixels, {width * height * 88 / 1e9:.3g} GB of pixel state"
+            )
         seed = _as_int("seed", seed)
         if not 0 <= seed < 2**64:
             raise ValueError(f"seed must be in [0, 2**64); got seed={seed}")
         if num_threads is not None:
-            num_threads = _as_int("num_threads", num_threads)
+            num_threads = _in_range("num_threads", _as_int("num_threads", num_threads), 1, MAX_THREADS, "or None")
         self.params = params
         self._core = _core.Sensor(width, height, params.to_core(), seed, num_threads)
         if max_events is not None:
@@ -52,17 +71,17 @@ class Sensor:
 
     @property
     def max_events(self) -> int:
-        """Most events one ``run``/``run_pixels`` call may produce (default
-        ``DEFAULT_MAX_EVENTS``, 1e8: about 4 GB while collected). A call that passes it raises
-        ValueError while producing them, before memory runs out; ``reset()`` the sensor then."""
+        """Most events one ``run``/``run_probe``/``run_pixels`` call may produce (default
+        ``DEFAULT_MAX_EVENTS``, 1e8: about 5 GB while collected, so a flood of events stops with
+        a ValueError long before memory runs out). Counted while the events are produced; a
+        call that passes it leaves the pixels half advanced, and the sensor refuses further
+        calls (RuntimeError) until ``reset()``. Raise it, up to 2**32 - 1, if memory allows;
+        or give ``max_events=`` to one call."""
         return int(self._core.max_events)
 
     @max_events.setter
     def max_events(self, value: int) -> None:
-        value = _as_int("max_events", value)
-        if value < 1:
-            raise ValueError(f"max_events must be >= 1; got max_events={value}")
-        self._core.max_events = value
+        self._core.max_events = _max_events(value)
 
     @property
     def width(self) -> int:
@@ -90,32 +109,46 @@ class Sensor:
     def num_threads(self) -> int:
         return int(self._core.num_threads)
 
-    def run(self, photon_rate: npt.ArrayLike, t_s: npt.ArrayLike) -> np.ndarray:
+    def run(self, photon_rate: npt.ArrayLike, t_s: npt.ArrayLike, *, max_events: int | None = None) -> np.ndarray:
         """Advance the sensor through the samples and return their events.
 
         photon_rate: (T, height, width) float32/float64 array, photons/s arriving on each
             pixel at each sample time (read without a copy when C-contiguous).
         t_s: the T sample times [s], strictly increasing, after the previous run's last.
 
+        max_events: this call's cap on its events (default: the sensor's ``max_events``).
+
+        Big-endian or unaligned arrays are converted to native values (one copy).
+
         Returns an EVENT_DTYPE array sorted by t (microseconds, from t = 0 s). The first
         sample after construction or reset only sets the steady state: no event fires.
         """
-        return self._core.run(_as_array(photon_rate), _as_array(t_s, "t_s"))
+        with self._cap(max_events):
+            return self._core.run(_as_array(photon_rate), _as_array(t_s, "t_s"))
 
     def run_probe(
-        self, photon_rate: npt.ArrayLike, t_s: npt.ArrayLike, pixels: Sequence[tuple[int, int]]
+        self, photon_rate: npt.ArrayLike, t_s: npt.ArrayLike, pixels: Sequence[tuple[int, int]], *,
+        max_events: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Like run, and also return a (T, len(pixels)) TRACE_DTYPE array of the internal
-        signals (current, log current, filtered level, reference) of the pixels (x, y)."""
+        signals (current, log current, filtered level, reference) of the pixels (x, y), each
+        listed once."""
         index = []
-        for x, y in pixels:
+        for j, xy in enumerate(pixels):
+            try:
+                x, y = (_as_int("pixels", v) for v in xy)
+            except (TypeError, ValueError):
+                raise TypeError(f"pixels must be (x, y) pairs of integers; got pixels[{j}]={xy!r}") from None
             if not (0 <= x < self.width and 0 <= y < self.height):
                 raise ValueError(f"pixels must lie on the {self.width}x{self.height} sensor; got (x, y)=({x}, {y})")
-            index.append(int(y) * self.width + int(x))
-        events, trace = self._core.run_probe(_as_array(photon_rate), _as_array(t_s, "t_s"), index)
+            index.append(y * self.width + x)
+        with self._cap(max_events):
+            events, trace = self._core.run_probe(_as_array(photon_rate), _as_array(t_s, "t_s"), index)
         return events, trace
 
-    def run_pixels(self, pixels: npt.ArrayLike, photon_rate: npt.ArrayLike, t_s: npt.ArrayLike) -> np.ndarray:
+    def run_pixels(
+        self, pixels: npt.ArrayLike, photon_rate: npt.ArrayLike, t_s: npt.ArrayLike, *, max_events: int | None = None
+    ) -> np.ndarray:
         """Advance only some pixels through their own, finer sample times.
 
         pixels: row-major indices ``y * width + x`` (no repeats); photon_rate: (T, len(pixels))
@@ -123,8 +156,23 @@ class Sensor:
         skips, for these pixels, the samples they have already passed, so a pixel near a fast
         source can be sub-sampled while the rest of the array keeps the base rate. Each
         pixel's random numbers follow its own sample counter. Returns the events, sorted.
+        max_events: this call's cap on its events (default: the sensor's ``max_events``).
         """
-        return self._core.run_pixels(_as_array(pixels, "pixels"), _as_array(photon_rate), _as_array(t_s, "t_s"))
+        with self._cap(max_events):
+            return self._core.run_pixels(_as_array(pixels, "pixels"), _as_array(photon_rate), _as_array(t_s, "t_s"))
+
+    @contextlib.contextmanager
+    def _cap(self, max_events: int | None) -> Iterator[None]:
+        """The sensor's max_events, or for one call the given one."""
+        if max_events is None:
+            yield
+            return
+        saved = self._core.max_events
+        self._core.max_events = _max_events(max_events)
+        try:
+            yield
+        finally:
+            self._core.max_events = saved
 
     def reset(self) -> None:
         """Forget the past (the next sample is a first sample); mismatch is kept."""
@@ -145,6 +193,16 @@ def _as_int(name: str, value: object) -> int:
         return operator.index(value)  # type: ignore[arg-type]
     except TypeError:
         raise TypeError(f"{name} must be an integer; got {name}={value!r}") from None
+
+
+def _in_range(name: str, value: int, lo: int, hi: int, extra: str = "") -> int:
+    if not lo <= value <= hi:
+        raise ValueError(f"{name} must be in [{lo}, {hi}]{' (' + extra + ')' if extra else ''}; got {name}={value}")
+    return value
+
+
+def _max_events(value: object) -> int:
+    return _in_range("max_events", _as_int("max_events", value), 1, MAX_MAX_EVENTS)
 
 
 def _as_array(value: npt.ArrayLike, name: str = "photon_rate") -> np.ndarray:

@@ -104,4 +104,79 @@ TEST(huge_mean_counts_stay_defined) {
     for (auto& e : ev) CHECK(e.x < 2 && e.y == 0);
 }
 
+TEST(limits_are_refused_up_front) {
+    // Issue 11: the OpenMP runtime crashes or exits at thousands of threads; a 30000 x 30000
+    // sensor failed in the allocation after minutes.
+    CHECK_THROWS(Sensor(4, 4, ideal(), 0, Sensor::MAX_THREADS + 1));
+    CHECK_THROWS(Sensor(4, 4, ideal(), 0, 100000));
+    Sensor ok(4, 4, ideal(), 0, Sensor::MAX_THREADS);
+    CHECK(ok.num_threads() == Sensor::MAX_THREADS);
+    CHECK_THROWS(Sensor(30000, 30000, ideal()));
+    CHECK_THROWS(ok.set_max_events(0));
+    CHECK_THROWS(ok.set_max_events(std::size_t{1} << 32));
+    // Times beyond int64 microseconds are refused by run_pixels as by run.
+    const std::uint32_t px[1] = {0};
+    const double rate[1] = {1e6}, t[1] = {1e13};
+    CHECK_THROWS(ok.run_pixels(px, 1, rate, t, 1));
+    CHECK_THROWS(ok.run(rate, t, 1));
+    // float(1e20) rounds up to 1.00000002e20: above the limit, as the double is.
+    const float big[16] = {1e20f, 1e20f, 1e20f, 1e20f, 1e20f, 1e20f, 1e20f, 1e20f,
+                           1e20f, 1e20f, 1e20f, 1e20f, 1e20f, 1e20f, 1e20f, 1e20f};
+    const double t1[1] = {1e-3};
+    CHECK_THROWS(ok.run(big, t1, 1));
+    // A probe pixel listed twice would leave one trace column empty.
+    std::vector<std::uint32_t> probe{1, 1};
+    std::vector<TraceSample> trace;
+    const double r16[16] = {1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6, 1e6};
+    CHECK_THROWS(ok.run(r16, t1, 1, &probe, &trace));
+    CHECK(ok.samples_seen() == 0);
+}
+
+/// Rates that jump between lo and hi every sample (the first sample only sets the state).
+static std::vector<Event> jumps(Sensor& s, int n_samples, double lo, double hi) {
+    const std::size_t npix = s.num_pixels();
+    std::vector<double> rate(n_samples * npix), t(n_samples);
+    for (int k = 0; k < n_samples; ++k) {
+        t[k] = (k + 1) * 1e-3;
+        for (std::size_t i = 0; i < npix; ++i) rate[k * npix + i] = k % 2 ? hi : lo;
+    }
+    return s.run(rate.data(), t.data(), t.size());
+}
+
+TEST(max_events_stops_a_flood_the_same_way_on_any_thread_count) {
+    // Issue 11's flood: theta 1e-3, no refractory period, rates jumping 1e-30 <-> 1e20: about
+    // 3.5e4 events per pixel and jump, 1e8 for these 1024 pixels and 3 jumps without the cap.
+    PixelParams p = ideal();
+    p.theta_on = p.theta_off = 1e-3;
+    for (int threads : {1, 2, 4}) {
+        Sensor s(32, 32, p, 0, threads);
+        s.set_max_events(100000);
+        bool thrown = false;
+        try {
+            jumps(s, 4, 1e-30, 1e20);
+        } catch (const std::length_error& e) {
+            thrown = std::string(e.what()).find("max_events=100000") != std::string::npos;
+        }
+        CHECK(thrown);
+        // The pixels are half advanced: the sensor refuses to go on until reset.
+        bool refused = false;
+        try {
+            jumps(s, 2, 1e6, 1e8);
+        } catch (const std::logic_error& e) {
+            refused = std::string(e.what()).find("reset()") != std::string::npos;
+        }
+        CHECK(refused);
+        s.reset();
+        s.set_max_events(1000000);
+        p.theta_on = p.theta_off = 1e-2;  // ln 100 / 0.01: 460 events a pixel, 4.7e5 in all
+        Sensor after(32, 32, p, 0, threads), fresh(32, 32, p, 0, 1);
+        after.set_max_events(1000000);
+        auto a = jumps(after, 2, 1e6, 1e8), b = jumps(fresh, 2, 1e6, 1e8);
+        CHECK(a.size() > 400000 && a.size() == b.size() &&
+              std::memcmp(a.data(), b.data(), a.size() * sizeof(Event)) == 0);
+        jumps(s, 2, 1e6, 1e6);  // usable again after reset
+        CHECK(s.samples_seen() == 2);
+    }
+}
+
 TEST_MAIN()

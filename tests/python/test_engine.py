@@ -544,10 +544,11 @@ def test_chunk_boundaries_inside_a_microsecond_keep_the_order_of_one_run() -> No
 # -- hardening (issue 11) ------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("n", [1025, 5000, 100_000, 2**31 - 1])
+@pytest.mark.parametrize("n", [1025, 5000, 100_000, 2**31 - 1, 2**31, 2**64, 0, -1])
 def test_thread_counts_beyond_the_bound_are_refused_not_crashed(n: int) -> None:
     with pytest.raises(ValueError, match=r"num_threads must be in \[1, 1024\].*num_threads=" + str(n)):
         Sensor(8, 8, PixelParams(), num_threads=n)
+    assert Sensor(8, 8, PixelParams(), num_threads=1024).num_threads == evstwin.sensor.MAX_THREADS == 1024
 
 
 def test_non_native_and_unaligned_rates_give_the_native_events() -> None:
@@ -590,14 +591,30 @@ def test_an_event_flood_stops_at_max_events_before_memory_runs_out() -> None:
     # pixels make ~4.7e8 events from 4 samples; the guard stops the call while producing them.
     p = PixelParams(theta_on=1e-3, theta_off=1e-3, refractory_s=0.0, dark_model="none", photon_shot_noise=False,
                     shot_noise_rate_hz=0.0, leak_rate_hz=0.0, cutoff_hz=None)
-    sensor = Sensor(64, 64, p, num_threads=2, max_events=200_000)
     rates = np.empty((4, 64, 64))
     rates[0::2], rates[1::2] = 1e-30, 1e20
-    with pytest.raises(ValueError, match=r"more than max_events=200000 events; use shorter chunks"):
-        sensor.run(rates, np.arange(1, 5) * 1e-3)
-    assert Sensor(4, 4, PixelParams()).max_events == evstwin._core.Sensor.DEFAULT_MAX_EVENTS == 100_000_000
-    with pytest.raises(ValueError, match="max_events must be >= 1"):
-        Sensor(4, 4, PixelParams(), max_events=0)
+    t4 = np.arange(1, 5) * 1e-3
+    for threads in (1, 2):
+        sensor = Sensor(64, 64, p, num_threads=threads, max_events=200_000)
+        with pytest.raises(ValueError, match=r"more than max_events=200000 events \(about 52 bytes each.*use shorter "
+                                             r"chunks, or raise max_events"):
+            sensor.run(rates, t4)
+        # Its pixels are half advanced: refused until reset, then as new.
+        with pytest.raises(RuntimeError, match=r"stopped part-way.*reset\(\)"):
+            sensor.run(rates[:1], [1.0])
+        sensor.reset()
+        assert len(sensor.run(rates[:1], [1.0])) == 0
+    # The default, its bounds, and a cap for one call only.
+    assert Sensor(4, 4, PixelParams()).max_events == evstwin.sensor.DEFAULT_MAX_EVENTS == 100_000_000
+    for bad in (0, -1, 2**32, 2**70):
+        with pytest.raises(ValueError, match=rf"max_events must be in \[1, 4294967295\]; got max_events={bad}"):
+            Sensor(4, 4, PixelParams(), max_events=bad)
+    with pytest.raises(TypeError, match="max_events must be an integer; got max_events=1.5"):
+        Sensor(4, 4, PixelParams(), max_events=1.5)  # type: ignore[arg-type]
+    sensor = Sensor(64, 64, p, num_threads=2)
+    with pytest.raises(ValueError, match="max_events=1000 events"):
+        sensor.run_pixels(np.arange(64), rates.reshape(4, -1)[:, :64], t4, max_events=1000)
+    assert sensor.max_events == 100_000_000  # restored after the call
     # Below the cap nothing changes: the same events with and without a (generous) guard.
     coarse = p.replace(theta_on=0.05, theta_off=0.05)
     few = np.full((3, 64, 64), 1e8)
@@ -606,3 +623,26 @@ def test_an_event_flood_stops_at_max_events_before_memory_runs_out() -> None:
     guarded = Sensor(64, 64, coarse, max_events=200_000).run(few, t)
     assert 150_000 < len(guarded) < 200_000
     assert np.array_equal(guarded, Sensor(64, 64, coarse).run(few, t))
+    assert np.array_equal(guarded, Sensor(64, 64, coarse, num_threads=2).run(few, t, max_events=len(guarded)))
+    with pytest.raises(ValueError, match=f"max_events={len(guarded) - 1} "):
+        Sensor(64, 64, coarse, num_threads=2).run(few, t, max_events=len(guarded) - 1)
+
+
+def test_sizes_and_arguments_out_of_range_are_value_errors() -> None:
+    # Issue 9: a 30000 x 30000 sensor ended in MemoryError after minutes; huge integers were
+    # pybind11's multi-line "incompatible function arguments" TypeError.
+    with pytest.raises(ValueError, match=r"width \* height must be at most 67108864 pixels.*width=30000, "
+                                         r"height=30000: 900000000 pixels, 79.2 GB"):
+        Sensor(30000, 30000)
+    for name, value in (("width", 2**40), ("height", 0), ("width", 65536)):
+        with pytest.raises(ValueError, match=rf"{name} must be in \[1, 65535\]; got {name}={value}"):
+            Sensor(**{"width": 4, "height": 4, name: value})  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="width must be an integer; got width=True"):
+        Sensor(True, 4)  # type: ignore[arg-type]
+    sensor = Sensor(4, 4)
+    rate = np.full((1, 4, 4), 1e6)
+    with pytest.raises(ValueError, match="probe pixels must not repeat; got pixel 1 twice"):
+        sensor.run_probe(rate, [1.0], [(1, 0), (1, 0)])
+    with pytest.raises(TypeError, match=r"pixels must be \(x, y\) pairs of integers; got pixels\[0\]=\(1.5, 0\)"):
+        sensor.run_probe(rate, [1.0], [(1.5, 0)])  # type: ignore[list-item]
+    assert sensor.samples_seen == 0

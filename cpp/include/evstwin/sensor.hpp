@@ -39,10 +39,17 @@ public:
     /// (5000, 2^31 - 1) at which the OpenMP runtime exits or crashes.
     static constexpr int MAX_THREADS = 1024;
     /// Default cap on the events of one run / run_pixels call: 1e8 events are about 4 GB
-    /// while collected (24-byte working records plus the 16-byte output), far above any
-    /// real chunk (a long simulation is cut into short calls) and below a machine's memory.
-    /// Exceeding it throws std::length_error, raised while the events are produced.
+    /// while collected (24-byte working records, the sort's 12 bytes and the 16-byte output),
+    /// far above any real chunk (a long simulation is cut into short calls) and below a
+    /// machine's memory. Exceeding it throws std::length_error while the events are produced:
+    /// they are counted every EVENT_COUNT_STEP events of a block, so a call stops within
+    /// max_events + num_threads * EVENT_COUNT_STEP events, whatever the thread count.
     static constexpr std::size_t DEFAULT_MAX_EVENTS = 100'000'000;
+    static constexpr std::size_t EVENT_COUNT_STEP = 4096;
+    /// Most pixels of one sensor: 2^26 (8192 x 8192, 70 times the largest event sensor made),
+    /// whose state alone is 5.9 GB; a larger request is refused before anything is allocated
+    /// rather than failing (or swapping) minutes into the allocation.
+    static constexpr std::uint64_t MAX_PIXELS = std::uint64_t{1} << 26;
     /// Fewest pixel-updates (pixels x samples) in one call worth a parallel region: below it
     /// (~0.3 ms of work) waking the other threads and waiting at the join costs more than
     /// it saves, and on a loaded machine the join waits for a descheduled thread.
@@ -56,8 +63,12 @@ public:
         if (height < 1 || height > 65535)
             throw std::invalid_argument("height must be in [1, 65535]; got height=" + std::to_string(height));
         const std::uint64_t n = static_cast<std::uint64_t>(width) * static_cast<std::uint64_t>(height);
-        if (n > 0xFFFFFFFFull)
-            throw std::invalid_argument("width * height must be below 2^32; got " + std::to_string(n));
+        if (n > MAX_PIXELS)
+            throw std::invalid_argument("width * height must be at most " + std::to_string(MAX_PIXELS) +
+                                        " pixels (8192 x 8192); got width=" + std::to_string(width) + ", height=" +
+                                        std::to_string(height) + ": " + std::to_string(n) + " pixels, " +
+                                        std::to_string((n * sizeof(PixelState) + 500'000'000) / 1'000'000'000) +
+                                        " GB of pixel state");
         set_num_threads(num_threads);
         state_.resize(static_cast<std::size_t>(n));
         reset();
@@ -75,9 +86,12 @@ public:
     int num_threads() const { return num_threads_; }
     std::size_t max_events() const { return max_events_; }
     /// Events one call may produce before it throws std::length_error (>= 1). After that
-    /// error the sensor's state is partly advanced: reset() before using it again.
+    /// error the pixels are partly advanced, so run() and run_pixels() refuse to go on
+    /// (std::logic_error) until reset().
     void set_max_events(std::size_t n) {
-        if (n < 1) throw std::invalid_argument("max_events must be >= 1; got max_events=0");
+        // The sort indexes a call's events with 32 bits.
+        if (n < 1 || n > 0xFFFFFFFFull)
+            throw std::invalid_argument("max_events must be in [1, 4294967295]; got max_events=" + std::to_string(n));
         max_events_ = n;
     }
 
@@ -91,6 +105,7 @@ public:
     /// Forget the past: the next sample is a first sample again. Mismatch stays (it is a
     /// property of the pixels for this seed).
     void reset() {
+        stopped_ = false;
         for (std::size_t i = 0; i < state_.size(); ++i) {
             state_[i] = PixelState{};
             model_.init_thresholds(state_[i], key_, static_cast<std::uint32_t>(i));
@@ -123,6 +138,7 @@ public:
                            const std::vector<std::uint32_t>* probe_pixels = nullptr,
                            std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
         const std::size_t npix = state_.size();
+        check_usable();
         if (n_samples == 0) return {};
         check_times(t_s, n_samples);
         check_rates(photon_rate, static_frame ? 1 : n_samples);
@@ -139,6 +155,8 @@ public:
                 if (px >= npix)
                     throw std::invalid_argument("probe pixel index " + std::to_string(px) + " is outside the " +
                                                 std::to_string(npix) + "-pixel sensor");
+                if (probe_slot[px] >= 0)
+                    throw std::invalid_argument("probe pixels must not repeat; got pixel " + std::to_string(px) + " twice");
                 probe_slot[px] = static_cast<std::int32_t>(j);
             }
             trace->assign(n_samples * n_probe, TraceSample{});
@@ -149,7 +167,7 @@ public:
         for (auto& b : block_events_) b.clear();
         events_in_call_.store(0, std::memory_order_relaxed);
 
-        for_each_block(nblocks, npix * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+        guarded_for_each_block(nblocks, npix * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
                       probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
         });
@@ -170,6 +188,7 @@ public:
     template <class Real>
     std::vector<Event> run_pixels(const std::uint32_t* pixels, std::size_t n_pixels, const Real* photon_rate,
                                   const double* t_s, std::size_t n_samples) {
+        check_usable();
         if (n_pixels == 0 || n_samples == 0) return {};
         const std::size_t npix = state_.size();
         std::vector<char> seen(npix, 0);
@@ -218,13 +237,37 @@ public:
         block_events_.resize(std::max(block_events_.size(), nblocks));
         for (auto& b : block_events_) b.clear();
         events_in_call_.store(0, std::memory_order_relaxed);
-        for_each_block(nblocks, n_pixels * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+        guarded_for_each_block(nblocks, n_pixels * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
         });
         return collect();
     }
 
 private:
+    /// The state after a call that stopped part-way (max_events, out of memory) is neither
+    /// the old one nor the new one: refuse to build on it.
+    void check_usable() const {
+        if (stopped_)
+            throw std::logic_error("the previous run call stopped part-way (an error inside it, e.g. max_events), "
+                                   "leaving the pixels half advanced: reset() the sensor before running it again");
+    }
+
+    /// for_each_block, marking the sensor stopped when a block throws (the pixels of the
+    /// other blocks have advanced). A block does not start once the call is over max_events.
+    template <class Fn>
+    void guarded_for_each_block(std::size_t nblocks, std::size_t updates, Fn&& fn) {
+        try {
+            for_each_block(nblocks, updates, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
+                fn(b, poisson, scratch);
+                note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
+            });
+        } catch (...) {
+            stopped_ = true;
+            throw;
+        }
+    }
+
     /// fn(block, poisson, scratch) for every block, in parallel when OpenMP is on, with
     /// per-thread sampler caches and scratch (neither changes results). Blocks are fixed, so
     /// which thread runs one does not matter. An exception in a block is rethrown here,
@@ -376,7 +419,7 @@ private:
         double t1 = 0.0;
         auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
             out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
-            if ((out.size() & 0xFFFF) == 0) note_events(0xFFFF + 1);  // memory bound, checked as it grows
+            if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
         std::uint32_t ids[BLOCK], active[BLOCK];
@@ -433,7 +476,7 @@ private:
         double t1 = 0.0;
         auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
             out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
-            if ((out.size() & 0xFFFF) == 0) note_events(0xFFFF + 1);  // memory bound, checked as it grows
+            if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
         // (each sample reads one contiguous stretch of its row of rates) and scattered back.
@@ -478,17 +521,24 @@ private:
     /// thread gets there first; the exception is rethrown after the parallel region).
     void note_events(std::size_t n) {
         const std::size_t now = events_in_call_.fetch_add(n, std::memory_order_relaxed) + n;
-        if (now > max_events_)
-            throw std::length_error("a run call produced more than max_events=" + std::to_string(max_events_) +
-                                    " events; use shorter chunks, or raise max_events if memory allows");
+        if (now > max_events_) throw_max_events();
+    }
+
+    /// One message whichever thread or check gets there first: the outcome (an error exactly
+    /// when the call's events exceed max_events) and its text do not depend on the threads.
+    [[noreturn]] void throw_max_events() const {
+        throw std::length_error("a run call produced more than max_events=" + std::to_string(max_events_) +
+                                " events (about 52 bytes each while collected); use shorter chunks, or raise "
+                                "max_events if memory allows");
     }
 
     std::vector<Event> collect() {
         std::size_t total = 0;
         for (const auto& b : block_events_) total += b.size();
-        if (total > max_events_)
-            throw std::length_error("a run call produced " + std::to_string(total) + " events, more than max_events=" +
-                                    std::to_string(max_events_) + "; use shorter chunks, or raise max_events if memory allows");
+        if (total > max_events_) {
+            stopped_ = true;
+            throw_max_events();
+        }
         std::vector<RawEvent> all;
         all.reserve(total);
         for (const auto& b : block_events_) all.insert(all.end(), b.begin(), b.end());
@@ -525,6 +575,7 @@ private:
     std::vector<std::vector<RawEvent>> block_events_;
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;
     std::atomic<std::size_t> events_in_call_{0};
+    bool stopped_ = false;
 };
 
 }  // namespace evstwin
