@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..sensor import EVENT_DTYPE
-from ._common import EventSource, FileFormat, one_line
+from ._common import EventSource, FileFormat, decoded, decoding, one_line
 
 ISOLATED: frozenset[str] = frozenset({"aedat4", "hdf5", "raw", "dat", "es"})
 """Formats (``FileFormat.name``) decoded in a child process by default: those whose decoder is
@@ -56,7 +56,10 @@ so 60 s is only reached by a decoder that no longer progresses."""
 ENABLED = os.environ.get("EVSTWIN_IO_ISOLATION", "1").strip().lower() not in ("0", "false", "no", "off")
 """False with ``EVSTWIN_IO_ISOLATION=0``: decode in the process itself (debugging a decoder)."""
 
-LIBRARIES = {"aedat4": "aedat", "hdf5": "libhdf5 (h5py)", "raw": "faery", "dat": "faery", "es": "faery"}
+LIBRARIES = {
+    "aedat4": "aedat", "hdf5": "libhdf5 (h5py)", "raw": "faery", "dat": "faery", "es": "faery",
+    "npz": "zipfile", "txt": "numpy.loadtxt", "csv": "numpy.loadtxt",
+}
 _EXTRAS = {"aedat4": "aedat", "raw": "faery", "dat": "faery", "es": "faery"}
 _PRELOAD = "evstwin.io._isolation_preload"
 
@@ -73,6 +76,20 @@ class DecoderCrashError(ValueError):
 
 class DecoderHangError(ValueError):
     """The decoder made no progress for :data:`NO_PROGRESS_TIMEOUT_S` and was stopped."""
+
+
+@contextlib.contextmanager
+def forced(formats: frozenset[str] | None = None) -> Iterator[None]:
+    """Decode ``formats`` (default: all) in a child while the block runs, so that a crash or a
+    hang of an in-process decoder is observed too (the fuzz harness)."""
+    global ISOLATED, ENABLED
+    saved = ISOLATED, ENABLED
+    ISOLATED = frozenset(LIBRARIES) if formats is None else formats
+    ENABLED = True
+    try:
+        yield
+    finally:
+        ISOLATED, ENABLED = saved
 
 
 def isolated(fmt: FileFormat) -> bool:
@@ -292,17 +309,21 @@ def _child_main(connection: Any, format_name: str, path_text: str, job: tuple[An
 
         fmt = next(f for f in FORMATS.values() if f.name == format_name)
         path = Path(path_text)
+        library = LIBRARIES.get(fmt.name, fmt.name)
         if job[0] == "source":
             assert fmt.open_source is not None
-            source = fmt.open_source(path, int(job[1]))
+            with decoding(path, library):  # the same one-line errors as in the process itself
+                source = fmt.open_source(path, int(job[1]))
             connection.send_bytes(_META)
             connection.send_bytes(pickle.dumps((source.meta, source.size_limit)))
-            for packet in source.packets:
+            for packet in decoded(path, library, source.packets):
                 _send_events(connection, packet)
         else:
             from . import hdf5
 
-            _send_events(connection, hdf5.read_window(path, int(job[1]), int(job[2])))
+            with decoding(path, library):
+                window = hdf5.read_window(path, int(job[1]), int(job[2]))
+            _send_events(connection, window)
         connection.send_bytes(_DONE)
     except BaseException as err:  # noqa: BLE001 - PanicException included: everything goes back as one line
         with contextlib.suppress(BaseException):
