@@ -7,6 +7,7 @@ each field gives its unit and its source in the paper (../shared/seed, "the pape
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -81,13 +82,13 @@ class PixelParams:
                     raise TypeError(f"{f.name} must be True or False; got {f.name}={value!r}")
             elif f.name == "cutoff_hz" and value is None:
                 pass
-            elif isinstance(value, bool) or not isinstance(value, (int, float)):
+            elif isinstance(value, bool) or not isinstance(value, numbers.Real):
                 raise TypeError(f"{f.name} must be a number; got {f.name}={value!r}")
-            elif isinstance(value, int):
+            else:
                 try:
                     float(value)
-                except OverflowError:
-                    raise ValueError(f"{f.name} must fit a 64-bit float; got an integer of {len(str(value))} "
+                except OverflowError:  # an int (or Fraction) beyond 1.8e308
+                    raise ValueError(f"{f.name} must fit a 64-bit float; got a number of {len(str(value))} "
                                      "digits") from None
         self.to_core().validate()
 
@@ -96,7 +97,8 @@ class PixelParams:
         core = _core.PixelParams()
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            setattr(core, f.name, float(value) if isinstance(value, int) and not isinstance(value, bool) else value)
+            numeric = isinstance(value, numbers.Real) and not isinstance(value, bool)
+            setattr(core, f.name, float(value) if numeric else value)
         return core
 
     def replace(self, **changes: Any) -> PixelParams:

@@ -13,7 +13,9 @@ The tables mirror the Python objects:
 ``[optics]``      ``Optics`` fields (``focal_length_m``, ``f_number``, ``extra_blur_sigma_px``...).
 ``[sampling]``    ``rate_hz`` (the floor rate of the whole array), ``max_shift_px`` (default
                   0.25: no target moves further between samples), ``sparse`` (sub-sample only
-                  the pixels near moving targets; default true), ``chunk_samples``.
+                  the pixels near moving targets; default true), ``chunk_samples``,
+                  ``max_events`` (most events of one engine call; default 1e8, see
+                  ``Sensor.max_events``).
 ``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
 ``[[targets]]``   ``kind`` = ``static`` | ``linear`` | ``circular`` | ``rotating_bar`` |
                   ``tabulated``, its geometry, and one brightness: ``flux_ph_s``,
@@ -41,10 +43,13 @@ from typing import Any
 
 import numpy as np
 
+from . import psf
 from .optics import Optics
 from .pixel import PixelParams
 from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
+from .sensor import MAX_MAX_EVENTS
 from .targets import (
+    MAX_STARS,
     CircularTarget,
     LightCurve,
     LinearTarget,
@@ -67,6 +72,7 @@ class ScenarioError(ValueError):
     """A scenario key with a bad value: the message names the key and what it accepts."""
 
 
+_PIXEL_TEXT_KEYS = ("dark_model", "lowpass")
 _BIAS_KEYS = ("i_on_a", "i_off_a", "i_diff_a", "i_pr_a", "i_sf_a", "i_refr_a")
 _OPTICS_KEYS = tuple(
     f.name for f in dataclasses.fields(Optics) if f.name not in ("width_px", "height_px", "pixel_pitch_m")
@@ -91,7 +97,7 @@ SCHEMA: dict[str, Any] = {
     "biases": {k: float for k in _BIAS_KEYS},
     "pixel": {name: Any for name in PixelParams.field_names()},
     "optics": {k: Any for k in _OPTICS_KEYS},
-    "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int},
+    "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int, "max_events": int},
     "background": {"photon_rate_ph_s": float, "sky_mag_per_arcsec2": float},
     "targets": list,
     "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
@@ -190,7 +196,9 @@ def _check_keys(raw: dict[str, Any]) -> None:
         if key not in SCHEMA:
             raise ScenarioError(f"unknown scenario key {key!r}; allowed: {', '.join(SCHEMA)}")
         spec = SCHEMA[key]
-        if isinstance(spec, dict):
+        if spec in (int, float, bool, str):
+            _check_type(key, value, spec)
+        elif isinstance(spec, dict):
             if not isinstance(value, dict):
                 raise ScenarioError(f"{key} must be a table; got {value!r}")
             for sub in value:
@@ -290,6 +298,8 @@ def _check_values(s: dict[str, Any]) -> None:
         raise ScenarioError(f"sampling.sparse must be true or false; got {sp['sparse']!r}")
     if isinstance(sp["chunk_samples"], bool) or not isinstance(sp["chunk_samples"], int) or sp["chunk_samples"] < 1:
         raise ScenarioError(f"sampling.chunk_samples must be an integer >= 1; got {sp['chunk_samples']!r}")
+    if "max_events" in sp and not 1 <= sp["max_events"] <= MAX_MAX_EVENTS:
+        raise ScenarioError(f"sampling.max_events must be in [1, {MAX_MAX_EVENTS}]; got {sp['max_events']!r}")
     bg = s.get("background", {})
     if len(bg) > 1:
         raise ScenarioError("background takes one of photon_rate_ph_s or sky_mag_per_arcsec2, not both")
@@ -378,6 +388,8 @@ class Scene:
     max_shift_px: float
     sparse: bool
     chunk_samples: int
+    max_events: int | None = None
+    """sampling.max_events: the cap on one engine call's events (None: the engine's default)."""
 
     @property
     def psf_sigma_px(self) -> float:
@@ -393,10 +405,13 @@ def _wrap(key: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
 
 MAX_PSF_SIGMA_PX = 1000.0
 """Widest PSF accepted [px]: its +-5 sigma window is rendered around every source and sample."""
-MAX_STARS = 1_000_000
-"""Most stars in a star field: each is a target rendered every sample."""
 MAX_SAMPLES = 10**9
-"""Most samples of the whole array, and most sub-samples per base sample, a scenario may imply."""
+"""Most samples a scenario may imply: duration x rate x the sub-sampling of its fastest target
+(1e9 samples of even a 64 x 64 window are 4e12 pixel-updates, a day of engine time)."""
+MAX_CHUNK_BYTES = 2 * 2**30
+"""Most memory one chunk's rendered rates may take [bytes]: chunk_samples frames of the whole
+array (8 bytes a pixel), or in a sparse sub-sampled chunk the PSF windows of every moving target
+at every fine sample (about 32 bytes a window pixel)."""
 MAX_PHOTON_RATE = 1e20
 """The engine's largest photon rate per pixel [photons/s] (``Sensor::MAX_RATE``)."""
 
@@ -434,7 +449,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     if pixel.get("cutoff_hz") in ("none", "None", "off"):
         pixel["cutoff_hz"] = None
     for key, value in pixel.items():
-        if isinstance(value, int) and not isinstance(value, bool):
+        if isinstance(value, int) and not isinstance(value, bool) and key not in _PIXEL_TEXT_KEYS:
             pixel[key] = float(value)
         params = _wrap(f"pixel.{key}", params.replace, **{key: pixel[key]})
 
@@ -460,7 +475,9 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             px_deg = optics.plate_scale_arcsec_per_px / 3600.0
             n_stars = sf["density_per_deg2"] * width * height * px_deg * px_deg
         if n_stars is not None and not n_stars <= MAX_STARS:
-            raise ScenarioError(f"star_field gives {n_stars:.3g} stars (> {MAX_STARS:g}); got star_field={sf}")
+            which = "star_field.n_stars" if "n_stars" in sf else "star_field.density_per_deg2"
+            raise ScenarioError(f"star_field gives {n_stars:.3g} stars (> {MAX_STARS:g}, about "
+                                f"{n_stars * 300 / 1e9:.3g} GB of targets): lower {which}; got star_field={sf}")
         slope = sf.get("counts_slope")
         if slope is not None and not -5.0 <= slope <= 5.0:
             raise ScenarioError(f"star_field.counts_slope must be in [-5, 5] (dex per magnitude; ~0.4 for stars); "
@@ -476,25 +493,56 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         raise ScenarioError(f"background gives {background:.3g} photons/s per pixel (> {MAX_PHOTON_RATE:g}, the "
                             f"engine's limit); got background={dict(bg)}")
     sp = s["sampling"]
-    n_base = float(s["duration_s"]) * float(sp["rate_hz"])
-    if not n_base <= MAX_SAMPLES:
-        raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base:.3g} samples (> {MAX_SAMPLES:g}); "
-                            f"got duration_s={s['duration_s']!r}, sampling.rate_hz={sp['rate_hz']!r}")
-    for i, target in enumerate(targets):
-        speed = float(_wrap(f"targets[{i}]", target.max_speed_px_s, 0.0, float(s["duration_s"])))
-        n_sub = speed / float(sp["rate_hz"]) / float(sp["max_shift_px"])
-        if not n_sub <= MAX_SAMPLES:
-            raise ScenarioError(
-                f"targets[{i}] moves {speed:.3g} px/s: sub-sampling it to sampling.max_shift_px="
-                f"{sp['max_shift_px']!r} at sampling.rate_hz={sp['rate_hz']!r} takes {n_sub:.3g} samples a "
-                f"sample (> {MAX_SAMPLES:g})"
-            )
+    _check_work(s, width, height, optics, targets)
     return Scene(
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
         rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
-        chunk_samples=int(sp["chunk_samples"]),
+        chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"),
     )
+
+
+def _check_work(s: dict[str, Any], width: int, height: int, optics: Optics, targets: list[Target]) -> None:
+    """The samples and the memory of one chunk a scenario implies, bounded before it runs,
+    each error naming the keys that set it (sub-sampling as ``simulate`` does it: the base
+    interval divided so that no target moves more than max_shift_px between samples)."""
+    sp = s["sampling"]
+    duration, rate, shift, chunk = float(s["duration_s"]), float(sp["rate_hz"]), float(sp["max_shift_px"]), sp["chunk_samples"]
+    n_base = max(1.0, math.ceil(duration * rate - 1e-9))
+    if not n_base <= MAX_SAMPLES:
+        raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base:.3g} samples (> {MAX_SAMPLES:g}); "
+                            f"got duration_s={s['duration_s']!r}, sampling.rate_hz={sp['rate_hz']!r}")
+    frame_bytes = 8.0 * width * height
+    if not chunk * frame_bytes <= MAX_CHUNK_BYTES:
+        raise ScenarioError(
+            f"sampling.chunk_samples={chunk} frames of {width}x{height} pixels take {chunk * frame_bytes / 2**30:.3g} GiB "
+            f"(> {MAX_CHUNK_BYTES / 2**30:g} GiB): lower sampling.chunk_samples"
+        )
+    moving = []
+    for i, target in enumerate(targets):
+        speed = float(_wrap(f"targets[{i}]", target.max_speed_px_s, 0.0, duration))
+        if speed > 0.0:
+            moving.append((speed, i))
+    if not moving:
+        return
+    speed, i = max(moving)
+    n_sub = max(1.0, math.ceil(speed / rate / shift - 1e-9))
+    n_total = n_base * n_sub
+    why = (f"targets[{i}] moves {speed:.3g} px/s, sub-sampled to sampling.max_shift_px={sp['max_shift_px']!r} at "
+           f"sampling.rate_hz={sp['rate_hz']!r}: {n_sub:.3g} sub-samples per base sample")
+    if not n_total <= MAX_SAMPLES:
+        raise ScenarioError(f"{why}, {n_total:.3g} samples over duration_s={s['duration_s']!r} (> {MAX_SAMPLES:g})")
+    if n_sub > 1 and sp["sparse"]:
+        half = psf.window_half_width_px(float(optics.psf_sigma_px))
+        window = min((2 * half + 1) ** 2, width * height)
+        fine = max(chunk, n_sub) + n_sub  # the fine samples of one sparse chunk, at most
+        need = fine * len(moving) * window * 32.0
+        if not need <= MAX_CHUNK_BYTES:
+            raise ScenarioError(
+                f"{why}; one chunk of {fine:.3g} fine samples renders {len(moving)} moving PSF windows of {window} px "
+                f"each, {need / 2**30:.3g} GiB (> {MAX_CHUNK_BYTES / 2**30:g} GiB): raise sampling.max_shift_px or "
+                "lower sampling.chunk_samples"
+            )
 
 
 def _brightness(table: dict[str, Any], optics: Optics) -> Any:

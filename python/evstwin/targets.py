@@ -403,6 +403,12 @@ class TabulatedTarget(Target):
 # ---------------------------------------------------------------------------------------------
 
 
+MAX_STARS = 1_000_000
+"""Most stars of a random star field: each becomes a target (about 300 bytes, 25 us to make)
+rendered at every sample; 1e6 already take 0.3 GB and 25 s to build. Refused up front."""
+_STAR_BYTES = 300
+
+
 def random_star_field(
     width: int,
     height: int,
@@ -441,10 +447,19 @@ def random_star_field(
     rng = np.random.default_rng(seed)
     if n_stars is not None:
         n = _check_int("n_stars", n_stars, 0)
+        if n > MAX_STARS:
+            raise ValueError(f"n_stars must be at most {MAX_STARS:,} (each star is a target, ~{_STAR_BYTES} bytes, "
+                             f"rendered every sample); got n_stars={n:,}, {n * _STAR_BYTES / 1e9:.3g} GB")
     else:
         density = _non_negative("density_per_deg2", density_per_deg2)
         px_deg = math.degrees(optics.plate_scale_rad_per_px)
-        n = int(rng.poisson(density * width * height * px_deg * px_deg))
+        mean = density * width * height * px_deg * px_deg
+        if not mean <= MAX_STARS:
+            raise ValueError(
+                f"density_per_deg2={density_per_deg2!r} gives {mean:.3g} stars on the {width}x{height} field "
+                f"({width * height * px_deg * px_deg:.3g} deg2), more than {MAX_STARS:,} ({mean * _STAR_BYTES / 1e9:.3g} GB)"
+            )
+        n = int(rng.poisson(mean))
     x = rng.uniform(-0.5, width - 0.5, n)
     y = rng.uniform(-0.5, height - 0.5, n)
     u = rng.uniform(0.0, 1.0, n)

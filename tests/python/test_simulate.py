@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from evstwin.scenario import ScenarioError, build, builtin_names, load, parse_assignment, set_value
+from evstwin.scenario import ScenarioError, build, builtin_names, load, parse_assignment, set_value, to_toml
 from evstwin.simulate import simulate
 
 NOISE_FREE = {
@@ -223,7 +223,16 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
         ("sensor.width=true", "sensor.width must be an integer; got True"),
         ("targets.0.kind={a = 1}", "targets[0].kind must be one of"),
         ("background.sky_mag_per_arcsec2=-30", "background gives 4.57e+21 photons/s per pixel"),
-        ("star_field.n_stars=1000000000", "star_field gives 1e+09 stars"),
+        ("star_field.n_stars=1000000000", "star_field gives 1e+09 stars (> 1e+06, about 300 GB of targets): lower "
+                                          "star_field.n_stars"),
+        ("sampling.chunk_samples=100000", "sampling.chunk_samples=100000 frames of 346x260 pixels take 67 GiB"),
+        ("sampling.max_shift_px=1e-9", "7.88e+07 sub-samples per base sample; one chunk of 1.58e+08 fine samples"),
+        ("name=1", "name must be a string; got 1"),
+        ("sampling.max_events=0", "sampling.max_events must be in [1, 4294967295]; got 0"),
+        ("sampling.max_events=1.5", "sampling.max_events must be an integer; got 1.5"),
+        ("pixel.lowpass=3", "pixel.lowpass: lowpass must be a string; got lowpass=3"),
+        ("seed=1e300", "seed must be an integer"),
+        ("sensor.k=nan", "sensor.k must be finite; got nan"),
     ],
 )
 def test_bad_scenario_values_are_one_line_naming_the_key(tmp_path, capsys, assignment: str, message: str) -> None:
@@ -242,5 +251,30 @@ def test_bad_scenario_values_are_one_line_naming_the_key(tmp_path, capsys, assig
 def test_pixel_params_overflow_is_a_value_error() -> None:
     from evstwin import PixelParams
 
-    with pytest.raises(ValueError, match="theta_on must fit a 64-bit float"):
+    with pytest.raises(ValueError, match="theta_on must fit a 64-bit float; got a number of 401 digits"):
         PixelParams(theta_on=10**400)
+    # NumPy scalars are numbers like any other; a bool is not.
+    assert PixelParams(theta_on=np.int64(1)).theta_on == 1 and PixelParams(theta_on=np.float32(0.5)).theta_on == 0.5
+    with pytest.raises(TypeError, match="theta_on must be a number; got theta_on=True"):
+        PixelParams(theta_on=True)
+
+
+def test_star_density_and_implied_samples_are_bounded_up_front() -> None:
+    # A density of 65535 stars per square degree on a wide field, or a target so fast that
+    # sub-sampling it would take 1e12 samples, used to run out of memory (issue 9).
+    wide = {"base": "mcreynolds", "star_field": {"density_per_deg2": 65535.0}}
+    with pytest.raises(ScenarioError, match=r"star_field gives .* stars \(> 1e\+06.*lower star_field.density_per_deg2"):
+        build(wide)
+    fast = {"base": "geo-stare", "duration_s": 1000.0, "targets": [
+        {"kind": "linear", "x0_px": 0.0, "y0_px": 0.0, "vx_px_s": 1e9, "flux_ph_s": 1e6}]}
+    with pytest.raises(ScenarioError, match=r"targets\[0\] moves 1e\+09 px/s.*samples over duration_s=1000.0"):
+        build(fast)
+    with pytest.raises(ScenarioError, match=r"duration_s x sampling.rate_hz = 1e\+10 samples \(> 1e\+09\)"):
+        build({"base": "geo-stare", "duration_s": 1e7, "sampling": {"rate_hz": 1e3}})
+
+
+def test_sampling_max_events_is_read_into_the_scene() -> None:
+    assert build("geo-stare").max_events is None  # the engine's default
+    scene = build(set_value(load("geo-stare"), "sampling.max_events", 5000))
+    assert scene.max_events == 5000
+    assert "max_events = 5000" in to_toml(scene.scenario)

@@ -232,3 +232,19 @@ def test_rotating_source_through_the_engine_fires_only_on_its_track() -> None:
     r = np.hypot(events["x"].astype(float) - 24.0, events["y"].astype(float) - 24.0)
     assert np.all(np.abs(r - 12.0) < 6.0)
     assert np.any(events["p"] == 1) and np.any(events["p"] == 0)
+
+
+def test_star_fields_beyond_a_million_stars_are_refused_up_front() -> None:
+    # Issue 9: 1e9 stars (or a density giving millions) ran out of memory after minutes.
+    from evstwin.presets import get_preset
+    from evstwin.targets import MAX_STARS, random_star_field
+
+    optics = get_preset("davis346").optics(0.041, 1.8).replace(width_px=346, height_px=260)
+    with pytest.raises(ValueError, match=r"n_stars must be at most 1,000,000 .*got n_stars=1,000,000,000, 300 GB"):
+        random_star_field(346, 260, optics, n_stars=10**9)
+    with pytest.raises(ValueError, match=r"density_per_deg2=65535 gives 3.94e\+06 stars on the 346x260 field"):
+        random_star_field(346, 260, optics, density_per_deg2=65535)
+    with pytest.raises(ValueError, match=r"density_per_deg2=1e\+300 gives"):
+        random_star_field(346, 260, optics, density_per_deg2=1e300)
+    assert MAX_STARS == 1_000_000
+    assert len(random_star_field(346, 260, optics, density_per_deg2=100.0, seed=1)) > 0
