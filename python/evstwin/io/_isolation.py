@@ -106,6 +106,7 @@ def isolated(fmt: FileFormat) -> bool:
 
 
 _context_lock = threading.Lock()
+_start_lock = threading.Lock()
 _context: Any = None
 
 
@@ -159,7 +160,7 @@ class _Child:
         reader, writer = ctx.Pipe(duplex=False)
         process = ctx.Process(target=_child_main, args=(writer, fmt.name, str(path), job), daemon=True)
         try:
-            with _main_module_hidden():
+            with _start_lock, _main_module_hidden():  # one start at a time: __main__ is swapped
                 process.start()
         finally:
             writer.close()  # the child holds the only writing end: its death is our EOF
