@@ -29,7 +29,14 @@ the other formats hold the events and the sensor size (plus, for ``.raw``, the E
 
 Every writer writes a hidden temporary file in the destination directory and renames it onto
 the final name only once it is complete, so a failed or interrupted write never leaves a
-truncated file under the final name (an existing file there is left untouched).
+truncated file under the final name (an existing file there is left untouched). A writer checks
+the free space before each chunk and at close (OSError ENOSPC naming the path, 512 KiB to spare),
+removes its temporary files on every failure, removes those a dead writer of the same path left,
+and holds a lock beside the output so that a second writer of the same path is refused.
+
+Files decoded by native libraries (``.aedat4``, ``.h5``/``.hdf5``, ``.raw``, ``.dat``, ``.es``)
+are decoded in a child process (:mod:`evstwin.io._isolation`): a decoder that aborts or spins on
+a corrupted file becomes a one-line ValueError naming the file, not a dead or hung caller.
 """
 
 from __future__ import annotations
