@@ -77,6 +77,9 @@ class PixelParams:
             if f.name in ("dark_model", "lowpass"):
                 if not isinstance(value, str):
                     raise TypeError(f"{f.name} must be a string; got {f.name}={value!r}")
+                allowed = ("poisson", "paper", "none") if f.name == "dark_model" else ("exact", "euler")
+                if value not in allowed:
+                    raise ValueError(f"{f.name} must be one of {', '.join(map(repr, allowed))}; got {f.name}={value!r}")
             elif f.name in ("photon_shot_noise", "pr_pole"):
                 if not isinstance(value, bool):
                     raise TypeError(f"{f.name} must be True or False; got {f.name}={value!r}")

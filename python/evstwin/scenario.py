@@ -444,7 +444,9 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             raise ScenarioError(f"biases needs {', '.join(missing)} (or sensor.bias_set); got {sorted(bias_table)}")
         biases = _wrap("biases", BiasSet, **fields, name=set_name or "custom")
         derived = _wrap("sensor.k", biases.derived, *(() if k is None else (k,)))
-        params = _wrap("biases", params.replace, **derived)
+        where = "biases" + (f" with sensor.k={k!r}" if k is not None else "") + (
+            f" (sensor.bias_set={set_name!r})" if set_name else "")
+        params = _wrap(where, params.replace, **derived)
     pixel = dict(s.get("pixel", {}))
     if pixel.get("cutoff_hz") in ("none", "None", "off"):
         pixel["cutoff_hz"] = None
@@ -460,8 +462,14 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     optics = optics.replace(width_px=width, height_px=height)
 
     targets: list[Target] = []
+    sources: list[str] = []  # the key each target comes from, for errors
     for i, table in enumerate(s["targets"]):
-        targets.extend(_wrap(f"targets[{i}]", _target, table, optics, width, height))
+        uses_magnitude = "magnitude" in table or (isinstance(table.get("light_curve"), dict)
+                                                  and "magnitude" in table["light_curve"])
+        label = f"targets[{i}]" + (f" (a magnitude, through optics={s.get('optics', {})})" if uses_magnitude else "")
+        made = _wrap(label, _target, table, optics, width, height)
+        targets.extend(made)
+        sources.extend([f"targets[{i}]"] * len(made))
     sigma = float(optics.psf_sigma_px)
     if not sigma <= MAX_PSF_SIGMA_PX:
         raise ScenarioError(
@@ -482,18 +490,27 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         if slope is not None and not -5.0 <= slope <= 5.0:
             raise ScenarioError(f"star_field.counts_slope must be in [-5, 5] (dex per magnitude; ~0.4 for stars); "
                                 f"got {slope!r}")
-        targets.extend(_wrap("star_field", random_star_field, width, height, optics, **sf))
+        stars = _wrap("star_field", random_star_field, width, height, optics, **sf)
+        targets.extend(stars)
+        sources.extend(["star_field"] * len(stars))
 
     bg = s.get("background", {})
     if "sky_mag_per_arcsec2" in bg:
         background = float(_wrap("background", optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
     else:
         background = float(bg.get("photon_rate_ph_s", 0.0))
-    if not background <= MAX_PHOTON_RATE:
-        raise ScenarioError(f"background gives {background:.3g} photons/s per pixel (> {MAX_PHOTON_RATE:g}, the "
-                            f"engine's limit); got background={dict(bg)}")
+    _check_peak_rate(background, dict(bg), targets, sources, sigma, s.get("optics", {}))
+    if (params.dark_model == "none" or params.dark_rate_e_per_s == 0.0) and not background >= 1e-30:
+        # Pixels away from every target see the background alone, and the log photoreceptor
+        # needs a current: the engine would refuse the first frame.
+        raise ScenarioError(
+            f"with no dark current (pixel.dark_model={params.dark_model!r}, pixel.dark_rate_e_per_s="
+            f"{params.dark_rate_e_per_s:g}) the background must be >= 1e-30 photons/s per pixel; got "
+            f"background={dict(bg)} ({background:.3g} photons/s)"
+        )
     sp = s["sampling"]
-    _check_work(s, width, height, optics, targets)
+    _check_work(s, width, height, optics, targets, sources)
+    _check_intervals(params, float(sp["rate_hz"]))
     return Scene(
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
@@ -502,7 +519,53 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     )
 
 
-def _check_work(s: dict[str, Any], width: int, height: int, optics: Optics, targets: list[Target]) -> None:
+def _peak_flux(target: Target) -> float:
+    b = target.brightness
+    return float(np.max(b.flux_ph_s)) if isinstance(b, LightCurve) else float(b)
+
+
+def _check_peak_rate(background: float, bg: dict[str, Any], targets: list[Target], sources: list[str], sigma: float,
+                     optics: dict[str, Any]) -> None:
+    """The engine refuses a pixel above 1e20 photons/s: make sure none can get there, before
+    the run, naming what sets it. Bound: the background plus, from every source, its largest
+    flux times the largest share one pixel gets of the PSF (a source centred on it; the
+    rendered window is normalised to its own mass)."""
+    half = psf.window_half_width_px(sigma)
+    share = (math.erf(0.5 / (math.sqrt(2.0) * sigma)) / math.erf((half + 0.5) / (math.sqrt(2.0) * sigma))) ** 2
+    peaks = [_peak_flux(t) for t in targets]
+    summed = float(np.sum(peaks)) if peaks else 0.0  # inf, not OverflowError, past 1.8e308
+    total = background + share * summed
+    if total <= MAX_PHOTON_RATE:
+        return
+    where = f"background={bg} gives {background:.3g} photons/s per pixel"
+    if peaks:
+        k = int(np.argmax(peaks))
+        where += (f"; {share:.3g} of the sources' peak fluxes adds {share * summed:.3g}, the brightest "
+                  f"{sources[k]} at {peaks[k]:.3g} photons/s")
+    raise ScenarioError(f"a pixel could receive {total:.3g} photons/s (> {MAX_PHOTON_RATE:g}, the engine's limit): "
+                        f"{where}; optics={optics}")
+
+
+def _check_intervals(params: PixelParams, rate_hz: float) -> None:
+    """The engine's limits on the sample interval, checked for the longest one (1 / rate_hz),
+    so what builds also runs (the engine would refuse it at the first sample, naming no key)."""
+    dt = 1.0 / rate_hz
+    noise = max(1.0, params.shot_noise_factor) * params.shot_noise_rate_hz * dt
+    if noise > 0.5:
+        raise ScenarioError(
+            f"pixel.shot_noise_rate_hz={params.shot_noise_rate_hz:g} x max(1, pixel.shot_noise_factor="
+            f"{params.shot_noise_factor:g}) / sampling.rate_hz={rate_hz:g} = {noise:.3g} must be <= 0.5 (eq. 13-15 "
+            "draw at most one noise event per sample): raise sampling.rate_hz or lower the noise rate"
+        )
+    if params.lowpass == "euler" and params.cutoff_hz is not None and 2 * math.pi * params.cutoff_hz * dt > 2:
+        raise ScenarioError(
+            f"pixel.lowpass='euler' (eq. 7) is unstable when 2 pi pixel.cutoff_hz / sampling.rate_hz > 2; got "
+            f"cutoff_hz={params.cutoff_hz:g}, rate_hz={rate_hz:g}: use lowpass='exact' or a higher rate"
+        )
+
+
+def _check_work(s: dict[str, Any], width: int, height: int, optics: Optics, targets: list[Target],
+                sources: list[str]) -> None:
     """The samples and the memory of one chunk a scenario implies, bounded before it runs,
     each error naming the keys that set it (sub-sampling as ``simulate`` does it: the base
     interval divided so that no target moves more than max_shift_px between samples)."""
@@ -520,18 +583,23 @@ def _check_work(s: dict[str, Any], width: int, height: int, optics: Optics, targ
         )
     moving = []
     for i, target in enumerate(targets):
-        speed = float(_wrap(f"targets[{i}]", target.max_speed_px_s, 0.0, duration))
+        speed = float(_wrap(sources[i], target.max_speed_px_s, 0.0, duration))
+        if not speed >= 0.0:  # NaN
+            raise ScenarioError(f"{sources[i]}: its speed is not a number ({speed!r} px/s)")
         if speed > 0.0:
             moving.append((speed, i))
     if not moving:
         return
     speed, i = max(moving)
-    n_sub = max(1.0, math.ceil(speed / rate / shift - 1e-9))
+    ratio = speed / rate / shift
+    n_sub = max(1.0, math.ceil(ratio - 1e-9)) if ratio <= MAX_SAMPLES else ratio  # ceil(inf) would raise
     n_total = n_base * n_sub
-    why = (f"targets[{i}] moves {speed:.3g} px/s, sub-sampled to sampling.max_shift_px={sp['max_shift_px']!r} at "
+    why = (f"{sources[i]} moves {speed:.3g} px/s, sub-sampled to sampling.max_shift_px={sp['max_shift_px']!r} at "
            f"sampling.rate_hz={sp['rate_hz']!r}: {n_sub:.3g} sub-samples per base sample")
     if not n_total <= MAX_SAMPLES:
         raise ScenarioError(f"{why}, {n_total:.3g} samples over duration_s={s['duration_s']!r} (> {MAX_SAMPLES:g})")
+    if not 1.0 / rate / n_sub >= 1e-12:
+        raise ScenarioError(f"{why}, {1.0 / rate / n_sub:.3g} s apart (< 1e-12 s, the engine's shortest interval)")
     if n_sub > 1 and sp["sparse"]:
         half = psf.window_half_width_px(float(optics.psf_sigma_px))
         window = min((2 * half + 1) ** 2, width * height)

@@ -222,7 +222,11 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
         ("sensor.width=1.5", "sensor.width must be an integer; got 1.5"),
         ("sensor.width=true", "sensor.width must be an integer; got True"),
         ("targets.0.kind={a = 1}", "targets[0].kind must be one of"),
-        ("background.sky_mag_per_arcsec2=-30", "background gives 4.57e+21 photons/s per pixel"),
+        ("background.sky_mag_per_arcsec2=-30", "a pixel could receive 4.57e+21 photons/s (> 1e+20, the engine's "
+                                               "limit): background={'sky_mag_per_arcsec2': -30} gives 4.57e+21"),
+        ("targets.0.magnitude=-30", "the brightest targets[0] at 1.26e+21 photons/s"),
+        ("sensor.k=4.0", "biases with sensor.k=4.0 (sensor.bias_set='fast_pr_slow_sf_balanced_th'): theta_on must be"),
+        ("optics.zero_point_ph_s_m2=1e30", "optics={'focal_length_m': 2.0, 'f_number': 4.0, 'transmission': 0.8, "),
         ("star_field.n_stars=1000000000", "star_field gives 1e+09 stars (> 1e+06, about 300 GB of targets): lower "
                                           "star_field.n_stars"),
         ("sampling.chunk_samples=100000", "sampling.chunk_samples=100000 frames of 346x260 pixels take 67 GiB"),
@@ -232,6 +236,13 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
         ("sampling.max_events=1.5", "sampling.max_events must be an integer; got 1.5"),
         ("pixel.lowpass=3", "pixel.lowpass: lowpass must be a string; got lowpass=3"),
         ("seed=1e300", "seed must be an integer"),
+        # Found by tests/python/test_fuzz_scenario.py: accepted by build, then refused by the engine
+        # (naming no key) or a traceback.
+        ("pixel.shot_noise_rate_hz=346", "pixel.shot_noise_rate_hz=346 x max(1, pixel.shot_noise_factor=0.25) / "
+                                         "sampling.rate_hz=100 = 3.46 must be <= 0.5"),
+        ("optics.aperture_diameter_m=1e300", "targets[0] (a magnitude, through optics={"),
+        ('pixel.dark_model="0\\n0"', "pixel.dark_model: dark_model must be one of 'poisson', 'paper', 'none'; "
+                                      "got dark_model='0\\n0'"),
         ("sensor.k=nan", "sensor.k must be finite; got nan"),
     ],
 )
@@ -278,3 +289,16 @@ def test_sampling_max_events_is_read_into_the_scene() -> None:
     scene = build(set_value(load("geo-stare"), "sampling.max_events", 5000))
     assert scene.max_events == 5000
     assert "max_events = 5000" in to_toml(scene.scenario)
+
+
+def test_a_scenario_without_dark_current_needs_a_background() -> None:
+    # The engine refuses a zero rate where there is no dark current: pixels away from the
+    # targets see only the background (found by the scenario fuzz).
+    with pytest.raises(ScenarioError, match=r"with no dark current \(pixel.dark_model='poisson', "
+                                            r"pixel.dark_rate_e_per_s=0\) the background must be >= 1e-30"):
+        build(set_value(load("mcreynolds"), "pixel.dark_rate_e_per_s", 0))
+    scene = build({"base": "mcreynolds", "pixel": {"dark_rate_e_per_s": 0}, "background": {"photon_rate_ph_s": 1.0}})
+    assert scene.params.dark_rate_e_per_s == 0
+    with pytest.raises(ScenarioError, match=r"pixel.lowpass='euler' \(eq. 7\) is unstable when 2 pi pixel.cutoff_hz / "
+                                            r"sampling.rate_hz > 2; got cutoff_hz=100, rate_hz=250"):
+        build({"base": "mcreynolds", "pixel": {"lowpass": "euler", "cutoff_hz": 100.0}})
