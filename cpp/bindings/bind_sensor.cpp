@@ -9,6 +9,11 @@ using evstwin::Sensor;
 
 namespace {
 
+/// Arrays the engine reads through typed pointers: C-contiguous, native-endian and aligned
+/// (NumPy copies an input that is not; reading a misaligned double is undefined behaviour).
+constexpr int READ_FLAGS = py::array::c_style | py::array::forcecast | py::detail::npy_api::NPY_ARRAY_ALIGNED_;
+using TimesArray = py::array_t<double, READ_FLAGS>;
+
 std::string shape_str(const py::array& a) {
     std::string s = "(";
     for (py::ssize_t i = 0; i < a.ndim(); ++i) s += (i ? ", " : "") + std::to_string(a.shape(i));
@@ -51,11 +56,11 @@ py::array checked_rates(const Sensor& s, py::array rate) {
     return rate;
 }
 
-py::array_t<double> checked_times(py::array t_s, py::ssize_t n) {
+TimesArray checked_times(py::array t_s, py::ssize_t n) {
     if (t_s.dtype().kind() != 'f' && t_s.dtype().kind() != 'i' && t_s.dtype().kind() != 'u')
         throw py::type_error("t_s must be an array of real times in seconds; got dtype " +
                              std::string(py::str(t_s.dtype())));
-    auto t = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(t_s);
+    auto t = TimesArray::ensure(t_s);
     if (!t || t.ndim() != 1 || t.shape(0) != n)
         throw py::value_error("t_s must be 1-D with one time per sample of photon_rate (" + std::to_string(n) +
                               "); got shape " + shape_str(t_s));
@@ -63,7 +68,7 @@ py::array_t<double> checked_times(py::array t_s, py::ssize_t n) {
 }
 
 template <class Real>
-std::vector<evstwin::Event> run_typed(Sensor& s, const py::array& rate, const py::array_t<double>& t,
+std::vector<evstwin::Event> run_typed(Sensor& s, const py::array& rate, const TimesArray& t,
                                       const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace,
                                       bool static_frame) {
     const Real* data = static_cast<const Real*>(rate.data());
@@ -88,7 +93,7 @@ std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::arra
     if (pixels.dtype().kind() != 'i' && pixels.dtype().kind() != 'u')
         throw py::type_error("pixels must be an integer array of row-major pixel indices; got dtype " +
                              std::string(py::str(pixels.dtype())));
-    auto idx = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(pixels);
+    auto idx = py::array_t<std::int64_t, READ_FLAGS>::ensure(pixels);
     if (!idx || idx.ndim() != 1) throw py::value_error("pixels must be 1-D; got shape " + shape_str(pixels));
     const auto n = idx.shape(0);
     std::vector<std::uint32_t> px(static_cast<std::size_t>(n));

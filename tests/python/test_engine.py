@@ -570,6 +570,17 @@ def test_non_native_and_unaligned_rates_give_the_native_events() -> None:
     rates = r.reshape(50, 64)[:, px]
     assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run_pixels(px, rates.astype(">f8"), t),
                           Sensor(8, 8, PixelParams(), seed=1).run_pixels(px, rates, t))
+    # Times and pixel indices too: big-endian or unaligned, they are read as their values
+    # (the bindings ask NumPy for an aligned native copy; a misaligned load is undefined).
+    t_odd = np.zeros(t.nbytes + 1, np.uint8)[1:].view(np.float64)
+    t_odd[:] = t
+    px_odd = np.zeros(px.nbytes + 1, np.uint8)[1:].view(np.int64)
+    px_odd[:] = px
+    assert not t_odd.flags.aligned and not px_odd.flags.aligned
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run(r, t_odd), native)
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run(r, t.astype(">f8")), native)
+    assert np.array_equal(Sensor(8, 8, PixelParams(), seed=1).run_pixels(px_odd, rates, t_odd),
+                          Sensor(8, 8, PixelParams(), seed=1).run_pixels(px.astype(">i8"), rates, t))
 
 
 def test_float32_rates_meet_the_same_limit_as_float64() -> None:
