@@ -607,7 +607,7 @@ def test_an_event_flood_stops_at_max_events_before_memory_runs_out() -> None:
     t4 = np.arange(1, 5) * 1e-3
     for threads in (1, 2):
         sensor = Sensor(64, 64, p, num_threads=threads, max_events=200_000)
-        with pytest.raises(ValueError, match=r"more than max_events=200000 events \(about 52 bytes each.*use shorter "
+        with pytest.raises(ValueError, match=r"more than max_events=200000 events \(about 50 bytes each.*use shorter "
                                              r"chunks, or raise max_events"):
             sensor.run(rates, t4)
         # Its pixels are half advanced: refused until reset, then as new.

@@ -38,8 +38,8 @@ public:
     /// Most engine threads accepted: far above any machine's cores, far below the counts
     /// (5000, 2^31 - 1) at which the OpenMP runtime exits or crashes.
     static constexpr int MAX_THREADS = 1024;
-    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 4 GB
-    /// while collected (24-byte working records, the sort's 12 bytes and the 16-byte output),
+    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 5 GB at the
+    /// peak (24-byte working records with their vectors' growth slack, and the 16-byte output),
     /// far above any real chunk (a long simulation is cut into short calls) and below a
     /// machine's memory. Exceeding it throws std::length_error while the events are produced:
     /// they are counted every EVENT_COUNT_STEP events of a block, so a call stops within
@@ -260,7 +260,9 @@ private:
             for_each_block(nblocks, updates, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
                 if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
                 fn(b, poisson, scratch);
-                note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
+                std::vector<RawEvent>& out = block_events_[b];
+                note_events(out.size() % EVENT_COUNT_STEP);  // the rest of this block's count
+                std::stable_sort(out.begin(), out.end(), before);  // in parallel; collect() merges
             });
         } catch (...) {
             stopped_ = true;
@@ -303,11 +305,22 @@ private:
     }
 
     struct RawEvent {
-        double t;
-        double t1;  ///< end of the sample interval that produced it (the sort's second key)
+        std::int64_t t_us;  ///< the event time in the output's microseconds
+        double t1;          ///< end of the sample interval that produced it (the sort's second key)
         std::uint32_t pixel;
         std::uint8_t p;
     };
+
+    /// The output order. Within one microsecond, events of an earlier sample interval come
+    /// first, then by pixel: a microsecond can straddle two run() calls, and this is the order
+    /// that concatenating their outputs gives. Ties (one pixel's events in one microsecond of
+    /// one interval) keep the order they were made in: each block is sorted stably, and the
+    /// merge takes the lower block first, as a stable sort of the blocks joined in order would.
+    static bool before(const RawEvent& a, const RawEvent& b) {
+        if (a.t_us != b.t_us) return a.t_us < b.t_us;
+        if (a.t1 != b.t1) return a.t1 < b.t1;
+        return a.pixel < b.pixel;
+    }
 
     void check_times(const double* t_s, std::size_t n) const {
         for (std::size_t k = 0; k < n; ++k) {
@@ -418,7 +431,7 @@ private:
         std::uint32_t pixel = 0;
         double t1 = 0.0;
         auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
-            out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
+            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol)});
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
@@ -475,7 +488,7 @@ private:
         std::uint32_t pixel = 0;
         double t1 = 0.0;
         auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
-            out.push_back({t, t1, pixel, static_cast<std::uint8_t>(pol)});
+            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol)});
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
@@ -528,7 +541,7 @@ private:
     /// when the call's events exceed max_events) and its text do not depend on the threads.
     [[noreturn]] void throw_max_events() const {
         throw std::length_error("a run call produced more than max_events=" + std::to_string(max_events_) +
-                                " events (about 52 bytes each while collected); use shorter chunks, or raise "
+                                " events (about 50 bytes each while collected); use shorter chunks, or raise "
                                 "max_events if memory allows");
     }
 
@@ -539,28 +552,42 @@ private:
             stopped_ = true;
             throw_max_events();
         }
-        std::vector<RawEvent> all;
-        all.reserve(total);
-        for (const auto& b : block_events_) all.insert(all.end(), b.begin(), b.end());
-        std::vector<std::int64_t> t_us(total);
-        for (std::size_t i = 0; i < total; ++i) t_us[i] = std::llround(all[i].t * 1e6);
-        std::vector<std::uint32_t> order(total);
-        for (std::size_t i = 0; i < total; ++i) order[i] = static_cast<std::uint32_t>(i);
-        // Within one microsecond, events of an earlier sample interval come first, then by
-        // pixel: a microsecond can straddle two run() calls, and this is the order that
-        // concatenating their outputs gives. Stable: a pixel's own events keep their order.
-        std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
-            if (t_us[a] != t_us[b]) return t_us[a] < t_us[b];
-            if (all[a].t1 != all[b].t1) return all[a].t1 < all[b].t1;
-            return all[a].pixel < all[b].pixel;
-        });
+        // A k-way merge of the blocks, each sorted already: no joined copy, so the peak is the
+        // blocks' events (24 bytes each, with their growth slack) and the output (16 bytes).
         std::vector<Event> events(total);
         const std::uint32_t w = static_cast<std::uint32_t>(width_);
-        for (std::size_t j = 0; j < total; ++j) {
-            const RawEvent& e = all[order[j]];
-            events[j] = Event{t_us[order[j]], static_cast<std::uint16_t>(e.pixel % w),
-                              static_cast<std::uint16_t>(e.pixel / w), e.p};
+        auto emit = [&](std::size_t j, const RawEvent& e) {
+            events[j] = Event{e.t_us, static_cast<std::uint16_t>(e.pixel % w), static_cast<std::uint16_t>(e.pixel / w), e.p};
+        };
+        std::vector<std::uint32_t> heap;  // blocks with events left; the top holds the next event
+        for (std::size_t b = 0; b < block_events_.size(); ++b)
+            if (!block_events_[b].empty()) heap.push_back(static_cast<std::uint32_t>(b));
+        std::vector<std::size_t> next(block_events_.size(), 0);
+        if (heap.size() == 1) {
+            const auto& only = block_events_[heap[0]];
+            for (std::size_t j = 0; j < total; ++j) emit(j, only[j]);
+        } else {
+            auto later = [&](std::uint32_t a, std::uint32_t b) {  // a max-heap of "later" is a min-heap
+                const RawEvent& x = block_events_[a][next[a]];
+                const RawEvent& y = block_events_[b][next[b]];
+                if (before(x, y)) return false;
+                if (before(y, x)) return true;
+                return a > b;
+            };
+            std::make_heap(heap.begin(), heap.end(), later);
+            for (std::size_t j = 0; j < total; ++j) {
+                std::pop_heap(heap.begin(), heap.end(), later);
+                const std::uint32_t b = heap.back();
+                emit(j, block_events_[b][next[b]++]);
+                if (next[b] < block_events_[b].size())
+                    std::push_heap(heap.begin(), heap.end(), later);
+                else
+                    heap.pop_back();
+            }
         }
+        // Keep the blocks' memory for the next call, unless a flood made it large.
+        for (auto& b : block_events_)
+            if (b.capacity() > (std::size_t{1} << 18)) std::vector<RawEvent>().swap(b);
         return events;
     }
 
