@@ -276,13 +276,19 @@ class Optics:
         z = _array("z_m", z_m, min_value=0.0, strict=True)
         k = self.image_distance_m / self.pixel_pitch_m
         cx, cy = self.principal_point_px
-        return _scalar_or_array(cx + k * x / z), _scalar_or_array(cy + k * y / z)
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            px, py = cx + k * x / z, cy + k * y / z
+        _finite_image("x_m, y_m, z_m", px, py)
+        return _scalar_or_array(px), _scalar_or_array(py)
 
     def length_to_px(self, length_m: ArrayLike, distance_m: ArrayLike) -> FloatOrArray:
         """Image size [px] of a length [m] seen face-on at a distance [m] (e.g. a radius)."""
         length = _array("length_m", length_m)
         d = _array("distance_m", distance_m, min_value=0.0, strict=True)
-        return _scalar_or_array(length * self.image_distance_m / (d * self.pixel_pitch_m))
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            size = length * self.image_distance_m / (d * self.pixel_pitch_m)
+        _finite_image("length_m / distance_m", size)
+        return _scalar_or_array(size)
 
     # -- PSF ----------------------------------------------------------------------------------
 
@@ -366,3 +372,11 @@ class Optics:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+
+def _finite_image(names: str, *values: np.ndarray) -> None:
+    """Refuse image coordinates that overflowed (a distance of 1e-320 m, a size of 1e300 m)."""
+    for v in values:
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{names} give image coordinates that overflow a 64-bit float (not finite px): "
+                             "a distance too small or a length too large")

@@ -313,3 +313,15 @@ def test_pixel_fractions_sum_to_one() -> None:
 def test_psf_validation(call, match: str) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_image_coordinates_that_overflow_are_a_value_error() -> None:
+    # A distance of 5e-324 m made inf pixels with a RuntimeWarning (found by the scenario fuzz).
+    from evstwin.presets import get_preset
+
+    optics = get_preset("davis346").optics(0.041, 1.8)
+    with pytest.raises(ValueError, match=r"length_m / distance_m give image coordinates that overflow a 64-bit float"):
+        optics.length_to_px(0.01, 5e-324)
+    with pytest.raises(ValueError, match=r"x_m, y_m, z_m give image coordinates that overflow"):
+        optics.project_to_px(1e300, 0.0, 1e-300)
+    assert math.isfinite(float(optics.length_to_px(0.01, 0.63)))

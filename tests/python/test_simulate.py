@@ -291,6 +291,11 @@ def test_sampling_max_events_is_read_into_the_scene() -> None:
     assert "max_events = 5000" in to_toml(scene.scenario)
 
 
+def test_a_target_distance_that_overflows_names_the_target() -> None:
+    with pytest.raises(ScenarioError, match=r"targets\[0\]: length_m / distance_m give image coordinates that overflow"):
+        build(set_value(load("mcreynolds"), "targets.0.distance_m", 5e-324))
+
+
 def test_a_scenario_without_dark_current_needs_a_background() -> None:
     # The engine refuses a zero rate where there is no dark current: pixels away from the
     # targets see only the background (found by the scenario fuzz).
