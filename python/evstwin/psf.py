@@ -55,11 +55,22 @@ class PixelValues(NamedTuple):
     value: np.ndarray
 
 
+MAX_WINDOW_HALF_PX = 2048
+"""Largest half width of the window rendered per source [px]: 4097 px a side, 1.7e7 pixels
+and about 400 MB while one source is rendered (the whole window is computed, then clipped to
+the sensor). A wider PSF is refused with a ValueError instead of exhausting memory."""
+
+
 def window_half_width_px(sigma_px: float, window_sigmas: float = 5.0) -> int:
     """Half width h [px] of the square window (2 h + 1 pixels a side) rendered per source."""
     s = _positive("sigma_px", sigma_px)
     w = _positive("window_sigmas", window_sigmas)
-    return max(2, math.ceil(w * s))
+    half = w * s
+    if not half <= MAX_WINDOW_HALF_PX:
+        raise ValueError(f"window_sigmas x sigma_px must be at most {MAX_WINDOW_HALF_PX} px (a {2 * MAX_WINDOW_HALF_PX + 1}"
+                         f" px window, ~400 MB per source); got sigma_px={sigma_px!r}, window_sigmas={window_sigmas!r}: "
+                         f"{half:.3g} px")
+    return max(2, math.ceil(half))
 
 
 def pixel_fractions(

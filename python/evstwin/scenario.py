@@ -403,8 +403,10 @@ def _wrap(key: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
         raise ScenarioError(f"{key}: {exc}") from None
 
 
-MAX_PSF_SIGMA_PX = 1000.0
-"""Widest PSF accepted [px]: its +-5 sigma window is rendered around every source and sample."""
+MAX_PSF_SIGMA_PX = 100.0
+"""Widest PSF accepted [px]: its +-5 sigma window (1001 px a side, 1e6 pixels at 100 px) is
+rendered around every source and sample before it is clipped to the sensor; a sigma of 1000 px
+took 2.5 GB per source (the scenario fuzz ran out of memory on one)."""
 MAX_SAMPLES = 10**9
 """Most samples a scenario may imply: duration x rate x the sub-sampling of its fastest target
 (1e9 samples of even a 64 x 64 window are 4e12 pixel-updates, a day of engine time)."""
@@ -459,7 +461,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     optics = _wrap(
         "optics", preset.optics, optics_kw.pop("focal_length_m", 0.041), optics_kw.pop("f_number", 1.8), **optics_kw
     )
-    optics = optics.replace(width_px=width, height_px=height)
+    optics = _wrap(f"optics={s.get('optics', {})}", optics.replace, width_px=width, height_px=height)
 
     targets: list[Target] = []
     sources: list[str] = []  # the key each target comes from, for errors
@@ -470,7 +472,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         made = _wrap(label, _target, table, optics, width, height)
         targets.extend(made)
         sources.extend([f"targets[{i}]"] * len(made))
-    sigma = float(optics.psf_sigma_px)
+    sigma = float(_wrap(f"optics={s.get('optics', {})}", lambda: optics.psf_sigma_px))
     if not sigma <= MAX_PSF_SIGMA_PX:
         raise ScenarioError(
             f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "

@@ -325,3 +325,14 @@ def test_image_coordinates_that_overflow_are_a_value_error() -> None:
     with pytest.raises(ValueError, match=r"x_m, y_m, z_m give image coordinates that overflow"):
         optics.project_to_px(1e300, 0.0, 1e-300)
     assert math.isfinite(float(optics.length_to_px(0.01, 0.63)))
+
+
+def test_psf_windows_too_wide_for_memory_are_refused() -> None:
+    # A sigma of 1000 px rendered a 10001 x 10001 window per source (2.5 GB) before clipping.
+    from evstwin.psf import MAX_WINDOW_HALF_PX, render_points, window_half_width_px
+
+    assert window_half_width_px(100.0) == 500 and MAX_WINDOW_HALF_PX == 2048
+    with pytest.raises(ValueError, match=r"window_sigmas x sigma_px must be at most 2048 px.*sigma_px=1000.0"):
+        window_half_width_px(1000.0)
+    with pytest.raises(ValueError, match="sigma_px=10000.0"):
+        render_points(8, 8, [1.0], [1.0], [1e6], 1e4)

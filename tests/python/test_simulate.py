@@ -215,6 +215,8 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
         ("pixel.theta_on=1" + "0" * 400, "pixel.theta_on: 100000000000...(401 digits) does not fit"),
         ("star_field.counts_slope=1e300", "star_field.counts_slope must be in [-5, 5]"),
         ("optics.mean_wavelength_m=2", "PSF sigma of 1.95e+05 px"),
+        ("optics.extra_blur_sigma_px=150", "optics give a PSF sigma of 150 px (> 100)"),
+        ("optics.f_number=5e-324", "optics={'focal_length_m': 2.0, 'f_number': 5e-324"),
         ("targets.0.wx_arcsec_s=1e300", "targets[0] moves 5.24e+299 px/s"),
         ("sampling.max_shift_px=1e-300", "sampling.max_shift_px=1e-300"),
         ("sampling.rate_hz=1e-300", "sampling.rate_hz=1e-300"),
