@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -36,7 +37,7 @@ AREAS = {
 }
 
 
-def run_area(test: str, examples: int, hang_s: float, rounds: int) -> dict[str, object]:
+def run_area(test: str, examples: int, hang_s: float, rounds: int, memory_gb: float) -> dict[str, object]:
     tried = crashes = hangs = failures = 0
     notes: list[str] = []
     for _ in range(rounds):
@@ -50,6 +51,7 @@ def run_area(test: str, examples: int, hang_s: float, rounds: int) -> dict[str, 
                 [sys.executable, "-m", "pytest", "-q", "-s", "-x", "-p", "no:cacheprovider", "-W", "ignore::DeprecationWarning",
                  str(TESTS / test)],
                 cwd=ROOT, env=env, capture_output=True, text=True, check=False,
+                preexec_fn=lambda: _limit_memory(memory_gb),
             )
             done = sum(1 for _ in progress)
         tried += done
@@ -70,12 +72,21 @@ def run_area(test: str, examples: int, hang_s: float, rounds: int) -> dict[str, 
     return {"tried": tried, "crashes": crashes, "hangs": hangs, "failures": failures, "notes": notes}
 
 
+def _limit_memory(gb: float) -> None:
+    """In the child: an address-space limit, so a runaway allocation is a MemoryError (a
+    failure with its example) rather than the machine's OOM killer (a SIGKILL, no example)."""
+    limit = int(gb * 2**30)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--examples", type=int, default=int(os.environ.get("EVSTWIN_FUZZ_EXAMPLES", "5000")),
                         help="examples per area (default: EVSTWIN_FUZZ_EXAMPLES or 5000)")
     parser.add_argument("--hang-s", type=float, default=60.0,
                         help="seconds one example may run before it counts as a hang (default 60)")
+    parser.add_argument("--memory-gb", type=float, default=6.0,
+                        help="address-space limit of each child [GiB] (default 6): more is a MemoryError")
     parser.add_argument("--rounds", type=int, default=5, help="children per area at most, after crashes (default 5)")
     parser.add_argument("--areas", default=",".join(AREAS), help=f"comma-separated, of {', '.join(AREAS)}")
     args = parser.parse_args()
@@ -86,12 +97,13 @@ def main() -> int:
     if args.examples < 1 or not args.hang_s > 0 or args.rounds < 1:
         parser.error(f"--examples, --hang-s and --rounds must be positive; got {args.examples}, {args.hang_s}, "
                      f"{args.rounds}")
-    print(f"{args.examples} examples per area, hang after {args.hang_s:g} s per example")
+    print(f"{args.examples} examples per area, hang after {args.hang_s:g} s per example, {args.memory_gb:g} GiB "
+          "address space per child")
     print(f"{'area':20} {'examples':>9} {'crashes':>8} {'hangs':>6} {'failures':>9} {'seconds':>8}")
     bad = False
     for area in areas:
         t0 = time.perf_counter()
-        r = run_area(AREAS[area], args.examples, args.hang_s, args.rounds)
+        r = run_area(AREAS[area], args.examples, args.hang_s, args.rounds, args.memory_gb)
         print(f"{area:20} {r['tried']:9d} {r['crashes']:8d} {r['hangs']:6d} {r['failures']:9d} "
               f"{time.perf_counter() - t0:8.0f}", flush=True)
         for note in r["notes"]:  # type: ignore[attr-defined]

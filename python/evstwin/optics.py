@@ -77,6 +77,18 @@ FloatOrArray = float | np.ndarray
 
 
 # ---------------------------------------------------------------------------------------------
+_PHYSICAL_RANGES = {
+    "focal_length_m": (1e-5, 1e4),
+    "f_number": (1e-2, 1e5),
+    "pixel_pitch_m": (1e-8, 1e-1),
+    "mean_wavelength_m": (1e-10, 1e-1),
+    "aperture_diameter_m": (1e-7, 1e4),
+    "zero_point_ph_s_m2": (1e-20, 1e40),
+}
+"""Bounds on the optics' lengths [m] and zero point, far outside any real camera or telescope
+(the focal length from 10 um to 10 km): within them the plate scale, PSF, fluxes and the sky
+background stay finite (a focal length of 1e-300 m overflowed them; found by fuzzing)."""
+
 # validation helpers (shared by psf, targets, presets)
 
 
@@ -220,6 +232,11 @@ class Optics:
             object.__setattr__(self, "aperture_diameter_m", f / float(self.f_number))
         else:
             _positive("aperture_diameter_m", self.aperture_diameter_m)
+        for name, (lo, hi) in _PHYSICAL_RANGES.items():
+            v = float(getattr(self, name))
+            if not lo <= v <= hi:
+                raise ValueError(f"{name} must be in [{lo:g}, {hi:g}] (a physical range: beyond it the image "
+                                 f"computations overflow); got {name}={getattr(self, name)!r}")
 
     def replace(self, **changes: Any) -> Optics:
         """A copy with some fields changed. A derived aperture is derived again unless given."""

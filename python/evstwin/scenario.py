@@ -399,8 +399,10 @@ class Scene:
 def _wrap(key: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
     try:
         return fn(*args, **kwargs)
-    except (ValueError, TypeError, ArithmeticError) as exc:  # OverflowError is an ArithmeticError
+    except (ValueError, TypeError) as exc:
         raise ScenarioError(f"{key}: {exc}") from None
+    except ArithmeticError as exc:  # OverflowError: math.pow, float(int)...
+        raise ScenarioError(f"{key}: a result overflows a 64-bit float ({exc})") from None
 
 
 MAX_PSF_SIGMA_PX = 100.0
@@ -498,7 +500,8 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
 
     bg = s.get("background", {})
     if "sky_mag_per_arcsec2" in bg:
-        background = float(_wrap("background", optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
+        background = float(_wrap(f"background.sky_mag_per_arcsec2 through optics={s.get('optics', {})}",
+                                 optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
     else:
         background = float(bg.get("photon_rate_ph_s", 0.0))
     _check_peak_rate(background, dict(bg), targets, sources, sigma, s.get("optics", {}))

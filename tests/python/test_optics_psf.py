@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -336,3 +337,11 @@ def test_psf_windows_too_wide_for_memory_are_refused() -> None:
         window_half_width_px(1000.0)
     with pytest.raises(ValueError, match="sigma_px=10000.0"):
         render_points(8, 8, [1.0], [1.0], [1e6], 1e4)
+
+
+@pytest.mark.parametrize(("name", "value"), [("focal_length_m", 1e-300), ("f_number", 5e-324), ("pixel_pitch_m", 1e300),
+                                             ("mean_wavelength_m", 2.0), ("zero_point_ph_s_m2", 1e300)])
+def test_optics_outside_physical_ranges_are_refused(name: str, value: float) -> None:
+    # A focal length of 1e-300 m overflowed the plate scale and the sky background (fuzzing).
+    with pytest.raises(ValueError, match=rf"{name} must be in \[.*\] \(a physical range.*got {name}={re.escape(repr(value))}"):
+        Optics(**{name: value})
