@@ -218,7 +218,7 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
         ("optics.mean_wavelength_m=0.01", "PSF sigma of 973 px (> 100)"),
         ("optics.focal_length_m=1e-300", "optics: focal_length_m must be in [1e-05, 10000]"),
         ("optics.extra_blur_sigma_px=150", "optics give a PSF sigma of 150 px (> 100)"),
-        ("optics.f_number=5e-324", "optics={'focal_length_m': 2.0, 'f_number': 5e-324"),
+        ("optics.f_number=5e-324", "optics: f_number must be in [0.01, 100000] (a physical range"),
         ("targets.0.wx_arcsec_s=1e300", "targets[0] moves 5.24e+299 px/s"),
         ("sampling.max_shift_px=1e-300", "sampling.max_shift_px=1e-300"),
         ("sampling.rate_hz=1e-300", "sampling.rate_hz=1e-300"),
@@ -244,7 +244,7 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
         # (naming no key) or a traceback.
         ("pixel.shot_noise_rate_hz=346", "pixel.shot_noise_rate_hz=346 x max(1, pixel.shot_noise_factor=0.25) / "
                                          "sampling.rate_hz=100 = 3.46 must be <= 0.5"),
-        ("optics.aperture_diameter_m=1e300", "targets[0] (a magnitude, through optics={"),
+        ("optics.aperture_diameter_m=1e300", "optics: aperture_diameter_m must be in [1e-07, 10000]"),
         ('pixel.dark_model="0\\n0"', "pixel.dark_model: dark_model must be one of 'poisson', 'paper', 'none'; "
                                       "got dark_model='0\\n0'"),
         ("sensor.k=nan", "sensor.k must be finite; got nan"),
