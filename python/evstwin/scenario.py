@@ -343,6 +343,9 @@ def set_value(scenario: dict[str, Any], key: str, value: Any) -> dict[str, Any]:
             if not part.isdigit() or int(part) >= len(node):
                 raise ScenarioError(f"{path}: index must be 0..{len(node) - 1}; got {part!r}")
             node = node[int(part)]
+        elif not isinstance(node, dict):
+            parent = ".".join(parts[:depth])
+            raise ScenarioError(f"{parent} is a value ({node!r}), not a table: {key!r} does not exist")
         else:
             if part not in node:
                 if depth == 0 and part in SCHEMA and isinstance(SCHEMA[part], dict):
@@ -354,6 +357,8 @@ def set_value(scenario: dict[str, Any], key: str, value: Any) -> dict[str, Any]:
     last = parts[-1]
     if isinstance(node, list):
         raise ScenarioError(f"{key}: give a field of one element, e.g. {key}.0.<field>")
+    if not isinstance(node, dict):
+        raise ScenarioError(f"{'.'.join(parts[:-1])} is a value ({node!r}), not a table: {key!r} does not exist")
     if last == "cutoff_hz" and parts[0] == "pixel" and value in ("none", "None", "off"):
         value = None
     if node is out and last not in SCHEMA:

@@ -124,7 +124,7 @@ def rate_array(draw: Any, n_samples: int, height: int, width: int) -> np.ndarray
     shape = (n_samples, height, width)
     kind = draw(st.sampled_from(["lognormal", "jumps", "specials", "static"]))
     if kind == "lognormal":
-        lo, hi = sorted((draw(st.floats(-30, 20)), draw(st.floats(-30, 20))))
+        lo, hi = sorted((draw(st.floats(-30, 20)) + 0.0, draw(st.floats(-30, 20)) + 0.0))  # no -0.0: (0, -0) is "high < low"
         rate = 10.0 ** rng.uniform(lo, hi, shape)
     elif kind == "jumps":
         lo, hi = draw(st.sampled_from([(1e-30, 1e20), (1e6, 1e9), (0.0, 1e12), (1e3, 1e3)]))

@@ -311,3 +311,12 @@ def test_a_scenario_without_dark_current_needs_a_background() -> None:
     with pytest.raises(ScenarioError, match=r"pixel.lowpass='euler' \(eq. 7\) is unstable when 2 pi pixel.cutoff_hz / "
                                             r"sampling.rate_hz > 2; got cutoff_hz=100, rate_hz=250"):
         build({"base": "mcreynolds", "pixel": {"lowpass": "euler", "cutoff_hz": 100.0}})
+
+
+def test_a_key_below_a_value_is_a_scenario_error() -> None:
+    # sensor.width=1 then sensor.width.x=0 was a TypeError (found by the scenario fuzz).
+    s = set_value(load("geo-stare"), "sensor.width", 1)
+    with pytest.raises(ScenarioError, match=r"sensor.width is a value \(1\), not a table: 'sensor.width.x' does not"):
+        set_value(s, "sensor.width.x", 0)
+    with pytest.raises(ScenarioError, match=r"sensor.width is a value \(1\), not a table: 'sensor.width.x.y'"):
+        set_value(s, "sensor.width.x.y", 0)
