@@ -38,7 +38,22 @@ void register_pixel(py::module_& m) {
         EVSTWIN_FIELD(photon_shot_noise) EVSTWIN_FIELD(threshold_sigma) EVSTWIN_FIELD(fill_factor)
         EVSTWIN_FIELD(internal_qe) EVSTWIN_FIELD(transmission) EVSTWIN_FIELD(absorption_per_m)
         EVSTWIN_FIELD(depletion_width_m) EVSTWIN_FIELD(pr_pole) EVSTWIN_FIELD(pr_cutoff_ref_hz)
-        EVSTWIN_FIELD(pr_ref_current_a)
+        EVSTWIN_FIELD(pr_ref_current_a) EVSTWIN_FIELD(shot_noise_on_rate_hz) EVSTWIN_FIELD(shot_noise_off_rate_hz)
+        EVSTWIN_FIELD(background_rate_sigma) EVSTWIN_FIELD(leak_rate_sigma) EVSTWIN_FIELD(leak_random_phase)
+        EVSTWIN_FIELD(hot_pixel_fraction) EVSTWIN_FIELD(hot_pixel_rate_hz) EVSTWIN_FIELD(hot_pixel_rate_sigma)
+        .def_property(
+            "noise_model",
+            [](const PixelParams& p) {
+                return std::string(p.noise_model == evstwin::NoiseModel::Continuous ? "continuous" : "sampled");
+            },
+            [](PixelParams& p, const std::string& s) {
+                if (s == "continuous")
+                    p.noise_model = evstwin::NoiseModel::Continuous;
+                else if (s == "sampled")
+                    p.noise_model = evstwin::NoiseModel::Sampled;
+                else
+                    throw py::value_error("noise_model must be one of 'continuous', 'sampled'; got noise_model='" + s + "'");
+            })
         .def_property(
             "dark_model", [](const PixelParams& p) { return dark_model_name(p.dark_model); },
             [](PixelParams& p, const std::string& s) { p.dark_model = dark_model_from(s); })

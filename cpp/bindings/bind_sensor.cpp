@@ -161,6 +161,13 @@ void register_sensor(py::module_& m) {
              },
              py::arg("pixels"), py::arg("photon_rate"), py::arg("t_s"))
         .def("reset", &Sensor::reset)
+        .def("last_labels",
+             [](const Sensor& s) { return to_numpy(std::vector<std::uint8_t>(s.last_labels())); },
+             "Why each event of the last run/run_pixels call fired (EventLabel codes).")
+        .def("set_hot_pixel_rates",
+             [](Sensor& s, std::vector<double> rates) { s.set_hot_pixel_rates(rates); }, py::arg("rates_hz"))
+        .def("hot_pixel_rates",
+             [](const Sensor& s) { return to_numpy(s.hot_pixel_rates(), {s.height(), s.width()}); })
         .def("thresholds",
              [](const Sensor& s, bool on) { return to_numpy(s.thresholds(on), {s.height(), s.width()}); },
              py::arg("on"))

@@ -17,6 +17,10 @@ _DEFAULT = _core.PixelParams()
 
 DarkModel = Literal["poisson", "paper", "none"]
 LowPass = Literal["exact", "euler"]
+NoiseModel = Literal["continuous", "sampled"]
+_ENUMS = {"dark_model": ("poisson", "paper", "none"), "lowpass": ("exact", "euler"),
+          "noise_model": ("continuous", "sampled")}
+_OPTIONAL = ("cutoff_hz", "shot_noise_on_rate_hz", "shot_noise_off_rate_hz")
 
 
 @dataclass(frozen=True)
@@ -41,6 +45,31 @@ class PixelParams:
     """Leak event rate f_leak [Hz] (eq. 10-11). Paper: 0.1 Hz."""
     shot_noise_rate_hz: float = _DEFAULT.shot_noise_rate_hz
     """Statistical shot-noise rate R_n [Hz] of each polarity in the dark (eq. 12). Paper: 0.05 Hz."""
+    shot_noise_on_rate_hz: float | None = _DEFAULT.shot_noise_on_rate_hz
+    """Eq. 12's R_n of ON events [Hz]; None = shot_noise_rate_hz. Sets the background's ON
+    rate independently of the thresholds (a real sensor's background is rarely symmetric)."""
+    shot_noise_off_rate_hz: float | None = _DEFAULT.shot_noise_off_rate_hz
+    """Eq. 12's R_n of OFF events [Hz]; None = shot_noise_rate_hz."""
+    background_rate_sigma: float = _DEFAULT.background_rate_sigma
+    """Log-normal spread of eq. 12's rates across pixels (sigma of ln rate, mean kept), in [0, 3]."""
+    leak_rate_sigma: float = _DEFAULT.leak_rate_sigma
+    """Log-normal spread of the leak rate across pixels (sigma of ln rate, mean kept), in [0, 3]."""
+    leak_random_phase: bool = _DEFAULT.leak_random_phase
+    """Start every pixel at a random phase of its leak cycle, so the leak is stationary from
+    t = 0 (True); False reproduces the paper, where every pixel leaks in lockstep."""
+    hot_pixel_fraction: float = _DEFAULT.hot_pixel_fraction
+    """Share of hot (flickering) pixels, drawn per seed, in [0, 1]."""
+    hot_pixel_rate_hz: float = _DEFAULT.hot_pixel_rate_hz
+    """Median hot-pixel rate r [Hz]: after each event the pixel is dead for refractory_s and then
+    fires after an exponential wait of rate r, alternating ON and OFF (r / (1 + r refractory_s)
+    events a second)."""
+    hot_pixel_rate_sigma: float = _DEFAULT.hot_pixel_rate_sigma
+    """Log-normal spread of the hot-pixel rates (sigma of ln r), in [0, 3]."""
+    noise_model: NoiseModel = _DEFAULT.noise_model  # type: ignore[assignment]
+    """'continuous' (default): shot noise as a white process through the photoreceptor pole and
+    source follower, advanced exactly between samples with threshold crossings inside an
+    interval (Brownian bridge), so its statistics do not depend on the sampling; 'sampled': the
+    paper's Poisson count per sample (noise grows as samples shorten), for reproduction."""
     shot_noise_factor: float = _DEFAULT.shot_noise_factor
     """F of eq. 12: the noise rate at I_max as a fraction of R_n. Paper: 0.25."""
     shot_noise_i_max_a: float = _DEFAULT.shot_noise_i_max_a
@@ -74,16 +103,16 @@ class PixelParams:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if f.name in ("dark_model", "lowpass"):
+            if f.name in _ENUMS:
                 if not isinstance(value, str):
                     raise TypeError(f"{f.name} must be a string; got {f.name}={value!r}")
-                allowed = ("poisson", "paper", "none") if f.name == "dark_model" else ("exact", "euler")
+                allowed = _ENUMS[f.name]
                 if value not in allowed:
                     raise ValueError(f"{f.name} must be one of {', '.join(map(repr, allowed))}; got {f.name}={value!r}")
-            elif f.name in ("photon_shot_noise", "pr_pole"):
+            elif f.name in ("photon_shot_noise", "pr_pole", "leak_random_phase"):
                 if not isinstance(value, bool):
                     raise TypeError(f"{f.name} must be True or False; got {f.name}={value!r}")
-            elif f.name == "cutoff_hz" and value is None:
+            elif f.name in _OPTIONAL and value is None:
                 pass
             elif isinstance(value, bool) or not isinstance(value, numbers.Real):
                 raise TypeError(f"{f.name} must be a number; got {f.name}={value!r}")

@@ -48,7 +48,11 @@ class Sensor:
         seed: int = 0,
         num_threads: int | None = None,
         max_events: int | None = None,
+        hot_pixel_rates_hz: npt.ArrayLike | None = None,
     ) -> None:
+        """hot_pixel_rates_hz: an explicit hot-pixel map, (height, width) rates r [Hz] (0 = not
+        hot; see ``PixelParams.hot_pixel_rate_hz`` for what r means), in place of the pixels that
+        ``params.hot_pixel_fraction`` would draw."""
         params = PixelParams() if params is None else params
         if not isinstance(params, PixelParams):
             raise TypeError(f"params must be an evstwin.PixelParams; got {type(params).__name__}")
@@ -68,6 +72,23 @@ class Sensor:
         self._core = _core.Sensor(width, height, params.to_core(), seed, num_threads)
         if max_events is not None:
             self.max_events = max_events
+        if hot_pixel_rates_hz is not None:
+            rates = np.asarray(hot_pixel_rates_hz, dtype=np.float64)
+            if rates.shape != (height, width):
+                raise ValueError(f"hot_pixel_rates_hz must have the sensor's shape (height, width) = ({height}, {width}); "
+                                 f"got shape {rates.shape}")
+            self._core.set_hot_pixel_rates(rates.ravel())
+
+    def hot_pixel_rates_hz(self) -> np.ndarray:
+        """Each pixel's hot rate r [Hz] (0 = not hot), (height, width): the draw or the map."""
+        return np.asarray(self._core.hot_pixel_rates())
+
+    def last_labels(self) -> np.ndarray:
+        """Why each event of the last ``run``/``run_probe``/``run_pixels`` call fired, in the
+        order of its events: uint8 codes, named in ``EVENT_LABELS`` (signal, shot_noise, leak,
+        background, hot_pixel). Shot-noise labels need the continuous noise model (the sampled
+        model's noise is inside the signal)."""
+        return np.asarray(self._core.last_labels())
 
     @property
     def max_events(self) -> int:

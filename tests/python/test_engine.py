@@ -134,7 +134,7 @@ def test_euler_option_is_eq7() -> None:
 
 def test_leak_alone_gives_on_events_at_f_leak() -> None:
     f_leak = 4.0
-    _, ev = constant_run(IDEAL.replace(leak_rate_hz=f_leak), 1e9, 3001, 1e-3)
+    _, ev = constant_run(IDEAL.replace(leak_rate_hz=f_leak, leak_random_phase=False), 1e9, 3001, 1e-3)
     assert len(ev) == 12 and np.all(ev["p"] == 1)
     np.testing.assert_allclose(ev["t"], np.arange(1, 13) / f_leak * 1e6, atol=0.5)
 
@@ -164,7 +164,7 @@ def probe_currents(params: PixelParams, rate: float, dt: float, n: int, n_pix: i
 @pytest.mark.parametrize("dt", [1e-3, 10e-3])  # mean 18 (table inversion) and 180 (PTRS)
 def test_poisson_dark_current_mean_and_variance(dt: float) -> None:
     lam = 18000.0
-    params = IDEAL.replace(dark_model="poisson", dark_rate_e_per_s=lam)
+    params = IDEAL.replace(dark_model="poisson", dark_rate_e_per_s=lam, noise_model="sampled")
     i = probe_currents(params, 0.0, dt, 400)
     mean, var = lam * E, lam * E * E / dt  # N ~ Poisson(lam dt), I = N e / dt
     n = i.size
@@ -174,7 +174,7 @@ def test_poisson_dark_current_mean_and_variance(dt: float) -> None:
 
 def test_paper_dark_current_mean_and_variance_do_not_depend_on_dt() -> None:
     lam = 18000.0
-    params = IDEAL.replace(dark_model="paper", dark_rate_e_per_s=lam)
+    params = IDEAL.replace(dark_model="paper", noise_model="sampled", dark_rate_e_per_s=lam)
     for dt in (1e-4, 1e-2):
         i = probe_currents(params, 0.0, dt, 200)
         mean, var = lam * E, lam * E * E  # eq. 4: I = Poisson(lam) e
@@ -187,7 +187,7 @@ def test_the_log_sees_n_plus_half_so_the_baseline_does_not_depend_on_dt(dt: floa
     from scipy.stats import poisson
 
     lam = 18000.0
-    params = IDEAL.replace(dark_model="poisson", dark_rate_e_per_s=lam)
+    params = IDEAL.replace(dark_model="poisson", dark_rate_e_per_s=lam, noise_model="sampled")
     sensor = Sensor(100, 1, params, seed=5)
     n_samples = 400
     _, trace = sensor.run_probe(np.zeros((n_samples, 1, 100)), np.arange(n_samples) * dt, [(i, 0) for i in range(100)])
@@ -205,7 +205,7 @@ def test_the_log_sees_n_plus_half_so_the_baseline_does_not_depend_on_dt(dt: floa
 
 
 def test_photon_shot_noise_is_poisson_on_the_signal() -> None:
-    params = IDEAL.replace(photon_shot_noise=True)
+    params = IDEAL.replace(photon_shot_noise=True, noise_model="sampled")
     dt = 1e-3
     photon_rate = 5e4 / params.electrons_per_photon  # 50 electrons per sample
     i = probe_currents(params, photon_rate, dt, 300)
@@ -397,16 +397,16 @@ def test_bad_inputs_raise_and_leave_the_sensor_untouched() -> None:
             sensor.run(zero, t)
     assert sensor.samples_seen == 0
     # Zero light is fine where there is dark current.
-    assert len(Sensor(4, 3, IDEAL.replace(dark_model="poisson")).run(zero, t)) >= 0
+    assert len(Sensor(4, 3, IDEAL.replace(dark_model="poisson", noise_model="sampled")).run(zero, t)) >= 0
     assert len(sensor.run(good, t)) == 0 and sensor.samples_seen == 3
     with pytest.raises(ValueError, match=r"continue after the previous run's last sample \(0.002 s\); got t_s\[0\]=0.002"):
         sensor.run(good[:1], [2e-3])
     with pytest.raises(ValueError, match="pixels must lie on the 4x3 sensor"):
         sensor.run_probe(good[:1], [1.0], [(4, 0)])
     with pytest.raises(ValueError, match=r"shot_noise_rate_hz \* dt must be <= 0.5"):
-        Sensor(1, 1, IDEAL.replace(shot_noise_rate_hz=10.0)).run(np.ones((2, 1, 1)), [0.0, 0.1])
+        Sensor(1, 1, IDEAL.replace(shot_noise_rate_hz=10.0, noise_model="sampled")).run(np.ones((2, 1, 1)), [0.0, 0.1])
     with pytest.raises(ValueError, match=r"shot_noise_factor=4"):  # F > 1: the top rate is F R_n
-        Sensor(1, 1, IDEAL.replace(shot_noise_rate_hz=2.0, shot_noise_factor=4.0)).run(np.ones((2, 1, 1)), [0.0, 0.1])
+        Sensor(1, 1, IDEAL.replace(shot_noise_rate_hz=2.0, shot_noise_factor=4.0, noise_model="sampled")).run(np.ones((2, 1, 1)), [0.0, 0.1])
     with pytest.raises(ValueError, match=r"sample intervals must be >= 1e-12 s; got dt=1e-13"):
         Sensor(1, 1, IDEAL).run(np.ones((2, 1, 1)), [0.0, 1e-13])
     with pytest.raises(ValueError, match=r"within \+-9.2e12 s"):
@@ -492,9 +492,9 @@ def test_run_pixels_bad_input() -> None:
         NOISY,
         NOISY.replace(pr_pole=True),
         NOISY.replace(photon_shot_noise=False, dark_model="none", pr_pole=True),
-        NOISY.replace(cutoff_hz=None),
+        NOISY.replace(cutoff_hz=None, noise_model="sampled"),
         NOISY.replace(lowpass="euler", cutoff_hz=20.0),
-        NOISY.replace(dark_model="paper"),
+        NOISY.replace(dark_model="paper", noise_model="sampled"),
     ],
     ids=["default", "pr_pole", "noise-free pr_pole", "no filter", "euler", "paper dark"],
 )

@@ -98,7 +98,7 @@ def test_pixel_params_from_biases_and_overrides() -> None:
     assert p.refractory_s == pytest.approx(1e-3)
     assert p.cutoff_hz == pytest.approx(10.0)
     assert p.dark_rate_e_per_s == 500.0
-    q = FAST_PR_SLOW_SF_BALANCED_TH.pixel_params(base, theta_on=0.3, cutoff_hz=None, refractory_s=2e-3)
+    q = FAST_PR_SLOW_SF_BALANCED_TH.pixel_params(base, theta_on=0.3, cutoff_hz=None, refractory_s=2e-3, pr_pole=True)
     assert (q.theta_on, q.cutoff_hz, q.refractory_s) == (0.3, None, 2e-3)
     assert q.theta_off == pytest.approx(0.093, rel=2e-3)
     # Table 2 gives no I_sf / I_refr: those stay at the base values
@@ -208,7 +208,7 @@ def test_paper_runs() -> None:
     assert (r3.theta_on, r3.theta_off) == pytest.approx((0.2578, 0.2181), rel=1e-3)
     assert (r3.shot_noise_rate_hz, r3.leak_rate_hz, r3.dark_rate_e_per_s) == (0.0, 0.0, 290.0)
     assert r3.fill_factor == 0.22
-    assert paper_run_params(3, dark_model="paper").dark_model == "paper"
+    assert paper_run_params(3, dark_model="paper", noise_model="sampled").dark_model == "paper"
     with pytest.raises(ValueError, match="run"):
         paper_run_params(4)
 

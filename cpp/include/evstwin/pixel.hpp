@@ -24,12 +24,28 @@
 #include "config.hpp"
 #include "constants.hpp"
 #include "event.hpp"
+#include "noise.hpp"
 #include "rng.hpp"
 
 namespace evstwin {
 
 enum class DarkModel { Poisson, Paper, None };
 enum class LowPass { Exact, Euler };
+/// How shot noise reaches the comparator. Continuous (default): the current's shot noise as a
+/// white process through the photoreceptor pole and the source follower, advanced exactly
+/// between samples (noise.hpp), so its statistics do not depend on the sampling. Sampled: the
+/// paper's model, a Poisson electron count per sample interval (eq. 4), whose noise grows as
+/// the samples get shorter; kept to reproduce the paper.
+enum class NoiseModel { Continuous, Sampled };
+
+/// Why an event fired (the optional label column of the output).
+enum EventLabel : std::uint8_t {
+    LABEL_SIGNAL = 0,      ///< the mean photocurrent changed (the scene)
+    LABEL_SHOT_NOISE = 1,  ///< photon and dark-current shot noise crossed a threshold
+    LABEL_LEAK = 2,        ///< the reference leaked down to the ON threshold (eq. 10-11)
+    LABEL_BACKGROUND = 3,  ///< a background-activity event of eq. 12 (statistical shot noise)
+    LABEL_HOT_PIXEL = 4,   ///< a hot or flickering pixel
+};
 
 /// Parameters of every pixel of a sensor. Defaults are the paper's DAVIS346 pixel: Table 3
 /// photodiode constants, section 2 noise figures, thresholds of the Table 1 bias set.
@@ -44,7 +60,30 @@ struct PixelParams {
     std::optional<double> cutoff_hz = 10.0;
     LowPass lowpass = LowPass::Exact;  ///< Exact first-order update, or eq. 7 (forward Euler)
     double leak_rate_hz = 0.1;         ///< f_leak, eq. 11; paper: 0.1 Hz
-    double shot_noise_rate_hz = 0.05;  ///< R_n, eq. 12; paper: 0.05 Hz
+    double shot_noise_rate_hz = 0.05;  ///< R_n, eq. 12, of each polarity; paper: 0.05 Hz
+    /// Eq. 12's R_n of ON and OFF events separately (empty: shot_noise_rate_hz). Real sensors'
+    /// background is far from symmetric (17 % ON on an IMX636 dark sky, ~100 % ON on a
+    /// DAVIS346 static scene), whatever the thresholds.
+    std::optional<double> shot_noise_on_rate_hz;
+    std::optional<double> shot_noise_off_rate_hz;
+    /// Spread of eq. 12's rates across pixels: each pixel's ON and OFF rates are R exp(s z - s^2/2)
+    /// with independent z ~ N(0, 1) fixed per pixel for a seed (log-normal, mean R). 0 = none.
+    double background_rate_sigma = 0.0;
+    /// Spread of the leak rate across pixels, log-normal as above. 0 = every pixel at f_leak.
+    double leak_rate_sigma = 0.0;
+    /// Start each pixel at a random phase of its leak cycle (the reference a uniform share of
+    /// theta_on below the signal), so leak events are stationary from t = 0 instead of all
+    /// pixels firing together at 1 / f_leak. Off reproduces the paper's lockstep.
+    bool leak_random_phase = true;
+    /// Hot (flickering) pixels: a share of the pixels, chosen per seed, fires alternating ON and
+    /// OFF events whatever the light: after each event the pixel is dead for refractory_s, then
+    /// fires after an exponential wait of rate r, so it fires r / (1 + r refractory_s) times a
+    /// second. r is log-normal about hot_pixel_rate_hz (its median) with hot_pixel_rate_sigma.
+    /// A sensor can also be given an explicit map of hot-pixel rates instead.
+    double hot_pixel_fraction = 0.0;
+    double hot_pixel_rate_hz = 100.0;
+    double hot_pixel_rate_sigma = 0.0;
+    NoiseModel noise_model = NoiseModel::Continuous;
     double shot_noise_factor = 0.25;   ///< F, eq. 12; paper: 0.25
     double shot_noise_i_max_a = 3.16e-9;  ///< I_max, eq. 12 [A]; paper: 3.16 nA
     // Dark current (eq. 1, 4): mean rate of thermally generated electrons.
@@ -101,6 +140,21 @@ inline void validate(const PixelParams& p) {
     if (p.cutoff_hz) require_range("cutoff_hz", *p.cutoff_hz, 1e-6, 1e9, " Hz (or None for no filter)");
     require_range("leak_rate_hz", p.leak_rate_hz, 0.0, 1e6, " Hz");
     require_range("shot_noise_rate_hz", p.shot_noise_rate_hz, 0.0, 1e6, " Hz");
+    if (p.shot_noise_on_rate_hz) require_range("shot_noise_on_rate_hz", *p.shot_noise_on_rate_hz, 0.0, 1e6, " Hz (or None)");
+    if (p.shot_noise_off_rate_hz)
+        require_range("shot_noise_off_rate_hz", *p.shot_noise_off_rate_hz, 0.0, 1e6, " Hz (or None)");
+    require_range("background_rate_sigma", p.background_rate_sigma, 0.0, 3.0, " (natural-log units)");
+    require_range("leak_rate_sigma", p.leak_rate_sigma, 0.0, 3.0, " (natural-log units)");
+    require_range("hot_pixel_fraction", p.hot_pixel_fraction, 0.0, 1.0, "");
+    require_range("hot_pixel_rate_hz", p.hot_pixel_rate_hz, 0.0, 1e6, " Hz");
+    require_range("hot_pixel_rate_sigma", p.hot_pixel_rate_sigma, 0.0, 3.0, " (natural-log units)");
+    if (p.noise_model == NoiseModel::Continuous && p.dark_model == DarkModel::Paper)
+        throw std::invalid_argument("dark_model='paper' (eq. 4: Poisson(rate) electrons per sample, whatever dt) is a "
+                                    "per-sample model; use it with noise_model='sampled'");
+    if (p.noise_model == NoiseModel::Continuous && !p.cutoff_hz && !p.pr_pole &&
+        (p.photon_shot_noise || p.dark_model == DarkModel::Poisson))
+        throw std::invalid_argument("noise_model='continuous' needs a low-pass to band-limit the shot noise (cutoff_hz "
+                                    "or pr_pole=True); got cutoff_hz=None and pr_pole=False (or use noise_model='sampled')");
     require_range("shot_noise_factor", p.shot_noise_factor, 0.0, 1e6, "");
     require_range("shot_noise_i_max_a", p.shot_noise_i_max_a, 1e-30, 1.0, " A");
     require_range("dark_rate_e_per_s", p.dark_rate_e_per_s, 0.0, 1e15, " e-/s");
@@ -128,6 +182,19 @@ struct PixelState {
     std::uint64_t n = 0;                          ///< samples consumed: the RNG's sample counter
     std::uint64_t spare_words = 0;                ///< Philox words 2-3 of the last even sample
     std::uint64_t spare_sample = ~std::uint64_t{0};  ///< the odd sample they belong to
+    // Continuous noise model: the noise parts of z and y (z holds the noise-free pole output,
+    // y the whole level, so the noise-free source-follower output is y - ny).
+    double nz = 0.0, ny = 0.0;
+    // Where the last event left the pixel, to tell why the next one fires: the level set as
+    // the reference then (before any leak) and the noise part of the signal then.
+    double level_at_event = 0.0, noise_at_event = 0.0;
+    // This pixel's background: leak and eq. 12 rates with their spread, and a hot pixel's
+    // exponential rate (0: not hot), next event time, polarity and event counter.
+    double leak_hz = 0.0, bg_on_hz = 0.0, bg_off_hz = 0.0;
+    double hot_hz = 0.0;
+    double next_hot_t = std::numeric_limits<double>::infinity();
+    std::uint64_t hot_count = 0;
+    std::uint8_t hot_pol = 0;
 };
 
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
@@ -138,6 +205,15 @@ struct SampleConstants {
     double log_e_over_dt = 0;  ///< ln(e / dt)
     double sf_decay = 0;       ///< exact: exp(-2 pi fc dt); euler: 1 - 2 pi fc dt
     double sf_ramp = 0;        ///< exact: (1 - exp(-u)) / u, u = 2 pi fc dt; euler: 2 pi fc dt
+};
+
+/// What the continuous model computes for one (photon rate, interval): the same for every
+/// pixel at the background's rate, so one per thread is kept and reused while they repeat.
+struct NoiseCache {
+    double photon_rate = -1.0, dt = -1.0;
+    double current_a = 0, x = 0, a = 0, D = 0;
+    double pole_decay = 0, pole_ramp = 0;
+    NoiseCoeffs k;
 };
 
 /// What one pixel-sample update reports for a probe (diagnostic trace).
@@ -156,6 +232,8 @@ struct PixelModel {
     bool has_filter = false;
     bool euler = false;
     double shot_slope_per_a = 0;  ///< (F - 1) R_n / I_max: eq. 12's slope in the current
+    bool continuous = false;      ///< NoiseModel::Continuous
+    double bg_on_hz = 0, bg_off_hz = 0;  ///< eq. 12's R_n per polarity
 
     explicit PixelModel(const PixelParams& params) : p(params) {
         validate(p);
@@ -164,7 +242,13 @@ struct PixelModel {
         has_filter = p.cutoff_hz.has_value();
         euler = p.lowpass == LowPass::Euler;
         shot_slope_per_a = (p.shot_noise_factor - 1.0) * p.shot_noise_rate_hz / p.shot_noise_i_max_a;
+        continuous = p.noise_model == NoiseModel::Continuous;
+        bg_on_hz = p.shot_noise_on_rate_hz.value_or(p.shot_noise_rate_hz);
+        bg_off_hz = p.shot_noise_off_rate_hz.value_or(p.shot_noise_rate_hz);
     }
+
+    /// Whether eq. 12's background is on for any pixel.
+    bool has_background() const { return bg_on_hz > 0.0 || bg_off_hz > 0.0; }
 
     /// The numbers of one sample interval (t0, t1] that do not depend on the pixel.
     SampleConstants constants(double t0, double t1) const {
@@ -191,20 +275,124 @@ struct PixelModel {
     /// Mean electron rate of a pixel receiving `photon_rate` photons/s.
     double mean_electron_rate(double photon_rate) const { return e_per_photon * photon_rate + dark_mean_e_per_s; }
 
-    /// Thresholds with this pixel's mismatch (a pure function of seed and pixel).
-    void init_thresholds(PixelState& s, Philox4x32Key key, std::uint32_t pixel) const {
+    /// The properties of one pixel that do not change in a run (a pure function of seed and
+    /// pixel): thresholds with their mismatch, leak and background rates with their spread,
+    /// and whether it is hot. hot_rate_hz >= 0 replaces the drawn hot rate (an explicit map).
+    void init_pixel(PixelState& s, Philox4x32Key key, std::uint32_t pixel, double hot_rate_hz = -1.0) const {
         s.theta_on = theta_with_sigma(p.theta_on, key, pixel, PURPOSE_MISMATCH_ON);
         s.theta_off = theta_with_sigma(p.theta_off, key, pixel, PURPOSE_MISMATCH_OFF);
+        const Philox4x32Counter a = philox4x32({0u, 0u, pixel, PURPOSE_PIXEL}, key);
+        const Philox4x32Counter b = philox4x32({1u, 0u, pixel, PURPOSE_PIXEL}, key);
+        // Log-normal factors of mean 1: exp(sigma z - sigma^2 / 2).
+        const auto spread = [](double sigma, std::uint32_t w0, std::uint32_t w1) {
+            if (sigma <= 0.0) return 1.0;
+            return std::exp(sigma * normal_from_uniforms(uniform_open(w0), uniform_open(w1)) - 0.5 * sigma * sigma);
+        };
+        s.bg_on_hz = bg_on_hz * spread(p.background_rate_sigma, a[0], a[1]);
+        s.bg_off_hz = bg_off_hz * spread(p.background_rate_sigma, a[2], a[3]);
+        s.leak_hz = p.leak_rate_hz * spread(p.leak_rate_sigma, b[0], b[1]);
+        if (hot_rate_hz >= 0.0) {
+            s.hot_hz = hot_rate_hz;
+        } else {
+            const bool hot = p.hot_pixel_fraction > 0.0 && uniform_open(b[2]) < p.hot_pixel_fraction;
+            // Median hot_pixel_rate_hz: exp(sigma z) without the mean correction.
+            s.hot_hz = hot ? p.hot_pixel_rate_hz * (p.hot_pixel_rate_sigma > 0.0
+                                                        ? std::exp(p.hot_pixel_rate_sigma *
+                                                                   normal_from_uniforms(uniform_open(b[3]), uniform_open(a[0] ^ b[2])))
+                                                        : 1.0)
+                           : 0.0;
+        }
+        s.hot_pol = static_cast<std::uint8_t>(b[3] & 1u);
     }
 
-    /// The first sample of a run: everything starts at the steady state of the mean input
-    /// and no event fires.
-    void init_state(PixelState& s, double photon_rate, double t) const {
-        s.x = std::log(ELEMENTARY_CHARGE_C * mean_electron_rate(photon_rate));
+    /// The first sample of a run: the noise-free state starts at the steady state of the mean
+    /// input; the continuous model's noise at its stationary distribution (the pixel has been
+    /// on long before t = 0), the leak at a random phase of its cycle and a hot pixel's next
+    /// event after an exponential wait. No event fires.
+    void init_state(PixelState& s, double photon_rate, double t, Philox4x32Key key, std::uint32_t pixel) const {
+        const double mean_e = mean_electron_rate(photon_rate);
+        s.x = std::log(ELEMENTARY_CHARGE_C * mean_e);
         s.z = s.y = s.ref = s.x;
+        s.nz = s.ny = 0.0;
         s.refr_until = -std::numeric_limits<double>::infinity();
         s.t = t;
         s.n = 1;
+        const Philox4x32Counter w = philox4x32({0u, 0u, pixel, PURPOSE_INIT}, key);
+        if (continuous) {
+            const double D = noise_intensity(photon_rate, mean_e);
+            if (D > 0.0) {
+                const double a = pole_rate(ELEMENTARY_CHARGE_C * mean_e), b = sf_rate();
+                double szz, szy, syy;
+                noise_stationary(a, b, D, szz, szy, syy);
+                double g1, g2;
+                normal_pair(w[0], w[1], g1, g2);
+                if (a > 0.0 && b > 0.0) {
+                    const double lzz = std::sqrt(szz), lyz = szy / lzz;
+                    s.nz = lzz * g1;
+                    s.ny = lyz * g1 + std::sqrt(std::max(0.0, syy - lyz * lyz)) * g2;
+                } else {
+                    s.ny = std::sqrt(syy) * g1;
+                }
+                s.y += s.ny;
+                s.ref = s.y;
+            }
+        }
+        s.level_at_event = s.ref;
+        s.noise_at_event = s.ny;
+        if (p.leak_random_phase && s.leak_hz > 0.0) s.ref -= uniform_open(w[2]) * s.theta_on;
+        s.next_hot_t = s.hot_hz > 0.0 ? t - std::log(uniform_open(w[3])) / s.hot_hz
+                                      : std::numeric_limits<double>::infinity();
+        s.hot_count = 0;
+    }
+
+    /// White-noise intensity D [1/s] of ln I at a photon rate: the Poisson part of the electron
+    /// rate over the square of the whole (1 / lambda when everything is shot-noise limited).
+    double noise_intensity(double photon_rate, double mean_e_per_s) const {
+        const double noisy = (p.photon_shot_noise ? e_per_photon * photon_rate : 0.0) +
+                             (p.dark_model == DarkModel::Poisson ? dark_mean_e_per_s : 0.0);
+        return noisy > 0.0 ? noisy / (mean_e_per_s * mean_e_per_s) : 0.0;
+    }
+    /// Photoreceptor pole rate 2 pi f_pr [1/s] at a current (0 without the pole).
+    double pole_rate(double current_a) const {
+        return p.pr_pole ? 2.0 * PI * p.pr_cutoff_ref_hz * (current_a / p.pr_ref_current_a) : 0.0;
+    }
+    /// Source-follower rate 2 pi f_sf [1/s] (0 without the filter).
+    double sf_rate() const { return has_filter ? 2.0 * PI * *p.cutoff_hz : 0.0; }
+
+    /// Two independent standard normals from two random words (Box-Muller, both outputs). The
+    /// angle's cosine and sine come from Taylor polynomials on a quarter turn (error < 1e-9,
+    /// far below what the normals are used for), rotated by the quadrant that the top two bits
+    /// of w1 pick: a third of the cost of libm's sincos, which dominated the noise update.
+    EVSTWIN_ALWAYS_INLINE static void normal_pair(std::uint32_t w0, std::uint32_t w1, double& g1, double& g2) {
+        const double r = std::sqrt(-2.0 * std::log(uniform_open(w0)));
+        const double t = (static_cast<double>(w1 & 0x3FFFFFFFu) + 0.5) * (0.5 * PI * 0x1p-30);  // [0, pi/2)
+        const double t2 = t * t;
+        const double sn = t * (1 + t2 * (-1.0 / 6 + t2 * (1.0 / 120 + t2 * (-1.0 / 5040 + t2 * (1.0 / 362880 +
+                              t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800.0)))))));
+        const double cs = 1 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (-1.0 / 3628800 +
+                              t2 * (1.0 / 479001600.0 + t2 * (-1.0 / 87178291200.0)))))));
+        switch (w1 >> 30) {
+            case 0: g1 = r * cs; g2 = r * sn; break;
+            case 1: g1 = -r * sn; g2 = r * cs; break;
+            case 2: g1 = -r * cs; g2 = -r * sn; break;
+            default: g1 = r * sn; g2 = -r * cs; break;
+        }
+    }
+
+    /// A hot pixel's events up to t1 (its own Poisson clock with dead time, alternating
+    /// polarity), independent of the comparator and of the sampling.
+    template <class Emit>
+    EVSTWIN_ALWAYS_INLINE void hot_events(PixelState& s, double t1, Philox4x32Key key, std::uint32_t pixel,
+                                          Emit& emit) const {
+        while (s.next_hot_t <= t1) {
+            emit(s.next_hot_t, static_cast<Polarity>(s.hot_pol), LABEL_HOT_PIXEL);
+            s.hot_pol ^= 1u;
+            ++s.hot_count;
+            const Philox4x32Counter w = philox4x32(
+                {static_cast<std::uint32_t>(s.hot_count), static_cast<std::uint32_t>(s.hot_count >> 32), pixel, PURPOSE_HOT},
+                key);
+            s.next_hot_t += p.refractory_s - std::log(uniform_open(w[0])) / s.hot_hz;
+        }
     }
 
     /// Advance a pixel to the sample (t1, photon_rate), whatever its last sample time: the
@@ -212,19 +400,20 @@ struct PixelModel {
     /// pixel was already advanced further by a finer, pixel-local sampling).
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void advance(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key,
-                                       std::uint32_t pixel, PoissonSampler& poisson, Emit&& emit,
+                                       std::uint32_t pixel, PoissonSampler& poisson, NoiseCache& cache, Emit&& emit,
                                        TraceSample* trace = nullptr) const {
         if (s.n == 0) {
-            init_state(s, photon_rate, c.t1);
+            init_state(s, photon_rate, c.t1, key, pixel);
             if (trace) *trace = {std::exp(s.x), s.x, s.y, s.ref};
             return;
         }
         if (c.t1 <= s.t) return;
-        if (s.t == c.t0) {
-            step(s, photon_rate, c, key, pixel, poisson, emit, trace);
-        } else {
-            step(s, photon_rate, constants(s.t, c.t1), key, pixel, poisson, emit, trace);
-        }
+        const SampleConstants own = s.t == c.t0 ? c : constants(s.t, c.t1);
+        if (continuous)
+            step_continuous(s, photon_rate, own, key, pixel, cache, emit, trace);
+        else
+            step(s, photon_rate, own, key, pixel, poisson, emit, trace);
+        if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
         s.t = c.t1;
         ++s.n;
     }
@@ -250,25 +439,60 @@ struct PixelModel {
         }
     }
 
-    /// Eq. 12-15: one uniform u decides OFF (u < p), ON (u > 1 - p) or nothing, and, given
-    /// an event, its time inside the interval (u / p is uniform). Returns the polarity or -1.
-    EVSTWIN_ALWAYS_INLINE int shot_noise(double u, double current_a, const SampleConstants& c, double& t_noise) const {
-        // r = ((F - 1) min(I / I_max, 1) + 1) R_n, with I / I_max saturating at the top of
-        // the dynamic range (beyond it eq. 12 would turn negative).
-        const double prob = (shot_slope_per_a * std::min(current_a, p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
-        if (u < prob) {
-            t_noise = c.t0 + c.dt * (u / prob);
+    /// Eq. 12's illumination factor (F - 1) min(I / I_max, 1) + 1, with I / I_max saturating
+    /// at the top of the dynamic range (beyond it eq. 12 would turn negative).
+    EVSTWIN_ALWAYS_INLINE double background_factor(double current_a) const {
+        return (p.shot_noise_factor - 1.0) * (std::min(current_a, p.shot_noise_i_max_a) / p.shot_noise_i_max_a) + 1.0;
+    }
+
+    /// Eq. 12-15 as the paper draws them (sampled model): one uniform u decides OFF
+    /// (u < p_off), ON (u > 1 - p_on) or nothing, p = r dt, and, given an event, its time
+    /// inside the interval (u / p is uniform). Returns the polarity or -1.
+    EVSTWIN_ALWAYS_INLINE int shot_noise(const PixelState& s, double u, double current_a, const SampleConstants& c,
+                                         double& t_noise) const {
+        const double f = background_factor(current_a) * c.dt;
+        const double p_off = s.bg_off_hz * f, p_on = s.bg_on_hz * f;
+        if (u < p_off) {
+            t_noise = c.t0 + c.dt * (u / p_off);
             return OFF;
         }
-        if (u > 1.0 - prob) {
-            t_noise = c.t0 + c.dt * ((1.0 - u) / prob);
+        if (u > 1.0 - p_on) {
+            t_noise = c.t0 + c.dt * ((1.0 - u) / p_on);
             return ON;
         }
         return -1;
     }
 
+    /// Eq. 12's background as a continuous-time process (continuous model): ON and OFF events
+    /// at rates r_on, r_off; one uniform u gives the first event of the interval, if any,
+    /// exactly (P = 1 - exp(-(r_on + r_off) dt)), its polarity and its time. Later events of
+    /// the same interval are dropped, a loss of about r dt / 2 of them.
+    EVSTWIN_ALWAYS_INLINE int background_event(const PixelState& s, double u, double current_a, const SampleConstants& c,
+                                               double& t_noise) const {
+        const double f = background_factor(current_a);
+        const double r_on = s.bg_on_hz * f, r_off = s.bg_off_hz * f, r = r_on + r_off;
+        if (!(r > 0.0)) return -1;
+        const double prob = -std::expm1(-r * c.dt);
+        if (!(u < prob)) return -1;
+        // u / prob is uniform: its first r_off / r share says OFF, the rest ON; rescaled, it
+        // gives the arrival time by inverting 1 - exp(-r t).
+        double v = u / prob;
+        const double share_off = r_off / r;
+        int pol;
+        if (v < share_off) {
+            pol = OFF;
+            v /= share_off;
+        } else {
+            pol = ON;
+            v = (v - share_off) / (1.0 - share_off);
+        }
+        t_noise = c.t0 + std::min(c.dt, -std::log1p(-v * prob) / r);
+        return pol;
+    }
+
     /// Whether the block kernel below handles this configuration (the common ones).
     bool has_block_kernel() const {
+        if (continuous) return false;
         const bool pooled = p.photon_shot_noise && p.dark_model != DarkModel::Paper;
         const bool deterministic = !p.photon_shot_noise && p.dark_model == DarkModel::None;
         return pooled || deterministic;
@@ -286,6 +510,7 @@ struct PixelModel {
         std::vector<double> pr_decay, pr_ramp;
         std::vector<std::uint8_t> pr_known;
         double pr_dt = -1.0;
+        NoiseCache noise;  ///< the continuous model's per-rate numbers (advance())
         void resize(std::size_t n) {
             if (x.size() < n) {
                 u_noise.resize(n); x.resize(n); current.resize(n); y.resize(n); busy.resize(n); count_word.resize(n);
@@ -331,7 +556,7 @@ struct PixelModel {
         PixelState* st = v.state;
         // at(j): the local index of the j-th active pixel.
         const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
-        const bool shot = p.shot_noise_rate_hz > 0.0;
+        const bool shot = has_background();
         if (p.photon_shot_noise) {
             std::uint32_t* count_word = scratch.count_word.data();
             for (std::size_t j = 0; j < n; ++j) {
@@ -413,12 +638,12 @@ struct PixelModel {
             y[j] = yi;
             bool noise = false;
             if (shot) {
-                const double prob =
-                    (shot_slope_per_a * std::min(cur[j], p.shot_noise_i_max_a) + p.shot_noise_rate_hz) * c.dt;
-                noise = (u_noise[j] < prob) | (u_noise[j] > 1.0 - prob);
+                const double f = background_factor(cur[j]) * c.dt;
+                noise = (u_noise[j] < si.bg_off_hz * f) | (u_noise[j] > 1.0 - si.bg_on_hz * f);
             }
+            noise |= si.next_hot_t <= c.t1;
             const double th_on = si.theta_on, th_off = si.theta_off;
-            const double g = (yi - si.y) * c.inv_dt + p.leak_rate_hz * th_on;
+            const double g = (yi - si.y) * c.inv_dt + si.leak_hz * th_on;
             const double db = si.y - si.ref;
             const double d1 = db + g * c.dt;
             const bool quiet = !noise & (si.refr_until <= c.t0) & (db < th_on) & (db > -th_off) & (d1 < th_on) &
@@ -431,8 +656,9 @@ struct PixelModel {
             if (busy[j]) {
                 pixel = v.ids[at(j)];
                 double t_noise = 0.0;
-                const int pol = shot ? shot_noise(u_noise[j], cur[j], c, t_noise) : -1;
-                compare(si, y[j], c, pol, t_noise, emit);
+                const int pol = shot ? shot_noise(si, u_noise[j], cur[j], c, t_noise) : -1;
+                compare(si, y[j], 0.0, c, pol, t_noise, emit);
+                if (si.next_hot_t <= c.t1) hot_events(si, c.t1, key, pixel, emit);
             }
             si.x = x[j];
             si.z = z[j];
@@ -449,7 +675,7 @@ struct PixelModel {
     EVSTWIN_ALWAYS_INLINE void step(PixelState& s, double photon_rate, const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
               PoissonSampler& poisson, Emit&& emit, TraceSample* trace = nullptr) const {
         std::uint32_t w[2] = {0, 0};
-        if (p.photon_shot_noise || p.dark_model != DarkModel::None || p.shot_noise_rate_hz > 0.0)
+        if (p.photon_shot_noise || p.dark_model != DarkModel::None || has_background())
             sample_words(s, key, pixel, w);
 
         // Photodiode current over the interval, eq. 1-2 and 4. Poisson counts are pooled into
@@ -510,9 +736,9 @@ struct PixelModel {
 
         // Statistical shot noise, eq. 12-15.
         double t_noise = 0.0;
-        const int noise_pol = p.shot_noise_rate_hz > 0.0 ? shot_noise(uniform_open(w[1]), current_a, c, t_noise) : -1;
+        const int noise_pol = has_background() ? shot_noise(s, uniform_open(w[1]), current_a, c, t_noise) : -1;
 
-        compare(s, y, c, noise_pol, t_noise, emit);
+        compare(s, y, 0.0, c, noise_pol, t_noise, emit);
         if (trace) *trace = {current_a, x, y, s.ref};
         s.x = x;
         s.z = z;
@@ -541,6 +767,132 @@ struct PixelModel {
     /// theta (1 + sigma z), redrawn below 1 % of nominal; once per pixel, not in the hot loop.
     double theta_with_sigma(double theta, Philox4x32Key key, std::uint32_t pixel, std::uint32_t purpose) const;
 
+    /// Advance one pixel over (c.t0, c.t1] with the continuous noise model (noise.hpp): the
+    /// noise-free chain follows the mean photocurrent exactly as in step() without noise; the
+    /// shot noise (n_z, n_y) is advanced with its exact transition and innovation; eq. 12's
+    /// background is a continuous-time process; and an excursion of the noise between the
+    /// samples that the straight line misses trips the comparator with the probability of a
+    /// Brownian bridge of the same conditional variance. One Philox call per sample: two
+    /// normals, the bridge's uniform and the background's.
+    template <class Emit>
+    EVSTWIN_ALWAYS_INLINE void step_continuous(PixelState& s, double photon_rate, const SampleConstants& c,
+                                               Philox4x32Key key, std::uint32_t pixel, NoiseCache& cache, Emit&& emit,
+                                               TraceSample* trace = nullptr) const {
+        if (photon_rate != cache.photon_rate || c.dt != cache.dt) {
+            const double mean_e = mean_electron_rate(photon_rate);
+            cache.photon_rate = photon_rate;
+            cache.dt = c.dt;
+            cache.current_a = ELEMENTARY_CHARGE_C * mean_e;
+            cache.x = std::log(cache.current_a);
+            cache.a = pole_rate(cache.current_a);
+            cache.D = noise_intensity(photon_rate, mean_e);
+            const double u = cache.a * c.dt;
+            cache.pole_decay = std::exp(-u);
+            cache.pole_ramp = one_minus_exp_over(u);
+            cache.k = cache.D > 0.0 ? noise_coeffs(cache.a, sf_rate(), cache.D, c.dt) : NoiseCoeffs{};
+        }
+        const double current_a = cache.current_a, x = cache.x, a = cache.a, D = cache.D;
+        const NoiseCoeffs& k = cache.k;
+        // Noise-free chain: pole (rate set by the mean current) and source follower.
+        const double z = p.pr_pole ? x + (s.z - s.x) * cache.pole_decay - (x - s.x) * cache.pole_ramp : x;
+        const double yd0 = s.y - s.ny;
+        double yd;
+        if (!has_filter)
+            yd = z;
+        else if (euler)
+            yd = c.sf_ramp * s.z + c.sf_decay * yd0;
+        else
+            yd = z + (yd0 - s.z) * c.sf_decay - (z - s.z) * c.sf_ramp;
+
+        const Philox4x32Counter w = philox4x32(
+            {static_cast<std::uint32_t>(s.n), static_cast<std::uint32_t>(s.n >> 32), pixel, PURPOSE_CONTINUOUS}, key);
+        double nz = 0.0, ny = 0.0;
+        if (D > 0.0) {
+            double g1, g2;
+            normal_pair(w[0], w[1], g1, g2);
+            nz = k.phi_zz * s.nz + k.l_zz * g1;
+            ny = (a > 0.0 && has_filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
+                                         : k.phi_yy * s.ny + k.l_yy * g1;
+        }
+        const double y = yd + ny;
+
+        double t_noise = 0.0;
+        const int noise_pol = has_background() ? background_event(s, uniform_open(w[3]), current_a, c, t_noise) : -1;
+
+        // The bridge: only while the line itself crosses nothing after the refractory period
+        // (a crossing of the line fires anyway; the excursions around it are second order).
+        bool bridged = false;
+        if (k.bridge_var > 0.0) {
+            const double t_start = std::max(c.t0, s.refr_until);
+            if (t_start < c.t1) {
+                const double g = (y - s.y) * c.inv_dt + s.leak_hz * s.theta_on;
+                const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
+                const double d_end = (s.y - s.ref) + g * c.dt;
+                const double th_on = s.theta_on, th_off = s.theta_off;
+                if (d_start < th_on && d_start > -th_off && d_end < th_on && d_end > -th_off) {
+                    // The variance rate of the bridge that has this middle variance over dt.
+                    const double sigma2 = 4.0 * k.bridge_var * c.inv_dt;
+                    const double span = c.t1 - t_start;
+                    const double mid = 0.25 * sigma2 * span;
+                    const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
+                    const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
+                    const double u = uniform_open(w[2]);
+                    if (u < p_on + p_off) {
+                        const bool on = u < p_on;
+                        CounterStream more(key, pixel, s.n, PURPOSE_BRIDGE_TIME);
+                        const double u0 = on ? th_on - d_start : th_off + d_start;
+                        const double u1 = on ? th_on - d_end : th_off + d_end;
+                        const double tc = t_start + bridge_first_passage(u0, u1, sigma2, span, more.uniform());
+                        if (tc > c.t0 && tc < c.t1) {
+                            // Split the interval at the crossing: a virtual sample there, just
+                            // past the level, so the comparator fires at tc; then on to y.
+                            const double f = (tc - c.t0) * c.inv_dt;
+                            const double d_line = (s.y - s.ref) + g * (tc - c.t0);
+                            const double level = on ? th_on * (1.0 + 1e-9) : -th_off * (1.0 + 1e-9);
+                            const double excursion = level - d_line;
+                            const double y_c = s.y + f * (y - s.y) + excursion;
+                            const double ny_c = s.ny + f * (ny - s.ny) + excursion;
+                            SampleConstants first = c, second = c;
+                            first.t1 = second.t0 = tc;
+                            first.dt = tc - c.t0;
+                            first.inv_dt = 1.0 / first.dt;
+                            second.dt = c.t1 - tc;
+                            second.inv_dt = 1.0 / second.dt;
+                            const bool noise_first = noise_pol >= 0 && t_noise <= tc;
+                            compare(s, y_c, ny_c, first, noise_first ? noise_pol : -1, t_noise, emit);
+                            s.y = y_c;
+                            s.ny = ny_c;
+                            compare(s, y, ny, second, noise_first ? -1 : noise_pol, t_noise, emit);
+                            bridged = true;
+                        }
+                    }
+                }
+            }
+        }
+        if (!bridged) compare(s, y, ny, c, noise_pol, t_noise, emit);
+        if (trace) *trace = {current_a, x, y, s.ref};
+        s.x = x;
+        s.z = z;
+        s.y = y;
+        s.nz = nz;
+        s.ny = ny;
+    }
+
+    /// Why a threshold crossing of the line fired, at a point a share f into the interval:
+    /// the largest of the changes since the last event in the crossing's direction, of the
+    /// noise-free level (signal), of the noise and (for ON) of the leak.
+    EVSTWIN_ALWAYS_INLINE std::uint8_t crossing_label(const PixelState& s, int pol, double d, double y_t,
+                                                      double ny_t) const {
+        const double dn = ny_t - s.noise_at_event;
+        const double dl = s.level_at_event - (y_t - d);  // how far the reference has leaked
+        const double ds = d - dn - dl;
+        if (pol == ON) {
+            if (dl >= ds && dl >= dn) return LABEL_LEAK;
+            return dn > ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
+        }
+        return -dn > -ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
+    }
+
     /// The comparator over (t0, t1]: the level difference d(t) = y(t) - ref(t) is linear in
     /// t, since y is interpolated linearly (eq. 16) and the leak lowers ref at a constant
     /// rate f_leak theta_on (eq. 10-11). Each crossing fires at its interpolated time and
@@ -548,11 +900,13 @@ struct PixelModel {
     /// the last event's level (it still leaks). If, when the refractory period ends, the
     /// difference has passed n >= 1 thresholds, one event fires then and ref moves by n
     /// whole thresholds: the levels crossed while the pixel was dead are merged into that
-    /// single event, as a real pixel cannot report them separately.
+    /// single event, as a real pixel cannot report them separately. ny1 is the noise part of
+    /// y1 (0 in the sampled model), for the events' labels.
     template <class Emit>
-    EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, const SampleConstants& c, int noise_pol, double t_noise, Emit& emit) const {
+    EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, double ny1, const SampleConstants& c, int noise_pol,
+                                       double t_noise, Emit& emit) const {
         const double th_on = s.theta_on, th_off = s.theta_off, refr = p.refractory_s;
-        const double g = (y1 - s.y) * c.inv_dt + p.leak_rate_hz * th_on;  // d(d)/dt
+        const double g = (y1 - s.y) * c.inv_dt + s.leak_hz * th_on;  // d(d)/dt
         double tb = c.t0;
         double db = s.y - s.ref;  // d(tb)
         // Fast path: no noise event, not refractory, and the line stays inside both thresholds.
@@ -564,6 +918,17 @@ struct PixelModel {
             s.ref = y1 - d1;
             return;
         }
+        const double y0 = s.y, ny0 = s.ny;
+        // An event at t with the difference d there, leaving the difference d_after: emit it
+        // and remember where it left the pixel.
+        auto fire = [&](double t, int pol, double d, double d_after, int label) {
+            const double f = (t - c.t0) * c.inv_dt;
+            const double y_t = y0 + f * (y1 - y0), ny_t = ny0 + f * (ny1 - ny0);
+            if (label < 0) label = crossing_label(s, pol, d, y_t, ny_t);
+            emit(t, static_cast<Polarity>(pol), static_cast<std::uint8_t>(label));
+            s.level_at_event = y_t - d_after;
+            s.noise_at_event = ny_t;
+        };
         for (;;) {
             if (s.refr_until > tb) {
                 if (noise_pol >= 0 && t_noise < s.refr_until) noise_pol = -1;  // dead pixel
@@ -573,15 +938,17 @@ struct PixelModel {
             }
             if (db >= th_on) {
                 const double n = std::floor(db / th_on);
-                emit(tb, ON);
+                const double d = db;
                 db -= n * th_on;
+                fire(tb, ON, d, db, -1);
                 s.refr_until = tb + refr;
                 continue;
             }
             if (db <= -th_off) {
                 const double n = std::floor(-db / th_off);
-                emit(tb, OFF);
+                const double d = db;
                 db += n * th_off;
+                fire(tb, OFF, d, db, -1);
                 s.refr_until = tb + refr;
                 continue;
             }
@@ -598,7 +965,7 @@ struct PixelModel {
                 // The noise pulse trips the comparator first; ref resets to the level there.
                 db += g * (t_noise - tb);
                 tb = t_noise;
-                emit(tb, static_cast<Polarity>(noise_pol));
+                fire(tb, noise_pol, db, 0.0, LABEL_BACKGROUND);
                 noise_pol = -1;
                 db = 0.0;
                 s.refr_until = tb + refr;
@@ -610,13 +977,14 @@ struct PixelModel {
                 // refractory period): the rest of this interval's levels fire as one event
                 // now, merged as at a wake-up, instead of looping at one instant.
                 const double d_end = db + g * (c.t1 - tb);
-                emit(tb, static_cast<Polarity>(pol));
+                const double d = db;
                 db = pol == ON ? d_end - std::floor(d_end / th_on) * th_on : d_end + std::floor(-d_end / th_off) * th_off;
+                fire(tb, pol, d, db - g * (c.t1 - tb), -1);
                 tb = c.t1;
                 s.refr_until = tb + refr;
                 break;
             }
-            emit(tc, static_cast<Polarity>(pol));
+            fire(tc, pol, pol == ON ? th_on : -th_off, 0.0, -1);
             tb = tc;
             db = 0.0;
             s.refr_until = tb + refr;

@@ -46,6 +46,11 @@ inline double uniform_open(std::uint32_t w) { return (static_cast<double>(w) + 0
 enum Purpose : std::uint32_t {
     PURPOSE_SAMPLE = 0,            ///< per pixel-sample block: photon/dark count, shot noise
     PURPOSE_POISSON_EXTRA = 1,     ///< further uniforms of the rejection sampler (+ iteration)
+    PURPOSE_CONTINUOUS = 0x10000000u,     ///< per pixel-sample: noise innovations, bridge, background
+    PURPOSE_BRIDGE_TIME = 0x18000000u,    ///< the time of a bridge crossing (+ block)
+    PURPOSE_INIT = 0x20000000u,           ///< a pixel's first sample: stationary noise, leak phase, hot clock
+    PURPOSE_PIXEL = 0x28000000u,          ///< a pixel's fixed properties: rate spreads, hot or not
+    PURPOSE_HOT = 0x30000000u,            ///< a hot pixel's event clock (counter: its event index)
     PURPOSE_PAPER_DARK = 0x40000000u,     ///< eq. 4 dark draw (+ iteration)
     PURPOSE_MISMATCH_ON = 0x80000000u,    ///< per pixel ON threshold mismatch (+ retry)
     PURPOSE_MISMATCH_OFF = 0xC0000000u,   ///< per pixel OFF threshold mismatch (+ retry)

@@ -108,11 +108,38 @@ public:
         stopped_ = false;
         for (std::size_t i = 0; i < state_.size(); ++i) {
             state_[i] = PixelState{};
-            model_.init_thresholds(state_[i], key_, static_cast<std::uint32_t>(i));
+            model_.init_pixel(state_[i], key_, static_cast<std::uint32_t>(i), hot_map_.empty() ? -1.0 : hot_map_[i]);
         }
         samples_ = 0;
         last_t_ = -std::numeric_limits<double>::infinity();
     }
+
+    /// An explicit hot-pixel map: the hot rate of every pixel (row-major, photons play no part;
+    /// 0 = not hot), in place of the random draw of hot_pixel_fraction; empty = back to the
+    /// draw. Resets the sensor (the map is a property of the pixels, as the mismatch is).
+    void set_hot_pixel_rates(const std::vector<double>& rates_hz) {
+        if (!rates_hz.empty() && rates_hz.size() != state_.size())
+            throw std::invalid_argument("hot_pixel_rates_hz must have one rate per pixel (" + std::to_string(height_) + " x " +
+                                        std::to_string(width_) + " = " + std::to_string(state_.size()) + "); got " +
+                                        std::to_string(rates_hz.size()) + " values");
+        for (std::size_t i = 0; i < rates_hz.size(); ++i)
+            if (!(rates_hz[i] >= 0.0 && rates_hz[i] <= 1e6))
+                throw std::invalid_argument("hot_pixel_rates_hz must be in [0, 1e6] Hz; got hot_pixel_rates_hz[" +
+                                            std::to_string(i / width_) + ", " + std::to_string(i % width_) + "]=" +
+                                            detail::fmt(rates_hz[i]));
+        hot_map_ = rates_hz;
+        reset();
+    }
+
+    /// Each pixel's hot rate [Hz] (0 = not hot), row-major: the draw or the explicit map.
+    std::vector<double> hot_pixel_rates() const {
+        std::vector<double> out(state_.size());
+        for (std::size_t i = 0; i < state_.size(); ++i) out[i] = state_[i].hot_hz;
+        return out;
+    }
+
+    /// Why each event of the last run / run_pixels call fired (EventLabel), in its order.
+    const std::vector<std::uint8_t>& last_labels() const { return labels_; }
 
     /// Per-pixel thresholds (mismatch included), row-major.
     std::vector<double> thresholds(bool on) const {
@@ -139,7 +166,10 @@ public:
                            std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
         const std::size_t npix = state_.size();
         check_usable();
-        if (n_samples == 0) return {};
+        if (n_samples == 0) {
+            labels_.clear();
+            return {};
+        }
         check_times(t_s, n_samples);
         check_rates(photon_rate, static_frame ? 1 : n_samples);
         const std::size_t sample_stride = static_frame ? 0 : npix;
@@ -189,7 +219,10 @@ public:
     std::vector<Event> run_pixels(const std::uint32_t* pixels, std::size_t n_pixels, const Real* photon_rate,
                                   const double* t_s, std::size_t n_samples) {
         check_usable();
-        if (n_pixels == 0 || n_samples == 0) return {};
+        if (n_pixels == 0 || n_samples == 0) {
+            labels_.clear();
+            return {};
+        }
         const std::size_t npix = state_.size();
         std::vector<char> seen(npix, 0);
         double latest = -std::numeric_limits<double>::infinity();
@@ -309,6 +342,7 @@ private:
         double t1;          ///< end of the sample interval that produced it (the sort's second key)
         std::uint32_t pixel;
         std::uint8_t p;
+        std::uint8_t label;  ///< EventLabel: why it fired
     };
 
     /// The output order. Within one microsecond, events of an earlier sample interval come
@@ -351,8 +385,10 @@ private:
             throw std::invalid_argument("lowpass='euler' (eq. 7) is unstable when 2 pi cutoff_hz dt > 2; got cutoff_hz=" +
                                         detail::fmt(*model_.p.cutoff_hz) + " and dt=" + detail::fmt(dt) + " s at t_s[" +
                                         std::to_string(k) + "]: use lowpass='exact' or shorter samples");
-        // The largest eq. 12 rate is R_n (at no current) or F R_n (at I_max) when F > 1.
-        if (std::max(1.0, model_.p.shot_noise_factor) * model_.p.shot_noise_rate_hz * dt > 0.5)
+        // The largest eq. 12 rate is R_n (at no current) or F R_n (at I_max) when F > 1. The
+        // continuous model draws the background exactly, whatever dt.
+        if (!model_.continuous &&
+            std::max(1.0, model_.p.shot_noise_factor) * std::max(model_.bg_on_hz, model_.bg_off_hz) * dt > 0.5)
             throw std::invalid_argument(
                 "max(1, shot_noise_factor) * shot_noise_rate_hz * dt must be <= 0.5 (eq. 13-15 draw at most one "
                 "event per sample); got shot_noise_rate_hz=" + detail::fmt(model_.p.shot_noise_rate_hz) +
@@ -430,8 +466,8 @@ private:
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
         double t1 = 0.0;
-        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
-            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol)});
+        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol, std::uint8_t label) {
+            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol), label});
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
@@ -465,13 +501,13 @@ private:
             } else if (!probe_slot) {
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
-                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit);
+                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, scratch.noise, emit);
                 }
             } else {
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
                     TraceSample* tr = probe_slot[i] >= 0 ? trace + k * n_probe + probe_slot[i] : nullptr;
-                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, emit, tr);
+                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, scratch.noise, emit, tr);
                 }
             }
         }
@@ -487,8 +523,8 @@ private:
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
         double t1 = 0.0;
-        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol) {
-            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol)});
+        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol, std::uint8_t label) {
+            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol), label});
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
@@ -511,7 +547,7 @@ private:
                 pixel = pixels[lo + j];
                 PixelState& s = local[j];
                 model_.advance(s, static_cast<double>(rate[lo + j]), model_.constants(s.t, t_s[0]), key_, pixel, poisson,
-                               emit);
+                               scratch.noise, emit);
             }
         }
         for (std::size_t k = 1; k < n_samples; ++k) {
@@ -523,7 +559,7 @@ private:
             } else {
                 for (std::size_t j = 0; j < m; ++j) {
                     pixel = pixels[lo + j];
-                    model_.advance(local[j], static_cast<double>(row[j]), consts[k], key_, pixel, poisson, emit);
+                    model_.advance(local[j], static_cast<double>(row[j]), consts[k], key_, pixel, poisson, scratch.noise, emit);
                 }
             }
         }
@@ -555,9 +591,11 @@ private:
         // A k-way merge of the blocks, each sorted already: no joined copy, so the peak is the
         // blocks' events (24 bytes each, with their growth slack) and the output (16 bytes).
         std::vector<Event> events(total);
+        labels_.resize(total);
         const std::uint32_t w = static_cast<std::uint32_t>(width_);
         auto emit = [&](std::size_t j, const RawEvent& e) {
             events[j] = Event{e.t_us, static_cast<std::uint16_t>(e.pixel % w), static_cast<std::uint16_t>(e.pixel / w), e.p};
+            labels_[j] = e.label;
         };
         std::vector<std::uint32_t> heap;  // blocks with events left; the top holds the next event
         for (std::size_t b = 0; b < block_events_.size(); ++b)
@@ -600,6 +638,8 @@ private:
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
     std::vector<std::vector<RawEvent>> block_events_;
+    std::vector<std::uint8_t> labels_;
+    std::vector<double> hot_map_;
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;
     std::atomic<std::size_t> events_in_call_{0};
     bool stopped_ = false;

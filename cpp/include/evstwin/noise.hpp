@@ -1,0 +1,170 @@
+// Shot noise as a continuous-time process, discretised exactly (the default noise model).
+//
+// The photodiode current is its mean plus shot noise: electrons arrive as a Poisson process
+// of rate lambda, so in the log domain the relative fluctuation is white with intensity
+// D = lambda_noisy / lambda^2 [1/s] (lambda_noisy: the part of the rate that is Poisson;
+// D = 1/lambda when signal and dark are both shot-noise limited). The log is linearised about
+// the mean, which holds while many electrons arrive per filter time constant: the
+// photoreceptor pole's bandwidth is proportional to the current, so it always averages
+// ~I_ref / (2 pi f_ref e) ~ 1000 electrons with the default pole.
+//
+// That white noise drives the photoreceptor pole (rate a = 2 pi f_pr, set by the *mean*
+// current) and the source follower (rate b = 2 pi f_sf), two first-order low-passes in
+// series: a linear stochastic system, an Ornstein-Uhlenbeck process in (n_z, n_y),
+//
+//   d n_z = -a n_z dt + a sqrt(D) dW,      d n_y = b (n_z - n_y) dt.
+//
+// Over an interval T its exact update is n(T) = Phi(T) n(0) + w, w ~ N(0, Q(T)), with Phi and
+// Q in closed form below, so the statistics of the samples do not depend on the sampling.
+// Between two samples the comparator could also be tripped by an excursion that the straight
+// line between the samples does not show; the probability is that of a Brownian bridge with
+// the same conditional variance at the interval's middle crossing the level (closed form,
+// bridge_crossing_probability), and its time is drawn from the bridge's first-passage law.
+// With one filter only (no pole, or no source follower) the system is the 1-D OU process of
+// that filter.
+#pragma once
+
+#include <cmath>
+#include <limits>
+
+#include "config.hpp"
+
+namespace evstwin {
+
+/// (1 - exp(-x)) / x, stable for small x, 1 at x = 0.
+inline double one_minus_exp_over(double x) { return std::fabs(x) > 1e-12 ? -std::expm1(-x) / x : 1.0 - 0.5 * x; }
+
+/// What one interval T of the noise process needs, for one (mean current, T).
+struct NoiseCoeffs {
+    // Transition Phi(T) of (n_z, n_y): n_z' = phi_zz n_z, n_y' = phi_yz n_z + phi_yy n_y.
+    double phi_zz = 0, phi_yz = 0, phi_yy = 0;
+    // Lower Cholesky factor of the innovation covariance Q(T): w_z = l_zz g1,
+    // w_y = l_yz g1 + l_yy g2 with g1, g2 independent standard normals.
+    double l_zz = 0, l_yz = 0, l_yy = 0;
+    /// Variance of n_y at the interval's middle given the whole state at both ends.
+    double bridge_var = 0;
+};
+
+/// The innovation covariance of the two-pole system over T: (zz, zy, yy). a, b > 0.
+inline void ou2_covariance(double a, double b, double D, double T, double& qzz, double& qzy, double& qyy) {
+    // v(s) = Phi(s) e_z = (e^{-as}, b (e^{-as} - e^{-bs}) / (b - a)); Q = D a^2 int_0^T v v^T.
+    const double h2a = T * one_minus_exp_over(2 * a * T);      // int e^{-2as}
+    const double hab = T * one_minus_exp_over((a + b) * T);    // int e^{-(a+b)s}
+    const double h2b = T * one_minus_exp_over(2 * b * T);      // int e^{-2bs}
+    const double c = b / (b - a);
+    const double g = D * a * a;
+    qzz = g * h2a;
+    qzy = g * c * (h2a - hab);
+    qyy = g * c * c * (h2a - 2 * hab + h2b);
+}
+
+/// Exact coefficients of the noise over an interval T.
+///   pole_rate_per_s: a = 2 pi f_pr (0 = no photoreceptor pole)
+///   sf_rate_per_s:   b = 2 pi f_sf (0 = no source follower)
+///   D: white-noise intensity of ln I [1/s]. At least one of a, b must be > 0.
+inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T) {
+    NoiseCoeffs k;
+    if (a > 0 && b > 0) {
+        // Equal rates make the closed form 0/0: move the pole by 1e-4 (far below what the
+        // bias currents are known to), which keeps every cancellation above 1e-8 relative.
+        if (std::fabs(b - a) < 1e-4 * (a + b)) a = b * (1.0 - 2e-4);
+        k.phi_zz = std::exp(-a * T);
+        k.phi_yy = std::exp(-b * T);
+        k.phi_yz = b * T * k.phi_zz * one_minus_exp_over((b - a) * T);
+        double qzz, qzy, qyy;
+        ou2_covariance(a, b, D, T, qzz, qzy, qyy);
+        if (qzz > 0) {
+            k.l_zz = std::sqrt(qzz);
+            k.l_yz = qzy / k.l_zz;
+            k.l_yy = std::sqrt(std::max(0.0, qyy - k.l_yz * k.l_yz));
+        }
+        // Cov(mid | ends) = Qh - Qh Ph^T (Ph Qh Ph^T + Qh)^-1 Ph Qh, half-interval Ph, Qh.
+        const double h = 0.5 * T;
+        double hzz, hzy, hyy;
+        ou2_covariance(a, b, D, h, hzz, hzy, hyy);
+        const double pzz = std::exp(-a * h), pyy = std::exp(-b * h), pyz = b * h * pzz * one_minus_exp_over((b - a) * h);
+        // P = Ph Qh (rows of Ph times Qh): [[pzz, 0], [pyz, pyy]] [[hzz, hzy], [hzy, hyy]]
+        const double Pzz = pzz * hzz, Pzy = pzz * hzy;
+        const double Pyz = pyz * hzz + pyy * hzy, Pyy = pyz * hzy + pyy * hyy;
+        // M = P Ph^T + Qh (symmetric)
+        const double Mzz = Pzz * pzz + hzz;
+        const double Mzy = Pzz * pyz + Pzy * pyy + hzy;
+        const double Myy = Pyz * pyz + Pyy * pyy + hyy;
+        const double det = Mzz * Myy - Mzy * Mzy;
+        if (det > 0) {
+            // Cov_yy = hyy - (Qh Ph^T)_y. M^-1 (Ph Qh)_.y, and (Qh Ph^T)_y. = (P_.y)^T.
+            const double iz = (Myy * Pzy - Mzy * Pyy) / det;  // (M^-1 P)_{z,y}
+            const double iy = (Mzz * Pyy - Mzy * Pzy) / det;  // (M^-1 P)_{y,y}
+            k.bridge_var = std::max(0.0, hyy - (Pzy * iz + Pyy * iy));
+        }
+    } else {
+        const double r = a > 0 ? a : b;  // one low-pass: a 1-D OU process of rate r
+        k.phi_yy = std::exp(-r * T);
+        k.l_yy = std::sqrt(D * r * r * T * one_minus_exp_over(2 * r * T));
+        const double qh = D * r * r * 0.5 * T * one_minus_exp_over(r * T);
+        const double ph = std::exp(-0.5 * r * T);
+        k.bridge_var = qh / (1.0 + ph * ph);
+    }
+    return k;
+}
+
+/// Stationary covariance of (n_z, n_y): the noise a pixel has carried since long before t = 0.
+inline void noise_stationary(double a, double b, double D, double& szz, double& szy, double& syy) {
+    if (a > 0 && b > 0) {
+        szz = 0.5 * D * a;
+        szy = syy = 0.5 * D * a * b / (a + b);
+    } else {
+        szz = szy = 0.0;
+        syy = 0.5 * D * (a > 0 ? a : b);
+    }
+}
+
+/// Probability that a Brownian bridge whose distance to a level is u0 > 0 and u1 > 0 at the
+/// ends of an interval, with variance `mid_var` at the middle, touches the level in between:
+/// exp(-2 u0 u1 / (sigma^2 T)) with sigma^2 T = 4 mid_var.
+inline double bridge_crossing_probability(double u0, double u1, double mid_var) {
+    if (!(mid_var > 0.0)) return 0.0;
+    const double e = u0 * u1 / (2.0 * mid_var);
+    return e > 745.0 ? 0.0 : std::exp(-e);
+}
+
+namespace detail {
+/// ln Phi(x) of the standard normal CDF, accurate in the far lower tail.
+inline double log_normal_cdf(double x) {
+    if (x > -8.0) return std::log(0.5 * std::erfc(-x / std::sqrt(2.0)));
+    const double x2 = x * x;  // Mills ratio series
+    return -0.5 * x2 - std::log(-x) - 0.91893853320467274178 + std::log1p(-1.0 / x2 + 3.0 / (x2 * x2));
+}
+}  // namespace detail
+
+/// The time, in [0, T], at which a Brownian bridge from distance u0 to u1 (both > 0) over T
+/// with variance rate sigma2 first touches the level, given that it does; q in (0, 1) picks
+/// the quantile of that conditional first-passage law. P(hit by s) is
+///   Phi(-m/sqrt v) + exp(-k m + k^2 v / 2) Phi((m - k v)/sqrt v),
+/// with m, v the bridge's mean and variance at s and k = 2 u0 / (sigma2 s); it is inverted by
+/// bisection (resolution T / 2^40).
+inline double bridge_first_passage(double u0, double u1, double sigma2, double T, double q) {
+    auto cdf = [&](double s) {
+        if (s <= 0.0) return 0.0;
+        if (s >= T) return std::exp(-2.0 * u0 * u1 / (sigma2 * T));
+        const double m = u0 + (u1 - u0) * s / T;
+        const double v = sigma2 * s * (T - s) / T;
+        const double sd = std::sqrt(v);
+        const double k = 2.0 * u0 / (sigma2 * s);
+        const double first = 0.5 * std::erfc(m / (sd * std::sqrt(2.0)));
+        const double second = std::exp(-k * m + 0.5 * k * k * v + detail::log_normal_cdf((m - k * v) / sd));
+        return first + second;
+    };
+    const double target = q * cdf(T);
+    double lo = 0.0, hi = T;
+    for (int i = 0; i < 40; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        if (cdf(mid) < target)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+}  // namespace evstwin
