@@ -44,8 +44,8 @@ def render_chunk(t: np.ndarray) -> np.ndarray:
     return out
 
 
-def bench_engine(duration_s: float, threads: int, chunks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, int]:
-    sensor = Sensor(WIDTH, HEIGHT, PixelParams(threshold_sigma=0.03), seed=1, num_threads=threads)
+def bench_engine(params: PixelParams, threads: int, chunks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, int]:
+    sensor = Sensor(WIDTH, HEIGHT, params, seed=1, num_threads=threads)
     elapsed, n_events = 0.0, 0
     for rate, t in chunks:
         start = time.perf_counter()
@@ -60,7 +60,10 @@ def main() -> None:
     ap.add_argument("--numpy-duration", type=float, default=0.5, help="sensor time for NumPy [s]")
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--chunk", type=int, default=250, help="samples per run() call")
+    ap.add_argument("--noise-model", choices=["continuous", "sampled"], default="continuous",
+                    help="the engine's shot-noise model (the NumPy reference implements 'sampled')")
     args = ap.parse_args()
+    params = PixelParams(threshold_sigma=0.03, noise_model=args.noise_model)
 
     n = int(round(args.duration * RATE_HZ))
     t_all = np.arange(n) / RATE_HZ
@@ -73,16 +76,17 @@ def main() -> None:
     updates = n * WIDTH * HEIGHT
     print(f"machine: {platform.processor() or platform.machine()}, {len(__import__('os').sched_getaffinity(0))} cores; "
           f"OpenMP: {has_openmp()}")
-    print(f"load: DAVIS346 {WIDTH}x{HEIGHT}, {RATE_HZ:.0f} Hz, {args.duration:g} s, 5 sources, all noise on")
+    print(f"load: DAVIS346 {WIDTH}x{HEIGHT}, {RATE_HZ:.0f} Hz, {args.duration:g} s, 5 sources, all noise on, "
+          f"noise_model={args.noise_model}")
     results = {}
     for threads in [int(x) for x in args.threads.split(",")]:
-        elapsed, n_ev = bench_engine(args.duration, threads, chunks)
+        elapsed, n_ev = bench_engine(params, threads, chunks)
         results[threads] = updates / elapsed
         print(f"C++ engine, {threads} thread(s): {elapsed:7.2f} s  {updates / elapsed / 1e6:8.1f} M pixel-updates/s  "
               f"{n_ev / elapsed / 1e6:6.2f} M events/s  ({n_ev} events)")
 
     m = int(round(args.numpy_duration * RATE_HZ))
-    ref = numpy_reference.NumpySensor(WIDTH, HEIGHT, PixelParams(threshold_sigma=0.03), seed=1)
+    ref = numpy_reference.NumpySensor(WIDTH, HEIGHT, params.replace(noise_model="sampled"), seed=1)
     start = time.perf_counter()
     n_ev = 0
     for a in range(0, m, args.chunk):
