@@ -533,7 +533,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         if n_stars is None and "density_per_deg2" in sf:
             px_deg = optics.plate_scale_arcsec_per_px / 3600.0
             n_stars = sf["density_per_deg2"] * width * height * px_deg * px_deg
-        if n_stars is not None and not n_stars * swept <= MAX_STARS:
+        if n_stars is not None and n_stars > 0 and not n_stars * swept <= MAX_STARS:
             which = "star_field.n_stars" if "n_stars" in sf else "star_field.density_per_deg2"
             if n_stars <= MAX_STARS:  # the drift brings in the rest
                 which = f"{drift_key} (it sweeps {swept:.3g} times the sensor area over {t_end:g} s), {which}"
@@ -705,11 +705,13 @@ def _most_windows_at_once(targets: list[Target], width: int, height: int, half: 
     end = np.full(len(linear), duration_s)
     for p0, v, size in ((x0, vx, width), (y0, vy, height)):
         lo, hi = -half - 0.5, size - 0.5 + half  # the centres whose window touches the sensor [px]
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             ta, tb = t0 + (lo - p0) / v, t0 + (hi - p0) / v
         inside = (p0 >= lo) & (p0 <= hi)
         first = np.where(v == 0.0, np.where(inside, -np.inf, np.inf), np.minimum(ta, tb))
         last = np.where(v == 0.0, np.where(inside, np.inf, -np.inf), np.maximum(ta, tb))
+        unknown = np.isnan(first) | np.isnan(last)  # inf - inf at absurd values: count it as on
+        first, last = np.where(unknown, -np.inf, first), np.where(unknown, np.inf, last)
         start, end = np.maximum(start, first), np.minimum(end, last)
     on = start <= end
     # Sweep the interval ends in time order, an interval's start before another's end at a tie.

@@ -557,7 +557,7 @@ def random_star_field(
     if n_stars is not None:
         n = _check_int("n_stars", n_stars, 0)
         per_px2 = n / (width * height)
-        mean = per_px2 * area_px2
+        mean = per_px2 * area_px2 if n else 0.0
         if n > MAX_STARS:
             raise ValueError(f"n_stars must be at most {MAX_STARS:,} (each star is a target, ~{_STAR_BYTES} bytes, "
                              f"rendered every sample); got n_stars={n:,}, {n * _STAR_BYTES / 1e9:.3g} GB")
@@ -569,7 +569,7 @@ def random_star_field(
         px_deg = math.degrees(optics.plate_scale_rad_per_px)
         per_px2 = density * px_deg * px_deg
         on_sensor = density * width * height * px_deg * px_deg  # this order: the same draws as before drifts
-        mean = on_sensor + per_px2 * (strip_x + strip_y)
+        mean = on_sensor + per_px2 * (strip_x + strip_y) if per_px2 > 0.0 else 0.0
         if not mean <= MAX_STARS:
             raise ValueError(
                 f"density_per_deg2={density_per_deg2!r} gives {mean:.3g} stars on the {width}x{height} field{swept} "
