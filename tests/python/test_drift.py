@@ -249,3 +249,23 @@ def test_built_in_scenarios_are_unchanged() -> None:
 def test_a_drifting_field_simulates_with_the_satellites_truth_only() -> None:
     r = simulate({"base": "geo-stare", "star_field": {"drift_px_s": [-3.0, 3.2]}}, duration_s=0.5, num_threads=1)
     assert list(r.meta["truth"]) == ["geo"] and r.n_events > 0
+
+
+def test_a_fast_drifting_field_sub_samples_sparsely_with_the_dense_events() -> None:
+    """150 px/s at 250 Hz moves every star 0.72 px a sample: n_sub = 3 for the pixels near
+    the stars only (sparse), or everywhere (dense); without noise both give the same events."""
+    noise_free = {"photon_shot_noise": False, "dark_model": "none", "leak_rate_hz": 0.0, "shot_noise_rate_hz": 0.0,
+                  "refractory_s": 0.0, "pr_pole": False}
+
+    def run(sparse: bool):  # type: ignore[no-untyped-def]
+        return simulate({
+            "name": "drift", "duration_s": 0.2, "sensor": {"preset": "davis346", "width": 64, "height": 48},
+            "pixel": noise_free, "background": {"photon_rate_ph_s": 1e5}, "optics": {"extra_blur_sigma_px": 0.6},
+            "sampling": {"rate_hz": 250.0, "sparse": sparse, "chunk_samples": 20},
+            "star_field": {"n_stars": 30, "mag_min": -2.0, "mag_max": 2.0, "drift_px_s": [150.0, -100.0]},
+        }, num_threads=1)
+
+    sparse, dense = run(True), run(False)
+    assert sparse.sub_sampled_chunks > 0 and sparse.n_events > 1000
+    assert sparse.pixel_updates < dense.pixel_updates
+    np.testing.assert_array_equal(sparse.events, dense.events)
