@@ -447,7 +447,8 @@ MAX_SAMPLES = 10**9
 MAX_CHUNK_BYTES = 2 * 2**30
 """Most memory one chunk's rendered rates may take [bytes]: chunk_samples frames of the whole
 array (8 bytes a pixel), or in a sparse sub-sampled chunk the PSF windows of every moving target
-at every fine sample (about 32 bytes a window pixel)."""
+that can be on the sensor at once (a drifting field's stars count only while they can touch
+it) at every fine sample (about 32 bytes a window pixel)."""
 MAX_PHOTON_RATE = 1e20
 """The engine's largest photon rate per pixel [photons/s] (``Sensor::MAX_RATE``)."""
 
