@@ -19,8 +19,14 @@ The tables mirror the Python objects:
 ``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
 ``[[targets]]``   ``kind`` = ``static`` | ``linear`` | ``circular`` | ``rotating_bar`` |
                   ``tabulated``, its geometry, and one brightness: ``flux_ph_s``,
-                  ``magnitude`` or ``light_curve = {t_s = [...], flux_ph_s|magnitude = [...]}``.
-``[star_field]``  a random star field (``n_stars`` or ``density_per_deg2``, magnitudes, seed).
+                  ``magnitude`` or ``light_curve = {t_s = [...], flux_ph_s|magnitude = [...]}``;
+                  ``frame = "field"`` gives it in field coordinates (it moves with the star
+                  field's drift as well; default ``"sensor"``).
+``[star_field]``  a random star field (``n_stars`` or ``density_per_deg2``, magnitudes, seed)
+                  and its drift across the sensor, ``drift_px_s = [vx, vy]`` or
+                  ``drift_arcsec_s = [wx, wy]`` (through the plate scale): every star moves,
+                  and stars drift in from the area the drift sweeps during the run. A table
+                  with only a drift makes no random stars (it moves the field-frame targets).
 
 Top level: ``name``, ``description``, ``duration_s``, ``seed``, and ``base`` (a built-in
 scenario this one starts from; its tables are merged key by key).
@@ -57,6 +63,8 @@ from .targets import (
     TabulatedTarget,
     Target,
     aligned_rotating_targets,
+    drift_px_s_from_arcsec,
+    drifting,
     random_star_field,
 )
 
@@ -78,6 +86,8 @@ _OPTICS_KEYS = tuple(
     f.name for f in dataclasses.fields(Optics) if f.name not in ("width_px", "height_px", "pixel_pitch_m")
 )
 _BRIGHTNESS_KEYS = ("flux_ph_s", "magnitude", "light_curve")
+_FRAMES = ("sensor", "field")
+_DRIFT_KEYS = ("drift_px_s", "drift_arcsec_s")
 _TARGET_KEYS: dict[str, tuple[str, ...]] = {
     "static": ("x_px", "y_px"),
     "linear": ("x0_px", "y0_px", "vx_px_s", "vy_px_s", "wx_arcsec_s", "wy_arcsec_s", "t0_s"),
@@ -101,7 +111,7 @@ SCHEMA: dict[str, Any] = {
     "background": {"photon_rate_ph_s": float, "sky_mag_per_arcsec2": float},
     "targets": list,
     "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
-                   "counts_slope": float, "seed": int},
+                   "counts_slope": float, "seed": int, "drift_px_s": Any, "drift_arcsec_s": Any},
 }
 DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50}
 
@@ -259,7 +269,7 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
     kind = target.get("kind")
     if not isinstance(kind, str) or kind not in _TARGET_KEYS:
         raise ScenarioError(f"targets[{i}].kind must be one of {', '.join(_TARGET_KEYS)}; got {kind!r}")
-    allowed = ("kind", "label") + _TARGET_KEYS[kind] + _BRIGHTNESS_KEYS
+    allowed = ("kind", "label", "frame") + _TARGET_KEYS[kind] + _BRIGHTNESS_KEYS
     for key in target:
         if key not in allowed:
             raise ScenarioError(f"unknown scenario key 'targets[{i}].{key}' for kind {kind!r}; allowed: {', '.join(allowed)}")
@@ -307,7 +317,20 @@ def _check_values(s: dict[str, Any]) -> None:
         number("background.photon_rate_ph_s", bg["photon_rate_ph_s"], 0.0, 1e20)
     if "sky_mag_per_arcsec2" in bg:
         number("background.sky_mag_per_arcsec2", bg["sky_mag_per_arcsec2"], -30.0, 40.0)
+    sf = s.get("star_field", {})
+    drifts = [k for k in _DRIFT_KEYS if k in sf]
+    if len(drifts) > 1:
+        raise ScenarioError(f"star_field takes one of drift_px_s or drift_arcsec_s, not both; got drift_px_s="
+                            f"{sf['drift_px_s']!r}, drift_arcsec_s={sf['drift_arcsec_s']!r}")
+    for key in drifts:
+        v = sf[key]
+        if not isinstance(v, list) or len(v) != 2 or not all(
+                isinstance(c, (int, float)) and not isinstance(c, bool) for c in v):
+            unit = "px/s" if key == "drift_px_s" else "arcsec/s"
+            raise ScenarioError(f"star_field.{key} must be two numbers [vx, vy] ({unit}); got {v!r}")
     for i, t in enumerate(s["targets"]):
+        if "frame" in t and t["frame"] not in _FRAMES:
+            raise ScenarioError(f"targets[{i}].frame must be one of {', '.join(map(repr, _FRAMES))}; got {t['frame']!r}")
         if "flux_ph_s" in t:
             number(f"targets[{i}].flux_ph_s", t["flux_ph_s"], 0.0, 1e25)
         if "magnitude" in t:
@@ -395,6 +418,10 @@ class Scene:
     chunk_samples: int
     max_events: int | None = None
     """sampling.max_events: the cap on one engine call's events (None: the engine's default)."""
+    field_stars: int = 0
+    """How many of the last ``targets`` the ``[star_field]`` made. Rendered like the others,
+    but not written as ground-truth tracks when they drift: thousands of tracks would cost 32
+    bytes per star per sample, and the resolved scenario (seed, drift) makes them again."""
 
     @property
     def psf_sigma_px(self) -> float:
@@ -420,7 +447,8 @@ MAX_SAMPLES = 10**9
 MAX_CHUNK_BYTES = 2 * 2**30
 """Most memory one chunk's rendered rates may take [bytes]: chunk_samples frames of the whole
 array (8 bytes a pixel), or in a sparse sub-sampled chunk the PSF windows of every moving target
-at every fine sample (about 32 bytes a window pixel)."""
+that can be on the sensor at once (a drifting field's stars count only while they can touch
+it) at every fine sample (about 32 bytes a window pixel)."""
 MAX_PHOTON_RATE = 1e20
 """The engine's largest photon rate per pixel [photons/s] (``Sensor::MAX_RATE``)."""
 
@@ -470,6 +498,11 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     )
     optics = _wrap(f"optics={s.get('optics', {})}", optics.replace, width_px=width, height_px=height)
 
+    # The run's end: whole base samples, as simulate runs them (the drift sweeps until then).
+    t_end = max(1, math.ceil(float(s["duration_s"]) * float(s["sampling"]["rate_hz"]) - 1e-9)) / float(
+        s["sampling"]["rate_hz"])
+    drift, drift_key = _field_drift(s, optics)
+    moves = drift != (0.0, 0.0)
     targets: list[Target] = []
     sources: list[str] = []  # the key each target comes from, for errors
     for i, table in enumerate(s["targets"]):
@@ -477,31 +510,46 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
                                                   and "magnitude" in table["light_curve"])
         label = f"targets[{i}]" + (f" (a magnitude, through optics={s.get('optics', {})})" if uses_magnitude else "")
         made = _wrap(label, _target, table, optics, width, height)
+        source = f"targets[{i}]"
+        if table.get("frame") == "field" and moves:
+            made = [drifting(t, *drift) for t in made]
+            source += f" (frame='field', moved by {drift_key})"
         targets.extend(made)
-        sources.extend([f"targets[{i}]"] * len(made))
+        sources.extend([source] * len(made))
     sigma = float(_wrap(f"optics={s.get('optics', {})}", lambda: optics.psf_sigma_px))
     if not sigma <= MAX_PSF_SIGMA_PX:
         raise ScenarioError(
             f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "
             f"optics.f_number and optics.extra_blur_sigma_px; got {s.get('optics', {})}"
         )
-    if "star_field" in s:
-        sf = dict(s["star_field"])
+    field_stars = 0
+    sf = dict(s.get("star_field", {}))
+    drift_only = any(k in sf for k in _DRIFT_KEYS) and "n_stars" not in sf and "density_per_deg2" not in sf
+    if sf and not drift_only:
+        for key in _DRIFT_KEYS:
+            sf.pop(key, None)
         n_stars = sf.get("n_stars")
+        # The stars that drift in come from the area the drift sweeps past the sensor.
+        swept = (width * height + height * abs(drift[0]) * t_end + width * abs(drift[1]) * t_end) / (width * height)
         if n_stars is None and "density_per_deg2" in sf:
             px_deg = optics.plate_scale_arcsec_per_px / 3600.0
             n_stars = sf["density_per_deg2"] * width * height * px_deg * px_deg
-        if n_stars is not None and not n_stars <= MAX_STARS:
+        if n_stars is not None and n_stars > 0 and not n_stars * swept <= MAX_STARS:
             which = "star_field.n_stars" if "n_stars" in sf else "star_field.density_per_deg2"
-            raise ScenarioError(f"star_field gives {n_stars:.3g} stars (> {MAX_STARS:g}, about "
-                                f"{n_stars * 300 / 1e9:.3g} GB of targets): lower {which}; got star_field={sf}")
+            if n_stars <= MAX_STARS:  # the drift brings in the rest
+                which = f"{drift_key} (it sweeps {swept:.3g} times the sensor area over {t_end:g} s), {which}"
+            total = n_stars * swept
+            raise ScenarioError(f"star_field gives {total:.3g} stars (> {MAX_STARS:g}, about "
+                                f"{total * 300 / 1e9:.3g} GB of targets): lower {which}; got star_field="
+                                f"{s['star_field']}")
         slope = sf.get("counts_slope")
         if slope is not None and not -5.0 <= slope <= 5.0:
             raise ScenarioError(f"star_field.counts_slope must be in [-5, 5] (dex per magnitude; ~0.4 for stars); "
                                 f"got {slope!r}")
-        stars = _wrap("star_field", random_star_field, width, height, optics, **sf)
+        stars = _wrap("star_field", random_star_field, width, height, optics, **sf, drift_px_s=drift, duration_s=t_end)
         targets.extend(stars)
-        sources.extend(["star_field"] * len(stars))
+        sources.extend([f"star_field (moved by {drift_key})" if moves else "star_field"] * len(stars))
+        field_stars = len(stars)
 
     bg = s.get("background", {})
     if "sky_mag_per_arcsec2" in bg:
@@ -525,8 +573,22 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
         rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
-        chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"),
+        chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
     )
+
+
+def _field_drift(s: dict[str, Any], optics: Optics) -> tuple[tuple[float, float], str]:
+    """The star field's drift (vx, vy) [px/s] and the key that sets it, for messages."""
+    sf = s.get("star_field", {})
+    if "drift_px_s" in sf:
+        v = sf["drift_px_s"]
+        return (float(v[0]), float(v[1])), f"star_field.drift_px_s={v!r}"
+    if "drift_arcsec_s" in sf:
+        w = sf["drift_arcsec_s"]
+        key = f"star_field.drift_arcsec_s={w!r}"
+        vx, vy = _wrap(f"{key} through optics={s.get('optics', {})}", drift_px_s_from_arcsec, w[0], w[1], optics)
+        return (vx, vy), f"{key} ({vx:.4g}, {vy:.4g} px/s at {optics.plate_scale_arcsec_per_px:.4g} arcsec/px)"
+    return (0.0, 0.0), "no drift"
 
 
 def _peak_flux(target: Target) -> float:
@@ -614,13 +676,51 @@ def _check_work(s: dict[str, Any], width: int, height: int, optics: Optics, targ
         half = psf.window_half_width_px(float(optics.psf_sigma_px))
         window = min((2 * half + 1) ** 2, width * height)
         fine = max(chunk, n_sub) + n_sub  # the fine samples of one sparse chunk, at most
-        need = fine * len(moving) * window * 32.0
+        # Windows off the sensor are skipped: a drifting field's stars, most of them outside
+        # at any one time on a long run, count only while they can touch it.
+        n_win = _most_windows_at_once([targets[j] for _, j in moving], width, height, half, duration)
+        need = fine * n_win * window * 32.0
         if not need <= MAX_CHUNK_BYTES:
             raise ScenarioError(
-                f"{why}; one chunk of {fine:.3g} fine samples renders {len(moving)} moving PSF windows of {window} px "
+                f"{why}; one chunk of {fine:.3g} fine samples renders {n_win} moving PSF windows of {window} px "
                 f"each, {need / 2**30:.3g} GiB (> {MAX_CHUNK_BYTES / 2**30:g} GiB): raise sampling.max_shift_px or "
                 "lower sampling.chunk_samples"
             )
+
+
+def _most_windows_at_once(targets: list[Target], width: int, height: int, half: int, duration_s: float) -> int:
+    """The most of these moving targets whose PSF windows (half-width ``half`` px) overlap the
+    sensor at one time in [0, duration_s]: exact for linear targets (each is on for one time
+    interval; the count is the deepest overlap of the intervals), every other one counted
+    as always on."""
+    linear = [t for t in targets if isinstance(t, LinearTarget)]
+    others = len(targets) - len(linear)
+    if not linear:
+        return others
+    x0 = np.array([t.x0_px for t in linear])
+    y0 = np.array([t.y0_px for t in linear])
+    vx = np.array([t.vx_px_s for t in linear])
+    vy = np.array([t.vy_px_s for t in linear])
+    t0 = np.array([t.t0_s for t in linear])
+    start = np.zeros(len(linear))
+    end = np.full(len(linear), duration_s)
+    for p0, v, size in ((x0, vx, width), (y0, vy, height)):
+        lo, hi = -half - 0.5, size - 0.5 + half  # the centres whose window touches the sensor [px]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            ta, tb = t0 + (lo - p0) / v, t0 + (hi - p0) / v
+        inside = (p0 >= lo) & (p0 <= hi)
+        first = np.where(v == 0.0, np.where(inside, -np.inf, np.inf), np.minimum(ta, tb))
+        last = np.where(v == 0.0, np.where(inside, np.inf, -np.inf), np.maximum(ta, tb))
+        unknown = np.isnan(first) | np.isnan(last)  # inf - inf at absurd values: count it as on
+        first, last = np.where(unknown, -np.inf, first), np.where(unknown, np.inf, last)
+        start, end = np.maximum(start, first), np.minimum(end, last)
+    on = start <= end
+    # Sweep the interval ends in time order, an interval's start before another's end at a tie.
+    times = np.concatenate([start[on], end[on]])
+    steps = np.concatenate([np.ones(int(on.sum()), np.int64), -np.ones(int(on.sum()), np.int64)])
+    order = np.lexsort((-steps, times))
+    deepest = int(np.cumsum(steps[order]).max(initial=0))
+    return others + deepest
 
 
 def _brightness(table: dict[str, Any], optics: Optics) -> Any:

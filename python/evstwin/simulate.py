@@ -33,7 +33,7 @@ from . import psf
 from ._core import __version__
 from .scenario import ScenarioError, Scene, build, load, parse_assignment, set_value
 from .sensor import EVENT_DTYPE, Sensor
-from .targets import LightCurve, Target
+from .targets import LightCurve, LinearTarget, Target
 
 
 @dataclass
@@ -204,9 +204,15 @@ def _stats(runner: _Runner, meta: dict[str, Any], wall0: float, n_events: int, n
 
 def track_names(scene: Scene) -> list[str]:
     """The names under which a scene's moving targets' ground truth is written (their labels,
-    ``target<j>`` for unlabelled ones, ``#<j>`` appended to a repeated label)."""
+    ``target<j>`` for unlabelled ones, ``#<j>`` appended to a repeated label). The stars of a
+    drifting star field have none (``Scene.field_stars``)."""
     t_end = max(1, math.ceil(scene.duration_s * scene.rate_hz - 1e-9)) / scene.rate_hz
-    return _names([t for t in scene.targets if not _is_static(t, t_end)])
+    return _names([t for t in _tracked(scene) if not _is_static(t, t_end)])
+
+
+def _tracked(scene: Scene) -> list[Target]:
+    """The targets whose tracks go into the ground truth: all but a star field's stars."""
+    return scene.targets[: len(scene.targets) - scene.field_stars]
 
 
 def _names(moving: Sequence[Target]) -> list[str]:
@@ -219,6 +225,41 @@ def _names(moving: Sequence[Target]) -> list[str]:
 
 def _is_static(target: Target, duration_s: float) -> bool:
     return not isinstance(target.brightness, LightCurve) and target.max_speed_px_s(0.0, duration_s) == 0.0
+
+
+class _LinearColumns:
+    """The constant-flux LinearTargets among ``targets`` (a drifting star field: thousands),
+    sampled in one array operation instead of one call each, with the same arithmetic
+    (``x0 + vx (t - t0)``), so the same values; ``others``: the columns of the rest."""
+
+    def __init__(self, targets: Sequence[Target]) -> None:
+        cols: list[int] = []
+        lin: list[LinearTarget] = []
+        flux: list[float] = []
+        for j, t in enumerate(targets):
+            b = t.brightness
+            if isinstance(t, LinearTarget) and type(t) is LinearTarget and not isinstance(b, LightCurve):
+                cols.append(j)
+                lin.append(t)
+                flux.append(float(b))
+        self.cols = np.array(cols, np.int64)
+        self.others = sorted(set(range(len(targets))) - set(cols))
+        self.x0 = np.array([t.x0_px for t in lin], np.float64)
+        self.y0 = np.array([t.y0_px for t in lin], np.float64)
+        self.vx = np.array([t.vx_px_s for t in lin], np.float64)
+        self.vy = np.array([t.vy_px_s for t in lin], np.float64)
+        self.t0 = np.array([t.t0_s for t in lin], np.float64)
+        self.flux = np.array(flux, np.float64)
+        self.max_speed_px_s = max((t.max_speed_px_s(0.0, 0.0) for t in lin), default=0.0)
+
+    def sample(self, t: np.ndarray, x: np.ndarray, y: np.ndarray, f: np.ndarray) -> None:
+        """Fill their columns of the (T, S) arrays x, y [px] and f [photons/s] at times t [s]."""
+        if not self.cols.size:
+            return
+        dt = t[:, None] - self.t0[None, :]
+        x[:, self.cols] = self.x0 + self.vx * dt
+        y[:, self.cols] = self.y0 + self.vy * dt
+        f[:, self.cols] = self.flux
 
 
 class _Runner:
@@ -234,7 +275,13 @@ class _Runner:
         self.t_end = self.n_base * self.dt
         t0 = time.perf_counter()
         static = [t for t in scene.targets if _is_static(t, self.t_end)]
-        self.moving = [t for t in scene.targets if not _is_static(t, self.t_end)]
+        # Moving targets: the tracked ones first (their columns carry the ground truth), then
+        # a drifting star field's stars.
+        tracked = _tracked(scene)
+        self.moving = [t for t in tracked if not _is_static(t, self.t_end)]
+        n_tracked = len(self.moving)
+        self.moving += [t for t in scene.targets[len(tracked):] if not _is_static(t, self.t_end)]
+        self._linear = _LinearColumns(self.moving)
         self.static_map = np.full((scene.height, scene.width), scene.background_ph_s, np.float64)
         if static:
             x = np.array([float(t.position_px(0.0)[0]) for t in static])
@@ -249,7 +296,7 @@ class _Runner:
         # the scene was rendered at (the fine rate where the run sub-sampled), in time order.
         self._truth_sink = truth_sink
         self._truth_t_last = -math.inf
-        self.track_names = _names(self.moving)
+        self.track_names = _names(self.moving[:n_tracked])
         self.half = psf.window_half_width_px(self.sigma)
         # A pixel a source has left keeps the fine sampling until the source follower has
         # settled (5 time constants): the comparator interpolates linearly between samples
@@ -301,7 +348,8 @@ class _Runner:
     def _n_sub(self, t0: float, t1: float) -> int:
         if not self.moving:
             return 1
-        speed = max(t.max_speed_px_s(t0, t1) for t in self.moving)
+        speed = max((self.moving[j].max_speed_px_s(t0, t1) for j in self._linear.others), default=0.0)
+        speed = max(speed, self._linear.max_speed_px_s)
         return max(1, math.ceil(speed * self.dt / self.scene.max_shift_px - 1e-9))
 
     def _sources(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -309,7 +357,9 @@ class _Runner:
         x = np.empty((t.size, n))
         y = np.empty((t.size, n))
         f = np.empty((t.size, n))
-        for j, target in enumerate(self.moving):
+        self._linear.sample(t, x, y, f)
+        for j in self._linear.others:
+            target = self.moving[j]
             x[:, j], y[:, j] = target.position_px(t)
             f[:, j] = target.flux_ph_s(t)
         keep = t > self._truth_t_last  # chunks come in time order; never repeat a time

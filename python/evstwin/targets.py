@@ -15,11 +15,17 @@ or of magnitudes through an ``Optics``: a tumbling satellite). For a constant ma
 ``optics.flux_from_magnitude(mag)``.
 
 Positions are unbounded: a target may leave the sensor (the renderer then skips it).
+
+A star field that drifts across the sensor (a telescope's tracking error, a staring camera)
+moves every star at once: ``random_star_field(..., drift_px_s=(vx, vy), duration_s=D)``
+gives LinearTargets, including the stars that drift in during the run, and ``drifting(target,
+vx, vy)`` carries any target given in field coordinates along with the field.
 """
 
 from __future__ import annotations
 
 import abc
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -400,6 +406,85 @@ class TabulatedTarget(Target):
         return float(speed[touch].max()) if np.any(touch) else 0.0
 
 
+@dataclass(frozen=True, eq=False)
+class DriftingTarget(Target):
+    """A target given in field coordinates, carried by a field that drifts across the sensor
+    at (vx_px_s, vy_px_s) [px/s]: ``sensor position = target.position_px(t) + v t`` (field and
+    sensor coordinates coincide at t = 0, the start of a simulation). Its velocity is its own
+    plus the drift; brightness and label are the target's.
+
+    Use :func:`drifting`, which gives a plain LinearTarget where the sum is one (static and
+    linear targets), and this wrapper for the others.
+    """
+
+    target: Target
+    vx_px_s: float
+    vy_px_s: float
+    brightness: Brightness = dataclasses.field(init=False)
+    label: str = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.target, Target):
+            raise TypeError(f"target must be a Target; got {self.target!r}")
+        _finite("vx_px_s", self.vx_px_s)
+        _finite("vy_px_s", self.vy_px_s)
+        object.__setattr__(self, "brightness", self.target.brightness)
+        object.__setattr__(self, "label", self.target.label)
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        t = _times(t_s)
+        x, y = self.target.position_px(t)
+        return x + self.vx_px_s * t, y + self.vy_px_s * t
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        vx, vy = self.target.velocity_px_s(t_s)
+        return vx + self.vx_px_s, vy + self.vy_px_s
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        """Exact for tabulated targets (the fastest segment plus the drift); for the others
+        the bound |own| + |drift| (reached by a circular target once per turn), which only
+        ever samples more finely than needed."""
+        inner = self.target
+        if isinstance(inner, TabulatedTarget) and inner.t_s.size >= 2:
+            t0, t1 = _interval(t0_s, t1_s)
+            inner._check_range(np.array([t0, t1]), "t0_s/t1_s")
+            vx, vy = inner._segment_velocity()
+            touch = (inner.t_s[1:] >= t0) & (inner.t_s[:-1] <= t1)
+            speed = float(np.hypot(vx[touch] + self.vx_px_s, vy[touch] + self.vy_px_s).max(initial=0.0))
+            if t0 < inner.t_s[0] or t1 > inner.t_s[-1]:  # outside a 'hold' table: at rest in the field
+                speed = max(speed, math.hypot(self.vx_px_s, self.vy_px_s))
+            return speed
+        return inner.max_speed_px_s(t0_s, t1_s) + math.hypot(self.vx_px_s, self.vy_px_s)
+
+
+def drifting(target: Target, vx_px_s: float, vy_px_s: float) -> Target:
+    """``target``, given in field coordinates, as seen on the sensor while the field drifts at
+    (vx_px_s, vy_px_s) [px/s] (field and sensor coordinates coincide at t = 0).
+
+    A static target becomes ``LinearTarget(x, y, vx, vy)``; a linear one a LinearTarget with
+    the velocities summed (exact, and sampled with the other linear targets in one array
+    operation); any other a :class:`DriftingTarget`. A zero drift returns ``target`` itself.
+    """
+    vx = _finite("vx_px_s", vx_px_s)
+    vy = _finite("vy_px_s", vy_px_s)
+    if vx == 0.0 and vy == 0.0:
+        return target
+    if isinstance(target, StaticTarget):
+        return LinearTarget(target.x_px, target.y_px, vx, vy, target.brightness, 0.0, target.label)
+    if isinstance(target, LinearTarget):
+        # x0 + v (t - t0) + d t = (x0 + d t0) + (v + d)(t - t0)
+        return LinearTarget(target.x0_px + vx * target.t0_s, target.y0_px + vy * target.t0_s,
+                            target.vx_px_s + vx, target.vy_px_s + vy, target.brightness, target.t0_s, target.label)
+    return DriftingTarget(target, vx, vy)
+
+
+def drift_px_s_from_arcsec(wx_arcsec_s: float, wy_arcsec_s: float, optics: Optics) -> tuple[float, float]:
+    """A field drift across the sky [arcsec/s] in pixels per second through the plate scale
+    (``optics.plate_scale_arcsec_per_px``; small-angle, as ``LinearTarget.from_angular_velocity``)."""
+    k = optics.plate_scale_arcsec_per_px
+    return _drift("drift_px_s", (_finite("wx_arcsec_s", wx_arcsec_s) / k, _finite("wy_arcsec_s", wy_arcsec_s) / k))
+
+
 # ---------------------------------------------------------------------------------------------
 
 
@@ -419,7 +504,9 @@ def random_star_field(
     mag_max: float = 12.0,
     counts_slope: float = 0.4,
     seed: int = 0,
-) -> list[StaticTarget]:
+    drift_px_s: Sequence[float] = (0.0, 0.0),
+    duration_s: float = 0.0,
+) -> list[StaticTarget] | list[LinearTarget]:
     """Random stars, uniform over the sensor, with power-law magnitude counts.
 
     Give exactly one of ``n_stars`` or ``density_per_deg2`` (stars per square degree between
@@ -431,6 +518,16 @@ def random_star_field(
     ``optics.flux_from_magnitude``; each star's label is ``"star <k> mag=<m>"``.
     Positions cover the whole sensor area, x in [-0.5, width - 0.5), y likewise.
     The same arguments and seed give the same stars (numpy ``default_rng(seed)``, PCG64).
+
+    drift_px_s: (vx, vy) [px/s], the velocity of the whole field across the sensor (a
+    telescope's tracking error, a staring camera; ``drift_px_s_from_arcsec`` converts a rate on
+    the sky). With a non-zero drift the stars are LinearTargets at (x0 + vx t, y0 + vy t) with
+    the positions above at t = 0, and the field also holds the stars that drift onto the
+    sensor during ``duration_s`` [s]: the area the drift sweeps past the sensor, at the same
+    density (``n_stars / (width height)`` per px^2 with n_stars, a Poisson count). The
+    count on the sensor is then the same in distribution at every time in [0, duration_s].
+    The stars on the sensor at t = 0 are those of the field without drift (their random
+    numbers come first). With no drift (the default) they are StaticTargets, as before.
     """
     width = _check_int("width", width, 1)
     height = _check_int("height", height, 1)
@@ -440,39 +537,89 @@ def random_star_field(
         raise ValueError(f"need mag_min <= mag_max; got mag_min={mag_min!r}, mag_max={mag_max!r}")
     alpha = _non_negative("counts_slope", counts_slope)
     seed = _check_int("seed", seed, 0)
+    vx, vy = _drift("drift_px_s", drift_px_s)
+    duration = _non_negative("duration_s", duration_s)
     if (n_stars is None) == (density_per_deg2 is None):
         raise ValueError(
             f"give exactly one of n_stars and density_per_deg2; got n_stars={n_stars!r}, density_per_deg2={density_per_deg2!r}"
         )
     rng = np.random.default_rng(seed)
+    # Where a star must be at t = 0 to be on the sensor at some time in [0, duration]: the
+    # sensor plus two strips swept by its leading edges moving by d = -v duration (disjoint
+    # from the sensor and from each other; their union is the sensor's Minkowski sum with
+    # the segment [0, d]).
+    dx, dy = -vx * duration, -vy * duration
+    strip_x = height * abs(dx)  # swept by the edge x = width - 0.5 (dx > 0) or -0.5 [px^2]
+    strip_y = width * abs(dy)
+    area_px2 = width * height + strip_x + strip_y
+    swept = "" if area_px2 == width * height else (
+        f" and the area drift_px_s={drift_px_s!r} sweeps past it over duration_s={duration_s!r}")
     if n_stars is not None:
         n = _check_int("n_stars", n_stars, 0)
+        per_px2 = n / (width * height)
+        mean = per_px2 * area_px2 if n else 0.0
         if n > MAX_STARS:
             raise ValueError(f"n_stars must be at most {MAX_STARS:,} (each star is a target, ~{_STAR_BYTES} bytes, "
                              f"rendered every sample); got n_stars={n:,}, {n * _STAR_BYTES / 1e9:.3g} GB")
+        if not mean <= MAX_STARS:
+            raise ValueError(f"n_stars={n:,} on the {width}x{height} sensor{swept} gives {mean:.3g} stars, more than "
+                             f"{MAX_STARS:,} ({mean * _STAR_BYTES / 1e9:.3g} GB)")
     else:
         density = _non_negative("density_per_deg2", density_per_deg2)
         px_deg = math.degrees(optics.plate_scale_rad_per_px)
-        mean = density * width * height * px_deg * px_deg
+        per_px2 = density * px_deg * px_deg
+        on_sensor = density * width * height * px_deg * px_deg  # this order: the same draws as before drifts
+        mean = on_sensor + per_px2 * (strip_x + strip_y) if per_px2 > 0.0 else 0.0
         if not mean <= MAX_STARS:
             raise ValueError(
-                f"density_per_deg2={density_per_deg2!r} gives {mean:.3g} stars on the {width}x{height} field "
-                f"({width * height * px_deg * px_deg:.3g} deg2), more than {MAX_STARS:,} ({mean * _STAR_BYTES / 1e9:.3g} GB)"
+                f"density_per_deg2={density_per_deg2!r} gives {mean:.3g} stars on the {width}x{height} field{swept} "
+                f"({area_px2 * px_deg * px_deg:.3g} deg2), more than {MAX_STARS:,} ({mean * _STAR_BYTES / 1e9:.3g} GB)"
             )
-        n = int(rng.poisson(mean))
+        n = int(rng.poisson(on_sensor))
     x = rng.uniform(-0.5, width - 0.5, n)
     y = rng.uniform(-0.5, height - 0.5, n)
     u = rng.uniform(0.0, 1.0, n)
+    if strip_x + strip_y > 0.0 and per_px2 > 0.0:
+        n_x = int(rng.poisson(per_px2 * strip_x))
+        along, s = rng.uniform(-0.5, height - 0.5, n_x), rng.uniform(0.0, 1.0, n_x)
+        xs = (width - 0.5 if dx > 0 else -0.5) + s * dx
+        ys = along + s * dy
+        n_y = int(rng.poisson(per_px2 * strip_y))
+        along, s = rng.uniform(-0.5, width - 0.5, n_y), rng.uniform(0.0, 1.0, n_y)
+        x = np.concatenate([x, xs, along + s * dx])
+        y = np.concatenate([y, ys, (height - 0.5 if dy > 0 else -0.5) + s * dy])
+        u = np.concatenate([u, rng.uniform(0.0, 1.0, n_x + n_y)])
+        n = x.size
     if alpha == 0.0 or hi == lo:
         mag = lo + (hi - lo) * u
     else:
         # inverse CDF of dN/dm ~ 10^(alpha m) on [lo, hi], relative to lo (no overflow)
         mag = lo + np.log10(1.0 + u * (10.0 ** (alpha * (hi - lo)) - 1.0)) / alpha
     flux = np.asarray(optics.flux_from_magnitude(mag), np.float64).reshape(-1)
+    if vx == 0.0 and vy == 0.0:
+        return [
+            StaticTarget(float(x[k]), float(y[k]), float(flux[k]), label=f"star {k} mag={mag[k]:.3f}")
+            for k in range(n)
+        ]
     return [
-        StaticTarget(float(x[k]), float(y[k]), float(flux[k]), label=f"star {k} mag={mag[k]:.3f}")
+        LinearTarget(float(x[k]), float(y[k]), vx, vy, float(flux[k]), label=f"star {k} mag={mag[k]:.3f}")
         for k in range(n)
     ]
+
+
+def _drift(name: str, value: object) -> tuple[float, float]:
+    """Two finite numbers (vx, vy), or a ValueError naming ``name`` and the value."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)) or len(value) != 2 or any(
+        isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) for v in value
+    ):
+        raise ValueError(f"{name} must be two numbers [vx, vy]; got {name}={value!r}")
+    try:
+        vx, vy = float(value[0]), float(value[1])
+    except OverflowError:
+        vx = vy = math.inf
+    if not (math.isfinite(vx) and math.isfinite(vy)):
+        raise ValueError(f"{name} must be finite; got {name}={value!r}")
+    return vx, vy
 
 
 def sample_targets(

@@ -25,7 +25,7 @@ KEYS = sorted(
     [k for k, spec in SCHEMA.items() if spec is not list]
     + [f"{k}.{sub}" for k, spec in SCHEMA.items() if isinstance(spec, dict) for sub in spec]
     + [f"targets.0.{k}" for keys in _TARGET_KEYS.values() for k in keys]
-    + ["targets.0.kind", "targets.0.label", "targets.0.flux_ph_s", "targets.0.magnitude", "targets.0.light_curve",
+    + ["targets.0.kind", "targets.0.label", "targets.0.frame", "targets.0.flux_ph_s", "targets.0.magnitude", "targets.0.light_curve",
        "targets", "targets.0", "targets.7.x_px", "targets.x.x_px", "pixel.nope", "nope", "sensor.width.x", ""]
 )
 """Every key a scenario knows, one target's fields of every kind, and a few it does not."""
@@ -35,7 +35,7 @@ VALUES = [
     "1e-300", "5e-324", "nan", "inf", "-inf", "1" + "0" * 400, "-" + "9" * 30, "true", "false", '"abc"', "abc",
     '""', "", "{a = 1}", "{}", "[1, 2]", "[]", "[[1]]", '["x"]', "[1e300, -1e300]", "none",
     "{t_s = [0.0, 1.0], flux_ph_s = [1.0, 2.0]}", "{t_s = [1.0, 0.0], magnitude = [1e300, 2]}",
-    '"poisson"', '"euler"', '"davis346"', '"imx636"', '"linear"', '"static"', '"tabulated"', "1979-05-27",
+    '"poisson"', '"euler"', '"field"', '"sensor"', "[-3.0, 3.2]", '"davis346"', '"imx636"', '"linear"', '"static"', '"tabulated"', "1979-05-27",
 ]
 """TOML value texts: the edges of every type."""
 
