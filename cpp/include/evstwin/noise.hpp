@@ -144,7 +144,7 @@ inline double log_normal_cdf(double x) {
 /// the quantile of that conditional first-passage law. P(hit by s) is
 ///   Phi(-m/sqrt v) + exp(-k m + k^2 v / 2) Phi((m - k v)/sqrt v),
 /// with m, v the bridge's mean and variance at s and k = 2 u0 / (sigma2 s); it is inverted by
-/// bisection (resolution T / 2^40).
+/// bisection (resolution T / 2^32: 1 fs at 4 ms samples).
 inline double bridge_first_passage(double u0, double u1, double sigma2, double T, double q) {
     auto cdf = [&](double s) {
         if (s <= 0.0) return 0.0;
@@ -159,7 +159,7 @@ inline double bridge_first_passage(double u0, double u1, double sigma2, double T
     };
     const double target = q * cdf(T);
     double lo = 0.0, hi = T;
-    for (int i = 0; i < 40; ++i) {
+    for (int i = 0; i < 32; ++i) {
         const double mid = 0.5 * (lo + hi);
         if (cdf(mid) < target)
             lo = mid;

@@ -195,6 +195,8 @@ struct PixelState {
     double next_hot_t = std::numeric_limits<double>::infinity();
     std::uint64_t hot_count = 0;
     std::uint8_t hot_pol = 0;
+    /// Continuous model: what is left of the exponential budgets of eq. 12's ON and OFF clocks.
+    double bg_clock_on = 0.0, bg_clock_off = 0.0;
 };
 
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
@@ -234,6 +236,7 @@ struct PixelModel {
     double shot_slope_per_a = 0;  ///< (F - 1) R_n / I_max: eq. 12's slope in the current
     bool continuous = false;      ///< NoiseModel::Continuous
     double bg_on_hz = 0, bg_off_hz = 0;  ///< eq. 12's R_n per polarity
+    double inv_i_max = 0;                ///< 1 / I_max of eq. 12
 
     explicit PixelModel(const PixelParams& params) : p(params) {
         validate(p);
@@ -245,6 +248,7 @@ struct PixelModel {
         continuous = p.noise_model == NoiseModel::Continuous;
         bg_on_hz = p.shot_noise_on_rate_hz.value_or(p.shot_noise_rate_hz);
         bg_off_hz = p.shot_noise_off_rate_hz.value_or(p.shot_noise_rate_hz);
+        inv_i_max = 1.0 / p.shot_noise_i_max_a;
     }
 
     /// Whether eq. 12's background is on for any pixel.
@@ -343,6 +347,11 @@ struct PixelModel {
         s.next_hot_t = s.hot_hz > 0.0 ? t - std::log(uniform_open(w[3])) / s.hot_hz
                                       : std::numeric_limits<double>::infinity();
         s.hot_count = 0;
+        // The background clocks start with fresh budgets: a Poisson process is memoryless, so
+        // it is stationary from t = 0.
+        const Philox4x32Counter v = philox4x32({1u, 0u, pixel, PURPOSE_INIT}, key);
+        s.bg_clock_on = -std::log(uniform_open(v[0]));
+        s.bg_clock_off = -std::log(uniform_open(v[1]));
     }
 
     /// White-noise intensity D [1/s] of ln I at a photon rate: the Poisson part of the electron
@@ -361,8 +370,9 @@ struct PixelModel {
 
     /// Two independent standard normals from two random words (Box-Muller, both outputs). The
     /// angle's cosine and sine come from Taylor polynomials on a quarter turn (error < 1e-9,
-    /// far below what the normals are used for), rotated by the quadrant that the top two bits
-    /// of w1 pick: a third of the cost of libm's sincos, which dominated the noise update.
+    /// far below what the normals are used for), reflected into the quadrant that the top two
+    /// bits of w1 pick (signs, without a branch): a third of the cost of libm's sincos, which
+    /// dominated the noise update.
     EVSTWIN_ALWAYS_INLINE static void normal_pair(std::uint32_t w0, std::uint32_t w1, double& g1, double& g2) {
         const double r = std::sqrt(-2.0 * std::log(uniform_open(w0)));
         const double t = (static_cast<double>(w1 & 0x3FFFFFFFu) + 0.5) * (0.5 * PI * 0x1p-30);  // [0, pi/2)
@@ -371,12 +381,8 @@ struct PixelModel {
                               t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800.0)))))));
         const double cs = 1 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (-1.0 / 3628800 +
                               t2 * (1.0 / 479001600.0 + t2 * (-1.0 / 87178291200.0)))))));
-        switch (w1 >> 30) {
-            case 0: g1 = r * cs; g2 = r * sn; break;
-            case 1: g1 = -r * sn; g2 = r * cs; break;
-            case 2: g1 = -r * cs; g2 = -r * sn; break;
-            default: g1 = r * sn; g2 = -r * cs; break;
-        }
+        g1 = r * cs * (1.0 - 2.0 * static_cast<double>((w1 >> 30) & 1u));
+        g2 = r * sn * (1.0 - 2.0 * static_cast<double>(w1 >> 31));
     }
 
     /// A hot pixel's events up to t1 (its own Poisson clock with dead time, alternating
@@ -408,11 +414,16 @@ struct PixelModel {
             return;
         }
         if (c.t1 <= s.t) return;
-        const SampleConstants own = s.t == c.t0 ? c : constants(s.t, c.t1);
+        SampleConstants own;
+        const SampleConstants* cs = &c;
+        if (s.t != c.t0) {
+            own = constants(s.t, c.t1);
+            cs = &own;
+        }
         if (continuous)
-            step_continuous(s, photon_rate, own, key, pixel, cache, emit, trace);
+            step_continuous(s, photon_rate, *cs, key, pixel, cache, emit, trace);
         else
-            step(s, photon_rate, own, key, pixel, poisson, emit, trace);
+            step(s, photon_rate, *cs, key, pixel, poisson, emit, trace);
         if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
         s.t = c.t1;
         ++s.n;
@@ -442,7 +453,7 @@ struct PixelModel {
     /// Eq. 12's illumination factor (F - 1) min(I / I_max, 1) + 1, with I / I_max saturating
     /// at the top of the dynamic range (beyond it eq. 12 would turn negative).
     EVSTWIN_ALWAYS_INLINE double background_factor(double current_a) const {
-        return (p.shot_noise_factor - 1.0) * (std::min(current_a, p.shot_noise_i_max_a) / p.shot_noise_i_max_a) + 1.0;
+        return (p.shot_noise_factor - 1.0) * (std::min(current_a, p.shot_noise_i_max_a) * inv_i_max) + 1.0;
     }
 
     /// Eq. 12-15 as the paper draws them (sampled model): one uniform u decides OFF
@@ -463,31 +474,32 @@ struct PixelModel {
         return -1;
     }
 
-    /// Eq. 12's background as a continuous-time process (continuous model): ON and OFF events
-    /// at rates r_on, r_off; one uniform u gives the first event of the interval, if any,
-    /// exactly (P = 1 - exp(-(r_on + r_off) dt)), its polarity and its time. Later events of
-    /// the same interval are dropped, a loss of about r dt / 2 of them.
-    EVSTWIN_ALWAYS_INLINE int background_event(const PixelState& s, double u, double current_a, const SampleConstants& c,
-                                               double& t_noise) const {
+    /// Eq. 12's background as continuous-time processes (continuous model): ON and OFF events
+    /// are two Poisson processes whose rates follow the light, each run on its own clock: an
+    /// exponential budget, drawn at each event, spent at the rate r dt per interval; the event
+    /// fires where the budget runs out (exact for rates constant over an interval), so a
+    /// sample costs two multiply-adds and no random number. If both fire in one interval, the
+    /// earlier reaches the comparator and the later is dropped (rare: r dt is small).
+    EVSTWIN_ALWAYS_INLINE int background_event(PixelState& s, double current_a, const SampleConstants& c,
+                                               Philox4x32Key key, std::uint32_t pixel, double& t_noise) const {
         const double f = background_factor(current_a);
-        const double r_on = s.bg_on_hz * f, r_off = s.bg_off_hz * f, r = r_on + r_off;
-        if (!(r > 0.0)) return -1;
-        const double prob = -std::expm1(-r * c.dt);
-        if (!(u < prob)) return -1;
-        // u / prob is uniform: its first r_off / r share says OFF, the rest ON; rescaled, it
-        // gives the arrival time by inverting 1 - exp(-r t).
-        double v = u / prob;
-        const double share_off = r_off / r;
-        int pol;
-        if (v < share_off) {
-            pol = OFF;
-            v /= share_off;
-        } else {
-            pol = ON;
-            v = (v - share_off) / (1.0 - share_off);
-        }
-        t_noise = c.t0 + std::min(c.dt, -std::log1p(-v * prob) / r);
-        return pol;
+        const double r_on = s.bg_on_hz * f, r_off = s.bg_off_hz * f;
+        s.bg_clock_on -= r_on * c.dt;
+        s.bg_clock_off -= r_off * c.dt;
+        if (s.bg_clock_on > 0.0 && s.bg_clock_off > 0.0) return -1;
+        // The time each clock ran out: its budget left at t1 is negative by r (t1 - t).
+        const double t_on = s.bg_clock_on > 0.0 ? std::numeric_limits<double>::infinity()
+                                                : c.t1 + s.bg_clock_on / r_on;
+        const double t_off = s.bg_clock_off > 0.0 ? std::numeric_limits<double>::infinity()
+                                                  : c.t1 + s.bg_clock_off / r_off;
+        CounterStream more(key, pixel, s.n, PURPOSE_BACKGROUND);
+        // A fresh budget for each clock that ran out, counted from where it ran out (the time
+        // left in the interval is spent at once; a second event in it is dropped).
+        if (s.bg_clock_on <= 0.0) s.bg_clock_on = std::max(0.0, -std::log(more.uniform()) + s.bg_clock_on) + 1e-300;
+        if (s.bg_clock_off <= 0.0) s.bg_clock_off = std::max(0.0, -std::log(more.uniform()) + s.bg_clock_off) + 1e-300;
+        const bool on = t_on < t_off;
+        t_noise = std::min(c.t1, std::max(c.t0, on ? t_on : t_off));
+        return on ? ON : OFF;
     }
 
     /// Whether the block kernel below handles this configuration (the common ones).
@@ -804,8 +816,8 @@ struct PixelModel {
         else
             yd = z + (yd0 - s.z) * c.sf_decay - (z - s.z) * c.sf_ramp;
 
-        const Philox4x32Counter w = philox4x32(
-            {static_cast<std::uint32_t>(s.n), static_cast<std::uint32_t>(s.n >> 32), pixel, PURPOSE_CONTINUOUS}, key);
+        std::uint32_t w[2];  // two words a sample, one Philox call for two samples
+        sample_words(s, key, pixel, w);
         double nz = 0.0, ny = 0.0;
         if (D > 0.0) {
             double g1, g2;
@@ -817,7 +829,7 @@ struct PixelModel {
         const double y = yd + ny;
 
         double t_noise = 0.0;
-        const int noise_pol = has_background() ? background_event(s, uniform_open(w[3]), current_a, c, t_noise) : -1;
+        const int noise_pol = has_background() ? background_event(s, current_a, c, key, pixel, t_noise) : -1;
 
         // The bridge: only while the line itself crosses nothing after the refractory period
         // (a crossing of the line fires anyway; the excursions around it are second order).
@@ -836,10 +848,11 @@ struct PixelModel {
                     const double mid = 0.25 * sigma2 * span;
                     const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
                     const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
-                    const double u = uniform_open(w[2]);
+                    // The bridge's uniforms are drawn only where a crossing is possible at all.
+                    CounterStream more(key, pixel, s.n, PURPOSE_BRIDGE);
+                    const double u = p_on + p_off > 0.0 ? more.uniform() : 1.0;
                     if (u < p_on + p_off) {
                         const bool on = u < p_on;
-                        CounterStream more(key, pixel, s.n, PURPOSE_BRIDGE_TIME);
                         const double u0 = on ? th_on - d_start : th_off + d_start;
                         const double u1 = on ? th_on - d_end : th_off + d_end;
                         const double tc = t_start + bridge_first_passage(u0, u1, sigma2, span, more.uniform());

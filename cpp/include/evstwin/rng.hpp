@@ -46,8 +46,8 @@ inline double uniform_open(std::uint32_t w) { return (static_cast<double>(w) + 0
 enum Purpose : std::uint32_t {
     PURPOSE_SAMPLE = 0,            ///< per pixel-sample block: photon/dark count, shot noise
     PURPOSE_POISSON_EXTRA = 1,     ///< further uniforms of the rejection sampler (+ iteration)
-    PURPOSE_CONTINUOUS = 0x10000000u,     ///< per pixel-sample: noise innovations, bridge, background
-    PURPOSE_BRIDGE_TIME = 0x18000000u,    ///< the time of a bridge crossing (+ block)
+    PURPOSE_BACKGROUND = 0x10000000u,     ///< eq. 12's clocks: a fresh budget after an event (+ block)
+    PURPOSE_BRIDGE = 0x18000000u,         ///< a bridge crossing: whether, and its time (+ block)
     PURPOSE_INIT = 0x20000000u,           ///< a pixel's first sample: stationary noise, leak phase, hot clock
     PURPOSE_PIXEL = 0x28000000u,          ///< a pixel's fixed properties: rate spreads, hot or not
     PURPOSE_HOT = 0x30000000u,            ///< a hot pixel's event clock (counter: its event index)
