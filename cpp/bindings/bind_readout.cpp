@@ -24,12 +24,12 @@ EventArray checked_events(const py::array& events) {
     return EventArray::ensure(events);
 }
 
-std::vector<Event> run(Readout& r, const py::array& events, std::vector<std::int64_t>* delay_ps) {
+std::vector<Event> run(Readout& r, const py::array& events, std::vector<std::int64_t>* delay_u) {
     EventArray ev = checked_events(events);
     const Event* data = ev.data();
     const auto n = static_cast<std::size_t>(ev.shape(0));
     py::gil_scoped_release release;
-    return r.process(data, n, delay_ps);
+    return r.process(data, n, delay_u);
 }
 
 }  // namespace
@@ -44,10 +44,11 @@ void register_readout(py::module_& m) {
         .def(
             "process_with_delays",
             [](Readout& r, const py::array& events) {
-                std::vector<std::int64_t> delay_ps;
-                auto out = run(r, events, &delay_ps);
-                std::vector<double> delay_s(delay_ps.size());
-                for (std::size_t i = 0; i < delay_ps.size(); ++i) delay_s[i] = static_cast<double>(delay_ps[i]) * 1e-12;
+                std::vector<std::int64_t> delay_u;
+                auto out = run(r, events, &delay_u);
+                std::vector<double> delay_s(delay_u.size());
+                for (std::size_t i = 0; i < delay_u.size(); ++i)
+                    delay_s[i] = static_cast<double>(delay_u[i]) * Readout::TIME_UNIT_S;
                 return py::make_tuple(to_numpy(std::move(out)), to_numpy(std::move(delay_s)));
             },
             py::arg("events"))
@@ -55,15 +56,20 @@ void register_readout(py::module_& m) {
         .def_property_readonly("max_rate_hz", &Readout::max_rate_hz)
         .def_property_readonly("fifo_depth", &Readout::fifo_depth)
         .def_property_readonly("tick_s", &Readout::tick_s)
-        .def_property_readonly("tick_ps", &Readout::tick_ps)
+        .def_property_readonly("tick_units", &Readout::tick_units)
         .def_property_readonly("last_t_us", &Readout::last_t_us)
         .def_property_readonly("n_in", [](const Readout& r) { return r.counts().n_in; })
         .def_property_readonly("n_out", [](const Readout& r) { return r.counts().n_out; })
         .def_property_readonly("n_dropped", [](const Readout& r) { return r.counts().n_dropped; })
         .def_property_readonly("n_dropped_on", [](const Readout& r) { return r.counts().n_dropped_on; })
         .def_property_readonly("n_delayed", [](const Readout& r) { return r.counts().n_delayed; })
-        .def_property_readonly("max_delay_ps", [](const Readout& r) { return r.counts().max_delay_ps; })
+        .def_property_readonly("max_delay_s",
+                               [](const Readout& r) {
+                                   return static_cast<double>(r.counts().max_delay_u) * Readout::TIME_UNIT_S;
+                               })
         .def_property_readonly("peak_waiting", [](const Readout& r) { return r.counts().peak_waiting; })
+        .def_readonly_static("TIME_UNIT_S", &Readout::TIME_UNIT_S)
+        .def_readonly_static("MAX_QUEUE_DELAY_S", &Readout::MAX_QUEUE_DELAY_S)
         .def_readonly_static("MAX_RATE_HZ", &Readout::MAX_RATE_HZ)
         .def_readonly_static("MIN_TICK_S", &Readout::MIN_TICK_S)
         .def_readonly_static("MAX_TICK_S", &Readout::MAX_TICK_S)

@@ -67,15 +67,17 @@ class Readout:
     max_rate_hz: float
     fifo_depth: int
     tick_s: float
-    tick_ps: int
+    tick_units: int
     last_t_us: int
     n_in: int
     n_out: int
     n_dropped: int
     n_dropped_on: int
     n_delayed: int
-    max_delay_ps: int
+    max_delay_s: float
     peak_waiting: int
+    TIME_UNIT_S: float
+    MAX_QUEUE_DELAY_S: float
     MAX_RATE_HZ: float
     MIN_TICK_S: float
     MAX_TICK_S: float

@@ -14,7 +14,7 @@ sorted events, chunk by chunk (the C++ ``evstwin::Readout``, cpp/include/evstwin
 * the output time is ``d_i`` floored to the timestamp ``tick_s``, as a counter latches it when
   the event leaves, then floored to the record's integer microsecond.
 
-Deterministic, exact (integer picoseconds), and streaming: the state carried between calls
+Deterministic, exact (integer multiples of 10 ps), and streaming: the state carried between calls
 is a few integers, so any chunking gives the same bytes as one call, and the output stays
 sorted by time. Below saturation, with a 1 us tick, every event keeps its time.
 
@@ -38,10 +38,15 @@ import numpy as np
 from . import _core
 from .optics import _finite
 
+TIME_UNIT_S: float = float(_core.Readout.TIME_UNIT_S)
+"""The model's clock (10 ps): times, services and delays are whole multiples of it."""
 MAX_RATE_HZ: float = float(_core.Readout.MAX_RATE_HZ)
-"""Highest max_rate_hz (1e12 Hz: a service time of at least one picosecond, the model's clock)."""
+"""Highest max_rate_hz (1e11 Hz: a service time of at least one unit of the model's clock)."""
 MIN_TICK_S: float = float(_core.Readout.MIN_TICK_S)
 MAX_TICK_S: float = float(_core.Readout.MAX_TICK_S)
+MAX_QUEUE_DELAY_S: float = float(_core.Readout.MAX_QUEUE_DELAY_S)
+"""Most fifo_depth / max_rate_hz [s] (1e6 s), the longest delay a kept event can suffer: it
+keeps every departure within the model clock's range."""
 MAX_FIFO_DEPTH = 2**63 - 1
 
 
@@ -59,6 +64,14 @@ def _depth(value: Any) -> int:
     if not 1 <= v <= MAX_FIFO_DEPTH:
         raise ValueError(f"fifo_depth must be an integer >= 1 (events); got fifo_depth={value!r}")
     return v
+
+
+def _queue(depth: int, rate_hz: float) -> None:
+    if not depth / rate_hz <= MAX_QUEUE_DELAY_S:
+        raise ValueError(
+            f"fifo_depth / max_rate_hz (the longest delay a kept event can suffer) must be <= {MAX_QUEUE_DELAY_S:g} s; "
+            f"got fifo_depth={depth}, max_rate_hz={rate_hz!r}"
+        )
 
 
 def _tick(value: Any) -> float:
@@ -84,6 +97,7 @@ class ReadoutParams:
         object.__setattr__(self, "max_rate_hz", _rate(self.max_rate_hz))
         object.__setattr__(self, "fifo_depth", _depth(self.fifo_depth))
         object.__setattr__(self, "tick_s", _tick(self.tick_s))
+        _queue(self.fifo_depth, self.max_rate_hz)
 
     @property
     def service_s(self) -> float:
@@ -113,7 +127,9 @@ class Readout:
     """
 
     def __init__(self, max_rate_hz: float, fifo_depth: int, tick_s: float = 1e-6) -> None:
-        self._core = _core.Readout(_rate(max_rate_hz), _depth(fifo_depth), _tick(tick_s))
+        rate, depth = _rate(max_rate_hz), _depth(fifo_depth)
+        _queue(depth, rate)
+        self._core = _core.Readout(rate, depth, _tick(tick_s))
 
     @classmethod
     def from_params(cls, params: ReadoutParams) -> Readout:
@@ -126,7 +142,7 @@ class Readout:
 
     def process_with_delays(self, events: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """As ``process``, plus each kept event's queueing delay [s] (departure - arrival,
-        before the tick; float64, exact to the picosecond)."""
+        before the tick; float64, a whole number of the model's 10 ps)."""
         return self._core.process_with_delays(events)
 
     def reset(self) -> None:
@@ -143,7 +159,7 @@ class Readout:
 
     @property
     def tick_s(self) -> float:
-        """The tick as given [s]; the model uses it rounded to a whole picosecond."""
+        """The tick as given [s]; the model uses it rounded to a whole 10 ps."""
         return float(self._core.tick_s)
 
     @property
@@ -174,7 +190,7 @@ class Readout:
     @property
     def max_delay_s(self) -> float:
         """Worst queueing delay of a kept event [s] (0.0 if none waited)."""
-        return int(self._core.max_delay_ps) * 1e-12
+        return float(self._core.max_delay_s)
 
     @property
     def peak_waiting(self) -> int:
@@ -201,4 +217,4 @@ class Readout:
                 f"{self.n_in} in, {self.n_dropped} dropped, worst delay {self.max_delay_s:.3g} s)")
 
 
-__all__ = ["MAX_RATE_HZ", "MAX_TICK_S", "MIN_TICK_S", "Readout", "ReadoutParams"]
+__all__ = ["MAX_QUEUE_DELAY_S", "MAX_RATE_HZ", "MAX_TICK_S", "MIN_TICK_S", "TIME_UNIT_S", "Readout", "ReadoutParams"]
