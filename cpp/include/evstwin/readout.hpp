@@ -47,6 +47,7 @@ public:
     static constexpr double MAX_TICK_S = 1.0;        ///< no timestamp clock is slower
     static constexpr double MAX_QUEUE_DELAY_S = 1e6;  ///< most fifo_depth / max_rate_hz
     static constexpr std::int64_t MAX_ABS_T_US = 20'000'000'000'000LL;  ///< 2e13 us, 231 days
+    static constexpr double UNITS_PER_S = 1e11;      ///< 1 / TIME_UNIT_S, exact in a double
 
     Readout(double max_rate_hz, std::int64_t fifo_depth, double tick_s)
         : rate_hz_(max_rate_hz), depth_(fifo_depth), tick_s_(tick_s) {
@@ -61,8 +62,8 @@ public:
                                         num(max_rate_hz));
         if (!(tick_s >= MIN_TICK_S) || !(tick_s <= MAX_TICK_S))
             throw std::invalid_argument("tick_s must be in [1e-11, 1] s; got tick_s=" + num(tick_s));
-        service_u_ = 1.0 / (max_rate_hz * TIME_UNIT_S);
-        tick_u_ = std::llround(tick_s / TIME_UNIT_S);
+        service_u_ = UNITS_PER_S / max_rate_hz;  // 1e11 / 1e6 is exactly 1e5: whole services stay whole
+        tick_u_ = std::llround(tick_s * UNITS_PER_S);
     }
 
     /// Counters since construction or the last reset().
