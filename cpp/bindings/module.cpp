@@ -21,4 +21,5 @@ PYBIND11_MODULE(_core, m) {
     m.def("default_num_threads", &evstwin::default_num_threads);
     register_pixel(m);
     register_sensor(m);
+    register_readout(m);
 }

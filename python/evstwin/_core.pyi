@@ -62,3 +62,27 @@ class Sensor:
     ) -> np.ndarray: ...
     def reset(self) -> None: ...
     def thresholds(self, on: bool) -> np.ndarray: ...
+
+class Readout:
+    max_rate_hz: float
+    fifo_depth: int
+    tick_s: float
+    tick_units: int
+    last_t_us: int
+    n_in: int
+    n_out: int
+    n_dropped: int
+    n_dropped_on: int
+    n_delayed: int
+    max_delay_s: float
+    peak_waiting: int
+    TIME_UNIT_S: float
+    MAX_QUEUE_DELAY_S: float
+    MAX_RATE_HZ: float
+    MIN_TICK_S: float
+    MAX_TICK_S: float
+    MAX_ABS_T_US: int
+    def __init__(self, max_rate_hz: float, fifo_depth: int, tick_s: float) -> None: ...
+    def process(self, events: np.ndarray) -> np.ndarray: ...
+    def process_with_delays(self, events: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+    def reset(self) -> None: ...

@@ -27,6 +27,7 @@ from typing import Any
 from ._core import ELEMENTARY_CHARGE_C  # one place for each constant
 from .optics import DAVIS346_MEAN_WAVELENGTH_M, Optics, _finite, _positive
 from .pixel import PixelParams
+from .readout import ReadoutParams
 
 # ---------------------------------------------------------------------------------------------
 # constants
@@ -319,6 +320,10 @@ class SensorPreset:
     qe_notes: str
     sources: tuple[str, ...]
     assumptions: tuple[str, ...]
+    readout: ReadoutParams | None = None
+    """The readout's maximum event rate, FIFO depth and timestamp tick (``evstwin.readout``);
+    None: an ideal readout (``simulate`` then keeps the engine's times unless the scenario
+    gives ``[readout]`` figures)."""
 
     def __post_init__(self) -> None:
         for f in ("width", "height"):
@@ -334,6 +339,19 @@ class SensorPreset:
             raise ValueError(
                 f"pixel.fill_factor={self.pixel.fill_factor!r} must equal the preset's fill_factor={ff!r}"
             )
+
+    def readout_params(self, **overrides: Any) -> ReadoutParams | None:
+        """The preset's readout figures with overrides (``max_rate_hz``, ``fifo_depth``,
+        ``tick_s``); None if the preset has none and no overrides are given. A preset without
+        figures needs both max_rate_hz and fifo_depth (ValueError naming the missing ones)."""
+        if self.readout is not None:
+            return self.readout.replace(**overrides)
+        if not overrides:
+            return None
+        missing = [k for k in ("max_rate_hz", "fifo_depth") if k not in overrides]
+        if missing:
+            raise ValueError(f"preset {self.name!r} has no readout figures: give {' and '.join(missing)}")
+        return ReadoutParams(**overrides)
 
     def pixel_params(self, biases: BiasSet | None = None, **overrides: Any) -> PixelParams:
         """The preset's pixel parameters, re-derived from ``biases`` if given, then overrides
@@ -362,6 +380,49 @@ class SensorPreset:
             num_threads=num_threads,
         )
 
+
+READOUT_FIFO_ASSUMPTION = (
+    "readout FIFO depth 4096 events: no datasheet gives the depth of the buffer between the pixel "
+    "array and the link; 4096 is a typical FPGA block-RAM FIFO (assumption). It bounds the worst "
+    "queueing delay at fifo_depth / max_rate_hz; change it with [readout] fifo_depth"
+)
+
+DAVIS346_READOUT = ReadoutParams(
+    max_rate_hz=12e6,
+    fifo_depth=4096,
+    tick_s=1e-6,
+    sources=(
+        "iniVation, DAVIS346 datasheet (inivation.com/wp-content/uploads/2019/08/DAVIS346.pdf, now "
+        "docs.inivation.com/_static/hardware_guides/davis346.pdf): 'Bandwidth 12 MEvents/second', "
+        "min. latency ~20 us. Not reachable from the machine this was written on: the figure is as "
+        "quoted from that datasheet by two independent public sources; check it against your copy",
+        "iniVation libcaer, davis.h (DAVIS_CONFIG_MUX_TIMESTAMP_RUN: the timestamp generator gives "
+        "'microsecond accurate timestamps'); iniVation AEDAT 2.0 docs: 'Timestamps tick is 1 us'",
+    ),
+    assumptions=(READOUT_FIFO_ASSUMPTION,),
+)
+"""DAVIS346 readout: 12 Mev/s (the camera's bandwidth), 1 us timestamps, FIFO assumed."""
+
+IMX636_READOUT = ReadoutParams(
+    max_rate_hz=1.066e9,
+    fifo_depth=4096,
+    tick_s=1e-6,
+    sources=(
+        "Sony Semiconductor Solutions, event-based vision sensor page "
+        "(sony-semicon.com/en/products/is/industry/evs.html) and Prophesee's IMX636 page: maximum "
+        "event rate 1.066 Gevents/s (quoted as '1.06 Gevents/s' and '1066 Mev/s'). Not reachable "
+        "from the machine this was written on: the figure is as quoted by public secondary sources",
+        "Prophesee Metavision docs, EVT 2.0 / 3.0 formats and EventCD: timestamps in microseconds",
+    ),
+    assumptions=(
+        READOUT_FIFO_ASSUMPTION,
+        "1.066 Gev/s is the sensor's own readout. A camera delivers less: the EVK4's USB 3 link "
+        "(1.6 Gbps in Prophesee's EVK docs) and the sensor's event-rate controller (ERC, which "
+        "thins events in time windows instead of queueing them) set the rate you see; give "
+        "[readout] max_rate_hz for your camera",
+    ),
+)
+"""IMX636 readout: 1.066 Gev/s (the sensor's), 1 us timestamps, FIFO assumed."""
 
 _DAVIS346_BASE = PixelParams(
     # photodiode, paper Table 3 and sec. 3.1
@@ -408,6 +469,7 @@ DAVIS346 = SensorPreset(
         "cutoff 10 Hz from I_sf = 834.7 fA via the calibrated C = 360 fF (SF_LOAD_CAPACITANCE_F)",
         "mean wavelength 0.7 um: the middle of a silicon photodiode's ~0.4-1.0 um response",
     ),
+    readout=DAVIS346_READOUT,
 )
 """The paper's DAVIS346 with its Table 1 biases (theta 0.2060 / 0.0930, 1 ms, 10 Hz)."""
 
@@ -448,6 +510,7 @@ IMX636 = SensorPreset(
         ),
         "mean wavelength 0.7 um as for the DAVIS346",
     ),
+    readout=IMX636_READOUT,
 )
 """Sony IMX636 / Prophesee EVK4: geometry sourced, pixel behaviour placeholders (see assumptions)."""
 

@@ -27,6 +27,9 @@ The tables mirror the Python objects:
                   ``drift_arcsec_s = [wx, wy]`` (through the plate scale): every star moves,
                   and stars drift in from the area the drift sweeps during the run. A table
                   with only a drift makes no random stars (it moves the field-frame targets).
+``[readout]``     the sensor's readout (``evstwin.readout``): ``enabled`` (default: true when
+                  the preset has readout figures, as the DAVIS346 and IMX636 do), and
+                  ``max_rate_hz``, ``fifo_depth``, ``tick_s`` overriding the preset's.
 
 Top level: ``name``, ``description``, ``duration_s``, ``seed``, and ``base`` (a built-in
 scenario this one starts from; its tables are merged key by key).
@@ -53,6 +56,7 @@ from . import psf
 from .optics import Optics
 from .pixel import PixelParams
 from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
+from .readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S, ReadoutParams
 from .sensor import MAX_MAX_EVENTS
 from .targets import (
     MAX_STARS,
@@ -112,6 +116,7 @@ SCHEMA: dict[str, Any] = {
     "targets": list,
     "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
                    "counts_slope": float, "seed": int, "drift_px_s": Any, "drift_arcsec_s": Any},
+    "readout": {"enabled": bool, "max_rate_hz": float, "fifo_depth": int, "tick_s": float},
 }
 DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50}
 
@@ -328,6 +333,13 @@ def _check_values(s: dict[str, Any]) -> None:
                 isinstance(c, (int, float)) and not isinstance(c, bool) for c in v):
             unit = "px/s" if key == "drift_px_s" else "arcsec/s"
             raise ScenarioError(f"star_field.{key} must be two numbers [vx, vy] ({unit}); got {v!r}")
+    ro = s.get("readout", {})
+    if "max_rate_hz" in ro:
+        number("readout.max_rate_hz", ro["max_rate_hz"], 0.0, MAX_RATE_HZ, lo_open=True)
+    if "fifo_depth" in ro and not 1 <= ro["fifo_depth"] < 2**63:
+        raise ScenarioError(f"readout.fifo_depth must be an integer >= 1 (events); got {ro['fifo_depth']!r}")
+    if "tick_s" in ro:
+        number("readout.tick_s", ro["tick_s"], MIN_TICK_S, MAX_TICK_S)
     for i, t in enumerate(s["targets"]):
         if "frame" in t and t["frame"] not in _FRAMES:
             raise ScenarioError(f"targets[{i}].frame must be one of {', '.join(map(repr, _FRAMES))}; got {t['frame']!r}")
@@ -422,6 +434,8 @@ class Scene:
     """How many of the last ``targets`` the ``[star_field]`` made. Rendered like the others,
     but not written as ground-truth tracks when they drift: thousands of tracks would cost 32
     bytes per star per sample, and the resolved scenario (seed, drift) makes them again."""
+    readout: ReadoutParams | None = None
+    """The readout applied to the events (None: off, the engine's times kept)."""
 
     @property
     def psf_sigma_px(self) -> float:
@@ -566,6 +580,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             f"{params.dark_rate_e_per_s:g}) the background must be >= 1e-30 photons/s per pixel; got "
             f"background={dict(bg)} ({background:.3g} photons/s)"
         )
+    readout = _readout(s, preset)
     sp = s["sampling"]
     _check_work(s, width, height, optics, targets, sources)
     _check_intervals(params, float(sp["rate_hz"]))
@@ -574,6 +589,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
         rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
         chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
+        readout=readout,
     )
 
 
@@ -589,6 +605,20 @@ def _field_drift(s: dict[str, Any], optics: Optics) -> tuple[tuple[float, float]
         vx, vy = _wrap(f"{key} through optics={s.get('optics', {})}", drift_px_s_from_arcsec, w[0], w[1], optics)
         return (vx, vy), f"{key} ({vx:.4g}, {vy:.4g} px/s at {optics.plate_scale_arcsec_per_px:.4g} arcsec/px)"
     return (0.0, 0.0), "no drift"
+
+
+def _readout(s: dict[str, Any], preset: SensorPreset) -> ReadoutParams | None:
+    """[readout] over the preset's figures: on by default where the preset has figures or the
+    table gives some; a preset without them needs readout.max_rate_hz and readout.fifo_depth."""
+    table = dict(s.get("readout", {}))
+    enabled = table.pop("enabled", preset.readout is not None or bool(table))
+    if not enabled:
+        return None
+    if preset.readout is None and not {"max_rate_hz", "fifo_depth"} <= set(table):
+        missing = [k for k in ("max_rate_hz", "fifo_depth") if k not in table]
+        raise ScenarioError(f"preset {preset.name!r} has no readout figures: readout.enabled=true needs "
+                            f"{' and '.join('readout.' + k for k in missing)}; got readout={s.get('readout', {})}")
+    return _wrap(f"readout={s.get('readout', {})}", preset.readout_params, **table)
 
 
 def _peak_flux(target: Target) -> float:

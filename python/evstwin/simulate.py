@@ -31,6 +31,7 @@ import numpy as np
 
 from . import psf
 from ._core import __version__
+from .readout import Readout
 from .scenario import ScenarioError, Scene, build, load, parse_assignment, set_value
 from .sensor import EVENT_DTYPE, Sensor
 from .targets import LightCurve, LinearTarget, Target
@@ -62,9 +63,23 @@ class SimulationStats:
         return (
             f"events: {total}  ON: {on}  OFF: {off}  ON/OFF: {ratio:.3f}  "
             f"rate: {total / dur:.4g} ev/s over {dur:g} s of sensor time\n"
+            f"{readout_summary(self.meta)}\n"
             f"wall time: {self.wall_s:.2f} s (engine {self.engine_s:.2f} s, scene {self.scene_s:.2f} s), "
             f"{self.pixel_updates / max(self.engine_s, 1e-9) / 1e6:.1f} M pixel-updates/s"
         )
+
+
+def readout_summary(meta: dict[str, Any]) -> str:
+    """One line on what the readout did, from a simulation's meta (``readout_*`` keys)."""
+    if not meta.get("readout_enabled"):
+        return "readout: off (the engine's timestamps, no rate limit)"
+    n_in, dropped = int(meta["readout_n_in"]), int(meta["readout_n_dropped"])
+    share = 100.0 * dropped / n_in if n_in else 0.0
+    return (
+        f"readout: {meta['readout_max_rate_hz'] / 1e6:.4g} Mev/s, FIFO {meta['readout_fifo_depth']}, "
+        f"tick {meta['readout_tick_s'] * 1e6:g} us: {dropped} of {n_in} events dropped ({share:.3g} %), "
+        f"{meta['readout_n_delayed']} delayed, worst delay {meta['readout_max_delay_s'] * 1e6:.4g} us"
+    )
 
 
 @dataclass
@@ -184,14 +199,19 @@ def _with_bar(runner: _Runner, scene: Scene, progress: bool) -> Iterator[np.ndar
 
 
 def _meta(runner: _Runner, scene: Scene) -> dict[str, Any]:
-    return {
+    meta: dict[str, Any] = {
         "width": scene.width,
         "height": scene.height,
         "duration_s": runner.t_end,
         "seed": scene.seed,
         "scenario": scene.scenario,
         "evstwin_version": __version__,
+        "readout_enabled": runner.readout is not None,
     }
+    # Flat scalars: every event-file format stores scalar meta (io.writer), none a nested table.
+    if runner.readout is not None:
+        meta.update({f"readout_{k}": v for k, v in runner.readout.stats().items()})
+    return meta
 
 
 def _stats(runner: _Runner, meta: dict[str, Any], wall0: float, n_events: int, n_on: int) -> dict[str, Any]:
@@ -309,11 +329,25 @@ class _Runner:
         self.settle_s = 5.0 / (2.0 * math.pi * cutoff) if cutoff is not None else 0.0
         self.hot_until = np.full(scene.width * scene.height, -np.inf)
         self._column = np.zeros(scene.width * scene.height, np.int64)  # pixel -> column of the hot list
+        # The sensor's readout (rate limit, FIFO, timestamp tick) on each chunk's events as it
+        # comes out of the engine: its state carries over, so the chunking changes nothing.
+        self.readout = None if scene.readout is None else Readout.from_params(scene.readout)
+        self.readout_s = 0.0
 
     # -- the loop --------------------------------------------------------------------------------
 
     def chunks(self, bar: Any = None) -> Iterator[np.ndarray]:
-        """The events, chunk by chunk in time order (each chunk sorted by t)."""
+        """The events, chunk by chunk in time order (each chunk sorted by t), with the readout's
+        times and losses when the scene has a readout."""
+        for events in self._engine_chunks(bar):
+            if self.readout is not None:
+                r0 = time.perf_counter()
+                events = self.readout.process(events)
+                self.readout_s += time.perf_counter() - r0
+            yield events
+
+    def _engine_chunks(self, bar: Any = None) -> Iterator[np.ndarray]:
+        """The engine's events, chunk by chunk in time order (each chunk sorted by t)."""
         yield self._dense(np.array([0.0]))
         chunk = self.scene.chunk_samples
         a = 0

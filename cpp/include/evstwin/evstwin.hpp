@@ -5,6 +5,7 @@
 #include "constants.hpp"
 #include "event.hpp"
 #include "pixel.hpp"
+#include "readout.hpp"
 #include "rng.hpp"
 #include "sensor.hpp"
 #include "version.hpp"
