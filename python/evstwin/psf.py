@@ -26,6 +26,15 @@ exact in-sensor share of the untruncated Gaussian by at most the tail above. Per
 then exceed eq. 17 by the factor 1 / (1 - tail) <= 1 + 1.2e-6. ``normalize=False`` gives eq. 17
 exactly on the window and drops the tail. The erf differences are formed from erfc of the
 distance to the centre, so far-tail pixels keep full relative precision.
+Other shapes
+------------
+Every renderer takes, in place of ``sigma_px``, a ``PSFShape``: ``GaussianPSF`` (the above),
+or a ``KernelPSF`` tabulated at sub-pixel phases from ``airy_psf`` (the diffraction pattern of
+an obstructed pupil with spider vanes), ``moffat_psf`` (a seeing halo) or ``image_psf`` (a
+PSF image); ``from_optics`` builds the one an ``Optics`` names (its ``psf`` field). All
+renderers, and ``simulate``'s sparse chunks, go through ``contributions``. ``KernelPSF``
+states the sub-pixel accuracy, the taper that cuts a shape at its window and what the
+window keeps (``captured_fraction``).
 """
 
 from __future__ import annotations
@@ -277,7 +286,9 @@ def render_points(
 
     x_px, y_px: source centres [px] (pixel-centre convention of this module); flux_ph_s:
     photons/s of each source at the focal plane, >= 0; sigma_px: PSF sigma [px], > 0 (e.g.
-    ``Optics.psf_sigma_px``). All four broadcast together (scalars = one source).
+    ``Optics.psf_sigma_px``), or a ``PSFShape`` (``Optics.psf_shape()``; then window_sigmas
+    and normalize stay at their defaults: the shape has its own window). All four broadcast
+    together (scalars = one source).
     out: optional C-contiguous float64/float32 (height, width) array the sources are *added*
     to (pre-fill it with a background); a new zero image otherwise.
     window_sigmas, normalize: see the module docstring (5 sigma, renormalised window).
@@ -342,7 +353,8 @@ def render_frames(
     """Render T samples of S sources: a (T, height, width) array of photons/s per pixel.
 
     x_px, y_px: (T, S) source centres [px] at each sample; flux_ph_s, sigma_px: broadcastable
-    to (T, S) (e.g. (S,) for constant values, a scalar for all). background_ph_s: photons/s
+    to (T, S) (e.g. (S,) for constant values, a scalar for all); sigma_px may be a ``PSFShape``
+    (as in ``render_points``). background_ph_s: photons/s
     per pixel added everywhere, >= 0, broadcastable to (T, height, width) (a scalar, a
     (height, width) map, or ``b[:, None, None]`` for one value per sample).
     out: optional C-contiguous (T, height, width) float64/float32 array, overwritten.
@@ -460,8 +472,10 @@ MAX_KERNEL_HALF_PX = 256
 """Largest half width of a tabulated PSF's window [px] one may ask for (``psf_half_width_px``)."""
 MOFFAT_DEFAULT_BETA = 4.765
 """Moffat beta of Kolmogorov seeing (Trujillo et al. 2001, MNRAS 328, 977)."""
-_MAX_GRID_SIDE = 4096
-"""Most samples a side of the grid a tabulated PSF is computed on (128 MB of float64)."""
+_MAX_GRID_SIDE = 3072
+"""Most samples a side of the grid a tabulated PSF is computed on (72 MB of float64)."""
+_MAX_TRANSFORM_WORK = 2e9
+"""Most complex multiply-adds of one Airy transform (about 5 s on 2 cores)."""
 _MAX_TABLE_ELEMENTS = 1 << 25
 """Most values in a phase table: (k + 1)^2 (2 h + 1)^2 float64, 256 MB."""
 _MAX_PUPIL_SIDE = 2048
@@ -699,6 +713,10 @@ def airy_psf(
     if n_p > _MAX_PUPIL_SIDE:
         raise ValueError(f"airy PSF: a {2 * h + 1} px window is {float(np.abs(x).max()):.3g} lambda N wide and needs "
                          f"{n_p} pupil samples (> {_MAX_PUPIL_SIDE}): lower psf_half_width_px")
+    work = n / 2 * n_p * (n + n_p)
+    if work > _MAX_TRANSFORM_WORK:
+        raise ValueError(f"airy PSF: a {2 * h + 1} px window at psf_subpixel={k} for lambda N = {lam:.3g} px needs "
+                         f"{work:.3g} multiply-adds (> {_MAX_TRANSFORM_WORK:g}): lower psf_half_width_px or psf_subpixel")
     p = pupil(n_p, eps, int(spider_vanes), w, angle)
     u = (np.arange(n_p, dtype=np.float64) + 0.5 - 0.5 * n_p) / n_p
     a = np.exp(-2j * math.pi * np.outer(x, u))  # (n, n_p): E = a p a^T / n_p^2

@@ -310,7 +310,8 @@ def test_sparse_rendering_gives_the_dense_events_for_a_tabulated_shape() -> None
         (lambda: Optics(moffat_beta=3.0), r"moffat_beta applies to psf='moffat'; got moffat_beta=3.0 with psf='gaussian'"),
         (lambda: Optics(psf="image", psf_file="a.npy"), r"psf='image' needs psf_file and psf_file_oversampling"),
         (lambda: Optics(psf="airy", psf_half_width_px=1000), r"psf_half_width_px must be an integer in \[1, 256\]"),
-        (lambda: airy_psf(0.05, half_width_px=256), r"psf_half_width_px=256 at psf_subpixel=8 needs a grid of \d+ samples a side \(> 4096\)"),
+        (lambda: airy_psf(0.05, half_width_px=256), r"psf_half_width_px=256 at psf_subpixel=8 needs a grid of \d+ samples a side \(> 3072\)"),
+        (lambda: airy_psf(0.2, half_width_px=60), r"needs 5.15e\+09 multiply-adds \(> 2e\+09\): lower psf_half_width_px"),
         (lambda: render_points(9, 9, 4.0, 4.0, 1.0, GaussianPSF(1.0), window_sigmas=3.0), r"window_sigmas and normalize"),
     ],
 )
