@@ -6,6 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
+EVENT_LABELS: dict[int, str]
 EVENT_DTYPE: np.dtype
 TRACE_DTYPE: np.dtype
 ELEMENTARY_CHARGE_C: float
@@ -35,6 +36,15 @@ class PixelParams:
     pr_pole: bool
     pr_cutoff_ref_hz: float
     pr_ref_current_a: float
+    shot_noise_on_rate_hz: float | None
+    shot_noise_off_rate_hz: float | None
+    background_rate_sigma: float
+    leak_rate_sigma: float
+    leak_random_phase: bool
+    hot_pixel_fraction: float
+    hot_pixel_rate_hz: float
+    hot_pixel_rate_sigma: float
+    noise_model: str
     def __init__(self) -> None: ...
     def validate(self) -> None: ...
     def electrons_per_photon(self) -> float: ...
@@ -61,6 +71,9 @@ class Sensor:
         self, pixels: npt.ArrayLike, photon_rate: npt.NDArray[np.floating], t_s: npt.ArrayLike
     ) -> np.ndarray: ...
     def reset(self) -> None: ...
+    def last_labels(self) -> np.ndarray: ...
+    def set_hot_pixel_rates(self, rates_hz: npt.ArrayLike) -> None: ...
+    def hot_pixel_rates(self) -> np.ndarray: ...
     def thresholds(self, on: bool) -> np.ndarray: ...
 
 class Readout:

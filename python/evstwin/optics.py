@@ -203,6 +203,35 @@ class Optics:
     """Sensor height [px]. DAVIS346: 260."""
     zero_point_ph_s_m2: float = ZERO_POINT_V_PH_S_M2
     """Photons/s/m^2 from a magnitude-0 star (default: V band, 8.79e9; see module doc)."""
+    psf: str = "gaussian"
+    """PSF shape (``evstwin.psf``): ``gaussian`` (paper eq. 17, sigma ``psf_sigma_px``),
+    ``airy`` (diffraction by the pupil: obstruction and spider vanes, plus the extra blur),
+    ``moffat`` (a seeing halo: ``moffat_fwhm_px`` or ``moffat_fwhm_arcsec``, ``moffat_beta``)
+    or ``image`` (``psf_file`` sampled ``psf_file_oversampling`` times per sensor pixel)."""
+    spider_vanes: int = 0
+    """Number of spider vanes holding the secondary mirror (``airy`` only), 0..64: radial bars
+    from the centre out, equally spaced; each diffracts a spike perpendicular to itself."""
+    spider_width_ratio: float = 0.01
+    """Width of each vane as a fraction of D, in [0, 0.5) (``airy``, with spider_vanes > 0)."""
+    spider_angle_deg: float = 0.0
+    """Direction of the first vane [deg] from the pixel +x axis towards +y (``airy``)."""
+    moffat_beta: float | None = None
+    """Moffat exponent beta > 1 (``moffat``); None = 4.765 (Trujillo et al. 2001, MNRAS 328,
+    977: the Moffat fit to Kolmogorov seeing; fits to real stars often give 2.5-4.5)."""
+    moffat_fwhm_px: float | None = None
+    """Moffat FWHM [px], in [0.05, 100] (``moffat``; or moffat_fwhm_arcsec, not both)."""
+    moffat_fwhm_arcsec: float | None = None
+    """Moffat FWHM [arcsec], converted with the plate scale (``moffat``; seeing)."""
+    psf_file: str | None = None
+    """Path of a 2-D PSF image (``image``): ``.npy``, or ``.fits``/``.fit`` with astropy."""
+    psf_file_oversampling: float | None = None
+    """Image pixels per sensor pixel along each axis (``image``; 4 = pixels a quarter wide)."""
+    psf_subpixel: int = 8
+    """Sub-pixel phases per pixel of a tabulated (non-Gaussian) PSF, 1..32; positions in
+    between are interpolated bilinearly (``evstwin.psf``, "Tabulated shapes")."""
+    psf_half_width_px: int | None = None
+    """Half width of a tabulated PSF's window [px] (2 h + 1 a side), 1..256; None = the radius
+    holding 99 % of the flux (Airy, Moffat) or the image's extent, in [2, 128]."""
 
     def __post_init__(self) -> None:
         f = _positive("focal_length_m", self.focal_length_m)
@@ -228,6 +257,7 @@ class Optics:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
                 raise ValueError(f"{name} must be a positive integer; got {name}={v!r}")
         _positive("zero_point_ph_s_m2", self.zero_point_ph_s_m2)
+        self._check_psf_fields()
         if self.aperture_diameter_m is None:
             object.__setattr__(self, "aperture_diameter_m", f / float(self.f_number))
         else:
@@ -237,6 +267,52 @@ class Optics:
             if not lo <= v <= hi:
                 raise ValueError(f"{name} must be in [{lo:g}, {hi:g}] (a physical range: beyond it the image "
                                  f"computations overflow); got {name}={getattr(self, name)!r}")
+
+    def _check_psf_fields(self) -> None:
+        """The PSF shape's fields: each in its range, and only the chosen shape's set."""
+        kinds = ("gaussian", "airy", "moffat", "image")
+        if not isinstance(self.psf, str) or self.psf not in kinds:
+            raise ValueError(f"psf must be one of {', '.join(kinds)}; got psf={self.psf!r}")
+        for name, lo, hi in (("spider_vanes", 0, 64), ("psf_subpixel", 1, 32), ("psf_half_width_px", 1, 256)):
+            v = getattr(self, name)
+            if v is None and name == "psf_half_width_px":
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                raise ValueError(f"{name} must be an integer in [{lo}, {hi}]; got {name}={v!r}")
+        w = _finite("spider_width_ratio", self.spider_width_ratio)
+        if not 0.0 <= w < 0.5:
+            raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={self.spider_width_ratio!r}")
+        _finite("spider_angle_deg", self.spider_angle_deg)
+        if self.moffat_beta is not None:
+            b = _finite("moffat_beta", self.moffat_beta)
+            if not 1.0 < b <= 1000.0:
+                raise ValueError(f"moffat_beta must be > 1 (a finite flux) and <= 1000; got moffat_beta={self.moffat_beta!r}")
+        if self.moffat_fwhm_px is not None:
+            f = _finite("moffat_fwhm_px", self.moffat_fwhm_px)
+            if not 0.05 <= f <= 100.0:
+                raise ValueError(f"moffat_fwhm_px must be in [0.05, 100]; got moffat_fwhm_px={self.moffat_fwhm_px!r}")
+        if self.moffat_fwhm_arcsec is not None:
+            _positive("moffat_fwhm_arcsec", self.moffat_fwhm_arcsec)
+        if self.psf_file is not None and (not isinstance(self.psf_file, str) or not self.psf_file):
+            raise ValueError(f"psf_file must be a non-empty path string; got psf_file={self.psf_file!r}")
+        if self.psf_file_oversampling is not None:
+            o = _finite("psf_file_oversampling", self.psf_file_oversampling)
+            if not 1e-3 <= o <= 1e3:
+                raise ValueError("psf_file_oversampling (image pixels per sensor pixel) must be in [0.001, 1000]; "
+                                 f"got psf_file_oversampling={self.psf_file_oversampling!r}")
+        own = {"moffat": ("moffat_beta", "moffat_fwhm_px", "moffat_fwhm_arcsec"),
+               "image": ("psf_file", "psf_file_oversampling")}
+        for kind, names in own.items():
+            for name in names:
+                if self.psf != kind and getattr(self, name) is not None:
+                    raise ValueError(f"{name} applies to psf={kind!r}; got {name}={getattr(self, name)!r} with "
+                                     f"psf={self.psf!r}")
+        if self.psf == "moffat" and (self.moffat_fwhm_px is None) == (self.moffat_fwhm_arcsec is None):
+            raise ValueError("psf='moffat' needs one of moffat_fwhm_px or moffat_fwhm_arcsec; got "
+                             f"moffat_fwhm_px={self.moffat_fwhm_px!r}, moffat_fwhm_arcsec={self.moffat_fwhm_arcsec!r}")
+        if self.psf == "image" and (self.psf_file is None or self.psf_file_oversampling is None):
+            raise ValueError("psf='image' needs psf_file and psf_file_oversampling (image pixels per sensor pixel); "
+                             f"got psf_file={self.psf_file!r}, psf_file_oversampling={self.psf_file_oversampling!r}")
 
     def replace(self, **changes: Any) -> Optics:
         """A copy with some fields changed. A derived aperture is derived again unless given."""
@@ -318,6 +394,25 @@ class Optics:
     def psf_sigma_px(self) -> float:
         """PSF sigma [px]: sqrt(diffraction_sigma_px^2 + extra_blur_sigma_px^2)."""
         return math.hypot(self.diffraction_sigma_px, self.extra_blur_sigma_px)
+
+    @property
+    def moffat_fwhm(self) -> float:
+        """The Moffat FWHM [px] (from moffat_fwhm_arcsec through the plate scale if given)."""
+        if self.moffat_fwhm_px is not None:
+            return float(self.moffat_fwhm_px)
+        if self.moffat_fwhm_arcsec is None:
+            raise ValueError(f"psf={self.psf!r} has no Moffat FWHM")
+        fwhm = float(self.moffat_fwhm_arcsec) / self.plate_scale_arcsec_per_px
+        if not 0.05 <= fwhm <= 100.0:
+            raise ValueError(f"moffat_fwhm_arcsec={self.moffat_fwhm_arcsec!r} is {fwhm:.3g} px at "
+                             f"{self.plate_scale_arcsec_per_px:.3g} arcsec/px; it must be in [0.05, 100] px")
+        return fwhm
+
+    def psf_shape(self) -> Any:
+        """The PSF to render sources with (``evstwin.psf.from_optics``: cached per Optics)."""
+        from . import psf
+
+        return psf.from_optics(self)
 
     def defocus_sigma_px(self, object_distance_m: ArrayLike) -> FloatOrArray:
         """Geometric defocus blur of a point at this distance [m], as a Gaussian sigma [px].

@@ -10,7 +10,10 @@ The tables mirror the Python objects:
 ``[pixel]``       any ``PixelParams`` field by name; overrides what biases and preset derive.
                   ``pr_pole`` defaults to true here (as in every built-in), unlike
                   ``PixelParams``, whose default is the paper's single pole.
-``[optics]``      ``Optics`` fields (``focal_length_m``, ``f_number``, ``extra_blur_sigma_px``...).
+``[optics]``      ``Optics`` fields (``focal_length_m``, ``f_number``, ``extra_blur_sigma_px``...),
+                  and the PSF shape: ``psf = "gaussian"`` (default) | ``"airy"`` | ``"moffat"``
+                  | ``"image"`` with its keys (``spider_*``, ``moffat_*``, ``psf_file*``,
+                  ``psf_subpixel``, ``psf_half_width_px``; README, "PSF shapes").
 ``[sampling]``    ``rate_hz`` (the floor rate of the whole array), ``max_shift_px`` (default
                   0.25: no target moves further between samples), ``sparse`` (sub-sample only
                   the pixels near moving targets; default true), ``chunk_samples``,
@@ -439,7 +442,13 @@ class Scene:
 
     @property
     def psf_sigma_px(self) -> float:
+        """The Gaussian PSF's sigma [px] (``optics.psf_sigma_px``; the width of psf='gaussian')."""
         return float(self.optics.psf_sigma_px)
+
+    @property
+    def psf(self) -> psf.PSFShape:
+        """The PSF its sources are rendered with (``optics.psf``; cached per optics)."""
+        return psf.from_optics(self.optics)
 
 
 def _wrap(key: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
@@ -536,6 +545,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "
             f"optics.f_number and optics.extra_blur_sigma_px; got {s.get('optics', {})}"
         )
+    shape = _psf_shape(optics, s.get("optics", {}))
     field_stars = 0
     sf = dict(s.get("star_field", {}))
     drift_only = any(k in sf for k in _DRIFT_KEYS) and "n_stars" not in sf and "density_per_deg2" not in sf
@@ -571,7 +581,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
                                  optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
     else:
         background = float(bg.get("photon_rate_ph_s", 0.0))
-    _check_peak_rate(background, dict(bg), targets, sources, sigma, s.get("optics", {}))
+    _check_peak_rate(background, dict(bg), targets, sources, shape, s.get("optics", {}))
     if (params.dark_model == "none" or params.dark_rate_e_per_s == 0.0) and not background >= 1e-30:
         # Pixels away from every target see the background alone, and the log photoreceptor
         # needs a current: the engine would refuse the first frame.
@@ -582,7 +592,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         )
     readout = _readout(s, preset)
     sp = s["sampling"]
-    _check_work(s, width, height, optics, targets, sources)
+    _check_work(s, width, height, shape, targets, sources)
     _check_intervals(params, float(sp["rate_hz"]))
     return Scene(
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
@@ -626,14 +636,13 @@ def _peak_flux(target: Target) -> float:
     return float(np.max(b.flux_ph_s)) if isinstance(b, LightCurve) else float(b)
 
 
-def _check_peak_rate(background: float, bg: dict[str, Any], targets: list[Target], sources: list[str], sigma: float,
-                     optics: dict[str, Any]) -> None:
+def _check_peak_rate(background: float, bg: dict[str, Any], targets: list[Target], sources: list[str],
+                     shape: psf.PSFShape, optics: dict[str, Any]) -> None:
     """The engine refuses a pixel above 1e20 photons/s: make sure none can get there, before
     the run, naming what sets it. Bound: the background plus, from every source, its largest
     flux times the largest share one pixel gets of the PSF (a source centred on it; the
     rendered window is normalised to its own mass)."""
-    half = psf.window_half_width_px(sigma)
-    share = (math.erf(0.5 / (math.sqrt(2.0) * sigma)) / math.erf((half + 0.5) / (math.sqrt(2.0) * sigma))) ** 2
+    share = shape.max_pixel_share
     peaks = [_peak_flux(t) for t in targets]
     summed = float(np.sum(peaks)) if peaks else 0.0  # inf, not OverflowError, past 1.8e308
     total = background + share * summed
@@ -666,7 +675,7 @@ def _check_intervals(params: PixelParams, rate_hz: float) -> None:
         )
 
 
-def _check_work(s: dict[str, Any], width: int, height: int, optics: Optics, targets: list[Target],
+def _check_work(s: dict[str, Any], width: int, height: int, shape: psf.PSFShape, targets: list[Target],
                 sources: list[str]) -> None:
     """The samples and the memory of one chunk a scenario implies, bounded before it runs,
     each error naming the keys that set it (sub-sampling as ``simulate`` does it: the base
@@ -703,7 +712,7 @@ def _check_work(s: dict[str, Any], width: int, height: int, optics: Optics, targ
     if not 1.0 / rate / n_sub >= 1e-12:
         raise ScenarioError(f"{why}, {1.0 / rate / n_sub:.3g} s apart (< 1e-12 s, the engine's shortest interval)")
     if n_sub > 1 and sp["sparse"]:
-        half = psf.window_half_width_px(float(optics.psf_sigma_px))
+        half = shape.half_width_px
         window = min((2 * half + 1) ** 2, width * height)
         fine = max(chunk, n_sub) + n_sub  # the fine samples of one sparse chunk, at most
         # Windows off the sensor are skipped: a drifting field's stars, most of them outside
@@ -751,6 +760,13 @@ def _most_windows_at_once(targets: list[Target], width: int, height: int, half: 
     order = np.lexsort((-steps, times))
     deepest = int(np.cumsum(steps[order]).max(initial=0))
     return others + deepest
+
+
+def _psf_shape(optics: Optics, table: dict[str, Any]) -> psf.PSFShape:
+    """The PSF of the scene's optics, built now so that a bad shape is a ScenarioError naming
+    the optics keys (a missing psf_file, an image with NaNs, a window too large)."""
+    keys = {k: v for k, v in table.items() if k == "psf" or k.startswith(("psf_", "moffat_", "spider_"))}
+    return _wrap(f"optics (psf={optics.psf!r}, {keys})", psf.from_optics, optics)  # type: ignore[no-any-return]
 
 
 def _brightness(table: dict[str, Any], optics: Optics) -> Any:

@@ -289,7 +289,7 @@ class _Runner:
                  truth_sink: Callable[[str, dict[str, np.ndarray]], None]) -> None:
         self.scene = scene
         self.sensor = Sensor(scene.width, scene.height, scene.params, seed=scene.seed, num_threads=num_threads)
-        self.sigma = scene.psf_sigma_px
+        self.psf = scene.psf
         self.dt = 1.0 / scene.rate_hz
         self.n_base = max(1, math.ceil(scene.duration_s * scene.rate_hz - 1e-9))
         self.t_end = self.n_base * self.dt
@@ -307,7 +307,7 @@ class _Runner:
             x = np.array([float(t.position_px(0.0)[0]) for t in static])
             y = np.array([float(t.position_px(0.0)[1]) for t in static])
             f = np.array([float(t.flux_ph_s(0.0)) for t in static])
-            psf.render_points(scene.width, scene.height, x, y, f, self.sigma, out=self.static_map)
+            psf.render_points(scene.width, scene.height, x, y, f, self.psf, out=self.static_map)
         self.scene_s = time.perf_counter() - t0
         self.engine_s = 0.0
         self.pixel_updates = 0
@@ -317,7 +317,7 @@ class _Runner:
         self._truth_sink = truth_sink
         self._truth_t_last = -math.inf
         self.track_names = _names(self.moving[:n_tracked])
-        self.half = psf.window_half_width_px(self.sigma)
+        self.half = self.psf.half_width_px
         # A pixel a source has left keeps the fine sampling until the source follower has
         # settled (5 time constants): the comparator interpolates linearly between samples
         # (eq. 16), and a fast decay sampled coarsely would cross its thresholds at other
@@ -409,7 +409,7 @@ class _Runner:
         sc = self.scene
         if self.moving:
             x, y, f = self._sources(t)
-            frames = psf.render_frames(sc.width, sc.height, x, y, f, self.sigma, background_ph_s=self.static_map)
+            frames = psf.render_frames(sc.width, sc.height, x, y, f, self.psf, background_ph_s=self.static_map)
         else:
             frames = np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
         s1 = time.perf_counter()
@@ -427,9 +427,8 @@ class _Runner:
         x, y, f = self._sources(t_fine)
         n_t, n_s = x.shape
         sample = np.repeat(np.arange(n_t, dtype=np.int64), n_s)
-        contributions = psf._window_contributions(
-            sc.width, sc.height, x.reshape(-1), y.reshape(-1), f.reshape(-1),
-            np.full(n_t * n_s, self.sigma), self.half, True, offset=sample * npix,
+        contributions = psf.contributions(
+            sc.width, sc.height, x.reshape(-1), y.reshape(-1), f.reshape(-1), self.psf, offset=sample * npix,
         )
         if contributions:
             idx = np.concatenate([c[0] for c in contributions])

@@ -1,0 +1,52 @@
+"""Cost of the PSF shapes: building a tabulated PSF, and ``render_frames`` per source and sample.
+
+    python bench/bench_psf.py
+
+50 samples of 10 sources at random positions on a 346 x 260 DAVIS346 frame (the call also
+fills each frame with the background: that is most of the Gaussian's time). Best of 3.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from evstwin import psf
+from evstwin.scenario import build
+
+
+def main() -> None:
+    rng = np.random.default_rng(0)
+    n_t, n_s, width, height = 50, 10, 346, 260
+    x = rng.uniform(40, 300, (n_t, n_s))
+    y = rng.uniform(40, 220, (n_t, n_s))
+    flux = np.full((n_t, n_s), 1e5)
+    geo = build("geo-stare").optics
+    cases: dict[str, Callable[[], psf.PSFShape]] = {
+        "gaussian, geo-stare (sigma 0.70 px)": lambda: psf.from_optics(geo),
+        "airy, geo-stare + 4 vanes (lambda N 0.15 px, blur 0.7 px)": lambda: psf.from_optics(
+            geo.replace(psf="airy", spider_vanes=4)),
+        "moffat, geo-stare, FWHM 2 arcsec, beta 4.765": lambda: psf.from_optics(
+            geo.replace(psf="moffat", moffat_fwhm_arcsec=2.0)),
+        "moffat, FWHM 3 px, beta 2.5": lambda: psf.moffat_psf(3.0, 2.5),
+        "airy, lambda N 1.5 px": lambda: psf.airy_psf(1.5),
+        "airy, lambda N 4 px": lambda: psf.airy_psf(4.0),
+    }
+    print(f"{'shape':58s} {'h':>4s} {'build s':>8s} {'us per source-sample':>21s}")
+    for name, make in cases.items():
+        psf._from_optics.cache_clear()
+        t0 = time.perf_counter()
+        shape = make()
+        built = time.perf_counter() - t0
+        best = np.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            psf.render_frames(width, height, x, y, flux, shape)
+            best = min(best, time.perf_counter() - t0)
+        print(f"{name:58s} {shape.half_width_px:4d} {built:8.3f} {best / (n_t * n_s) * 1e6:21.1f}")
+
+
+if __name__ == "__main__":
+    main()
