@@ -305,7 +305,9 @@ def test_detect_ranks_bright_above_faint_and_low_threshold_above_high() -> None:
     assert low["mean_excess_fraction"] > high["mean_excess_fraction"] + 0.3
     assert low["mean_track_events_per_s"] > high["mean_track_events_per_s"]
     bright = m[(7.0, 3e-8)]
-    assert 0.0 <= bright["mean_chance_fraction"] < 0.1 and bright["mean_track_px"] >= 25
+    # The track fraction noise alone would give: with theta_on 0.085 about 4 sigma of the
+    # filtered dark shot noise above the level, ~10 % in the continuous noise model.
+    assert 0.0 <= bright["mean_chance_fraction"] < 0.2 and bright["mean_track_px"] >= 25
     assert abs(bright["mean_latency_median_s"]) < 0.05 and bright["mean_noise_rate_per_px_hz"] > 0
 
 
