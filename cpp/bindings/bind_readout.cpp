@@ -24,12 +24,13 @@ EventArray checked_events(const py::array& events) {
     return EventArray::ensure(events);
 }
 
-std::vector<Event> run(Readout& r, const py::array& events, std::vector<std::int64_t>* delay_u) {
+std::vector<Event> run(Readout& r, const py::array& events, std::vector<std::int64_t>* delay_u,
+                       std::vector<std::uint64_t>* kept = nullptr) {
     EventArray ev = checked_events(events);
     const Event* data = ev.data();
     const auto n = static_cast<std::size_t>(ev.shape(0));
     py::gil_scoped_release release;
-    return r.process(data, n, delay_u);
+    return r.process(data, n, delay_u, kept);
 }
 
 }  // namespace
@@ -50,6 +51,14 @@ void register_readout(py::module_& m) {
                 for (std::size_t i = 0; i < delay_u.size(); ++i)
                     delay_s[i] = static_cast<double>(delay_u[i]) * Readout::TIME_UNIT_S;
                 return py::make_tuple(to_numpy(std::move(out)), to_numpy(std::move(delay_s)));
+            },
+            py::arg("events"))
+        .def(
+            "process_with_index",
+            [](Readout& r, const py::array& events) {
+                std::vector<std::uint64_t> kept;
+                auto out = run(r, events, nullptr, &kept);
+                return py::make_tuple(to_numpy(std::move(out)), to_numpy(std::move(kept)));
             },
             py::arg("events"))
         .def("reset", &Readout::reset)

@@ -22,11 +22,12 @@ from ._core import __version__
 from .io import read_events, write_events
 from .pixel import PixelParams
 from .presets import thresholds_from_biases
-from .sensor import EVENT_DTYPE, TRACE_DTYPE, Sensor
+from .sensor import EVENT_DTYPE, EVENT_LABELS, TRACE_DTYPE, Sensor
 from .simulate import simulate, simulate_to_file
 
 __all__ = [
     "EVENT_DTYPE",
+    "EVENT_LABELS",
     "TRACE_DTYPE",
     "PixelParams",
     "Sensor",

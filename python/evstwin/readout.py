@@ -145,6 +145,11 @@ class Readout:
         before the tick; float64, a whole number of the model's 10 ps)."""
         return self._core.process_with_delays(events)
 
+    def process_with_index(self, events: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Like ``process``, and each kept event's index into ``events`` (uint64; the FIFO keeps
+        the order), to carry per-event data such as labels along."""
+        return self._core.process_with_index(events)
+
     def reset(self) -> None:
         """An empty, idle readout with zeroed counters."""
         self._core.reset()

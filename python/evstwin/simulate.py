@@ -9,6 +9,10 @@ dense way). Pixels outside every moving window see only static light, for which 
 rate is exact, so the sparse way gives the dense way's events when noise is off, and its
 statistics when noise is on (each pixel's random numbers follow its own sample counter).
 
+With ``labels=True`` every event also carries why it fired (``EVENT_LABELS``: signal, shot
+noise, leak, background, hot pixel), taken from ``Sensor.last_labels()`` after each engine call
+and put through the same merge and permutation as the events, so label ``i`` is event ``i``'s.
+
 Memory stays flat: only one chunk of photon rates exists at a time. :func:`simulate` keeps
 the events and ground-truth tracks in memory (they grow with the recording, not with pixels
 x samples); :func:`simulate_to_file` streams both into the output file as each chunk
@@ -88,6 +92,9 @@ class SimulationResult(SimulationStats):
     (size, duration, seed, the resolved scenario, ground truth)."""
 
     events: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, EVENT_DTYPE))
+    labels: np.ndarray | None = None
+    """Why each event fired (uint8 codes of ``EVENT_LABELS``, one per event, in the order of
+    ``events``), or None when the simulation was not asked for them (``labels=False``)."""
 
 
 def resolve_scenario(scenario: str | Path | dict, sets: Sequence[str] = ()) -> dict[str, Any]:
@@ -134,23 +141,30 @@ def simulate(
     num_threads: int | None = None,
     sets: Sequence[str] = (),
     progress: bool = False,
+    labels: bool = False,
 ) -> SimulationResult:
     """Simulate a scenario (built-in name, TOML path or dict) and return its events.
 
     duration_s, seed: override the scenario's; sets: ``key=value`` overrides as on the CLI;
     num_threads: engine threads (default: :func:`default_num_threads`, the cores not busy
-    elsewhere); progress: a tqdm bar on stderr over sensor time.
+    elsewhere); progress: a tqdm bar on stderr over sensor time; labels: also return why each
+    event fired as ``result.labels`` (uint8 codes of ``EVENT_LABELS``; default False: None).
     """
     wall0 = time.perf_counter()
     scene = build(resolve_scenario(scenario, sets), duration_s=duration_s, seed=seed)
     tracks: dict[str, list[dict[str, np.ndarray]]] = {}
     threads = default_num_threads() if num_threads is None else num_threads
-    runner = _Runner(scene, threads, truth_sink=lambda name, rows: tracks.setdefault(name, []).append(rows))
+    runner = _Runner(scene, threads, truth_sink=lambda name, rows: tracks.setdefault(name, []).append(rows),
+                     labels=labels)
     parts = list(_with_bar(runner, scene, progress))
-    events = np.concatenate(parts) if parts else np.zeros(0, EVENT_DTYPE)
+    events = np.concatenate([e for e, _ in parts]) if parts else np.zeros(0, EVENT_DTYPE)
+    codes = None
+    if labels:
+        codes = np.concatenate([c for _, c in parts if c is not None]) if parts else np.zeros(0, np.uint8)
     truth = {name: {k: np.concatenate([r[k] for r in rows]) for k in rows[0]} for name, rows in tracks.items()}
-    return SimulationResult(events=events, **_stats(runner, dict(_meta(runner, scene), truth=truth), wall0,
-                                                    len(events), int(np.count_nonzero(events["p"] == 1))))
+    return SimulationResult(events=events, labels=codes,
+                            **_stats(runner, dict(_meta(runner, scene), truth=truth), wall0,
+                                     len(events), int(np.count_nonzero(events["p"] == 1))))
 
 
 def simulate_to_file(
@@ -161,21 +175,27 @@ def simulate_to_file(
     num_threads: int | None = None,
     sets: Sequence[str] = (),
     progress: bool = False,
+    labels: bool = False,
 ) -> SimulationStats:
     """simulate() streamed into ``out_path`` (format from the extension): the events and the
     ground truth go to the file as each chunk finishes, so memory does not grow with the
     duration; the file appears under its name only when complete (an error or Ctrl-C leaves
-    nothing). The result carries the counts, not the events."""
+    nothing). The result carries the counts, not the events.
+
+    labels: also write why each event fired as the file's label column (``.h5``/``.hdf5``,
+    ``.npz``, ``.txt``, ``.csv``; any other format is refused with ValueError before the
+    simulation starts). Default False: the file is as without labels."""
     from .io import open_event_writer
 
     wall0 = time.perf_counter()
     scene = build(resolve_scenario(scenario, sets), duration_s=duration_s, seed=seed)
-    with open_event_writer(out_path, {"width": scene.width, "height": scene.height}) as writer:
+    size = {"width": scene.width, "height": scene.height}
+    with open_event_writer(out_path, size, labels=labels) as writer:
         threads = default_num_threads() if num_threads is None else num_threads
-        runner = _Runner(scene, threads, truth_sink=writer.append_truth)
+        runner = _Runner(scene, threads, truth_sink=writer.append_truth, labels=labels)
         n_on = 0
-        for part in _with_bar(runner, scene, progress):
-            writer.write(part)
+        for part, codes in _with_bar(runner, scene, progress):
+            writer.write(part, labels=codes)
             n_on += int(np.count_nonzero(part["p"] == 1))
         meta = _meta(runner, scene)
         writer.update_meta(meta)
@@ -183,8 +203,8 @@ def simulate_to_file(
     return SimulationStats(path=writer.path, **_stats(runner, meta, wall0, n_events, n_on))
 
 
-def _with_bar(runner: _Runner, scene: Scene, progress: bool) -> Iterator[np.ndarray]:
-    """The runner's event chunks, with a tqdm bar over sensor time on stderr if asked."""
+def _with_bar(runner: _Runner, scene: Scene, progress: bool) -> Iterator[_Chunk]:
+    """The runner's (events, labels) chunks, with a tqdm bar over sensor time on stderr if asked."""
     if not progress:
         yield from runner.chunks()
         return
@@ -282,12 +302,17 @@ class _LinearColumns:
         f[:, self.cols] = self.flux
 
 
+_Chunk = tuple[np.ndarray, "np.ndarray | None"]
+"""A chunk of events (sorted by t) and their labels (None when the runner keeps none)."""
+
+
 class _Runner:
     """The chunk loop of one simulation."""
 
     def __init__(self, scene: Scene, num_threads: int | None,
-                 truth_sink: Callable[[str, dict[str, np.ndarray]], None]) -> None:
+                 truth_sink: Callable[[str, dict[str, np.ndarray]], None], labels: bool = False) -> None:
         self.scene = scene
+        self.labels = labels
         self.sensor = Sensor(scene.width, scene.height, scene.params, seed=scene.seed, num_threads=num_threads)
         self.psf = scene.psf
         self.dt = 1.0 / scene.rate_hz
@@ -336,18 +361,24 @@ class _Runner:
 
     # -- the loop --------------------------------------------------------------------------------
 
-    def chunks(self, bar: Any = None) -> Iterator[np.ndarray]:
-        """The events, chunk by chunk in time order (each chunk sorted by t), with the readout's
-        times and losses when the scene has a readout."""
-        for events in self._engine_chunks(bar):
+    def chunks(self, bar: Any = None) -> Iterator[_Chunk]:
+        """The events, chunk by chunk in time order (each chunk sorted by t), each with its
+        labels (in the same order) when the runner keeps them, with the readout's times and
+        losses when the scene has a readout (a dropped event's label goes with it)."""
+        for events, labels in self._engine_chunks(bar):
             if self.readout is not None:
                 r0 = time.perf_counter()
-                events = self.readout.process(events)
+                if labels is None:
+                    events = self.readout.process(events)
+                else:
+                    events, kept = self.readout.process_with_index(events)
+                    labels = labels[kept]
                 self.readout_s += time.perf_counter() - r0
-            yield events
+            yield events, labels
 
-    def _engine_chunks(self, bar: Any = None) -> Iterator[np.ndarray]:
-        """The engine's events, chunk by chunk in time order (each chunk sorted by t)."""
+    def _engine_chunks(self, bar: Any = None) -> Iterator[_Chunk]:
+        """The engine's events, chunk by chunk in time order (each chunk sorted by t), each
+        with its labels when the runner keeps them."""
         yield self._dense(np.array([0.0]))
         chunk = self.scene.chunk_samples
         a = 0
@@ -404,7 +435,7 @@ class _Runner:
                                         "flux_ph_s": f[keep, j]})
         return x, y, f
 
-    def _dense(self, t: np.ndarray) -> np.ndarray:
+    def _dense(self, t: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
         sc = self.scene
         if self.moving:
@@ -414,13 +445,14 @@ class _Runner:
             frames = np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
         s1 = time.perf_counter()
         events = self.sensor.run(frames, t)
+        codes = self.sensor.last_labels() if self.labels else None
         s2 = time.perf_counter()
         self.scene_s += s1 - s0
         self.engine_s += s2 - s1
         self.pixel_updates += t.size * sc.width * sc.height
-        return events
+        return events, codes
 
-    def _sparse(self, t_fine: np.ndarray, t_base: np.ndarray) -> np.ndarray:
+    def _sparse(self, t_fine: np.ndarray, t_base: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
         sc = self.scene
         npix = sc.width * sc.height
@@ -457,14 +489,19 @@ class _Runner:
         frames = np.broadcast_to(self.static_map, (t_base.size, sc.height, sc.width))
         s1 = time.perf_counter()
         fine_events = self.sensor.run_pixels(hot, rates, t_fine)
+        fine_codes = self.sensor.last_labels() if self.labels else None
         base_events = self.sensor.run(frames, t_base)
+        base_codes = self.sensor.last_labels() if self.labels else None
         s2 = time.perf_counter()
         self.scene_s += s1 - s0
         self.engine_s += s2 - s1
         self.pixel_updates += hot.size * n_t + (npix - hot.size) * t_base.size
         events = np.concatenate([fine_events, base_events])
+        # lexsort is stable: the labels, concatenated alike, take the same permutation.
         order = np.lexsort((events["y"].astype(np.int64) * sc.width + events["x"], events["t"]))
-        return events[order]
+        if fine_codes is None or base_codes is None:
+            return events[order], None
+        return events[order], np.concatenate([fine_codes, base_codes])[order]
 
 
 def run_many(
@@ -474,9 +511,11 @@ def run_many(
     sets: Sequence[str] = (),
     processes: int | None = None,
     progress: bool = False,
+    labels: bool = False,
 ) -> list[SimulationResult]:
     """The same scenario with several seeds, in parallel processes (one thread each), in the
-    order of ``seeds``; ``progress``: a tqdm bar on stderr counting finished runs."""
+    order of ``seeds``; ``progress``: a tqdm bar on stderr counting finished runs; ``labels``:
+    as for :func:`simulate`."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
@@ -485,7 +524,7 @@ def run_many(
     # forkserver: never fork a process that has run OpenMP or BLAS threads.
     context = multiprocessing.get_context("forkserver")
     with ProcessPoolExecutor(max_workers=processes, mp_context=context) as pool:
-        futures = [pool.submit(simulate, resolved, duration_s, seed, 1) for seed in seeds]
+        futures = [pool.submit(simulate, resolved, duration_s, seed, 1, labels=labels) for seed in seeds]
         if progress:
             from tqdm import tqdm
 

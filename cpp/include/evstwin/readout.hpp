@@ -79,15 +79,18 @@ public:
 
     /// Pass n events (sorted by t, and not before the previous call's last) through the
     /// readout; append the kept ones to `out` with their output times and, if `delay_u` is
-    /// given, each one's queueing delay (departure - arrival, before the tick) in TIME_UNIT_S.
+    /// given, each one's queueing delay (departure - arrival, before the tick) in TIME_UNIT_S;
+    /// if `kept` is given, each kept event's index in `in` (the FIFO keeps their order), so a
+    /// caller can carry per-event data (labels) along.
     /// Atomic: on an error (unsorted or out-of-range times) nothing is appended and the state
     /// is unchanged.
     void process(const Event* in, std::size_t n, std::vector<Event>& out,
-                 std::vector<std::int64_t>* delay_u = nullptr) {
+                 std::vector<std::int64_t>* delay_u = nullptr, std::vector<std::uint64_t>* kept = nullptr) {
         check(in, n);
         State s = state_;
         const std::size_t out0 = out.size();
         const std::size_t delay0 = delay_u ? delay_u->size() : 0;
+        const std::size_t kept0 = kept ? kept->size() : 0;
         try {
             for (std::size_t i = 0; i < n; ++i) {
                 const Event& e = in[i];
@@ -118,21 +121,25 @@ public:
                 ++s.counts.n_out;
                 out.push_back({floor_div(floor_div(d, tick_u_) * tick_u_, UNITS_PER_US), e.x, e.y, e.p});
                 if (delay_u) delay_u->push_back(delay);
+                if (kept) kept->push_back(i);
             }
         } catch (...) {
             out.resize(out0);
             if (delay_u) delay_u->resize(delay0);
+            if (kept) kept->resize(kept0);
             throw;
         }
         if (n) s.last_t_us = in[n - 1].t;
         state_ = s;
     }
 
-    std::vector<Event> process(const Event* in, std::size_t n, std::vector<std::int64_t>* delay_u = nullptr) {
+    std::vector<Event> process(const Event* in, std::size_t n, std::vector<std::int64_t>* delay_u = nullptr,
+                               std::vector<std::uint64_t>* kept = nullptr) {
         std::vector<Event> out;
         out.reserve(n);
         if (delay_u) delay_u->reserve(delay_u->size() + n);
-        process(in, n, out, delay_u);
+        if (kept) kept->reserve(kept->size() + n);
+        process(in, n, out, delay_u, kept);
         return out;
     }
 

@@ -17,6 +17,9 @@ def register(sub: Any) -> None:
     p.add_argument("--threads", type=int, help="engine threads (default: all cores)")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override one scenario value, e.g. pixel.theta_on=0.25 (repeatable)")
+    p.add_argument("--labels", action="store_true",
+                   help="also write why each event fired (0 signal, 1 shot_noise, 2 leak, 3 background, "
+                        "4 hot_pixel) as a label column: .h5, .npz, .txt, .csv only")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_force(p)
     p.set_defaults(func=cmd_simulate)
@@ -36,7 +39,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     check_output_file(args.output, args.force, "--output")
     result = simulate_to_file(
         args.scenario, args.output, duration_s=args.duration, seed=args.seed, num_threads=args.threads,
-        sets=args.sets, progress=not args.no_progress,
+        sets=args.sets, progress=not args.no_progress, labels=args.labels,
     )
     print(f"wrote {args.output}")
     print(result.summary())

@@ -19,6 +19,13 @@ suffix                    format                                                
 ``.es``                   Event Stream (DVS), faery                                   eventstream
 ========================  ==========================================================  ==========
 
+Labels (why each event fired, uint8 codes of ``evstwin.EVENT_LABELS``) are an optional column
+of ``.h5``/``.hdf5`` (``/events/label``), ``.npz`` (``label``) and ``.txt``/``.csv`` (a fifth
+column): ``write_events(..., labels=codes)``, ``open_event_writer(..., labels=True)`` then
+``write(events, labels=codes)``, ``read_events(..., labels=True) -> (events, meta, labels)``,
+``iter_events(path).labeled()``; ``meta['has_labels']`` says whether a file has them. The other
+formats have no label column and refuse labels with ValueError naming the format.
+
 h5py and NumPy are core dependencies; ``aedat`` and ``faery`` come with ``pip install
 'evstwin[io]'`` and are imported only when an AEDAT/RAW/DAT/ES file is read or written.
 

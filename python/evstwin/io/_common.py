@@ -27,6 +27,12 @@ RAW_FORMATS: tuple[str, ...] = ("evt3", "evt2")
 """EVT versions ``write_events`` can write to ``.raw`` (the first is the default)."""
 
 FIELDS: tuple[str, ...] = ("t", "x", "y", "p")
+LABEL = "label"
+"""The name of the optional label column (why each event fired: codes of ``EVENT_LABELS``) in
+every layout that has one: ``/events/label`` (HDF5), ``label`` (NPZ), the fifth text column."""
+LABELED_DTYPE = np.dtype([*((name, EVENT_DTYPE[name]) for name in FIELDS), (LABEL, np.uint8)])
+"""A decoded packet of a file with a label column: ``EVENT_DTYPE``'s fields, then ``label``
+(internal to the readers: callers get the events and the labels as two arrays)."""
 COORD_MAX = np.iinfo(np.uint16).max
 SIZE_MAX = COORD_MAX  # a width or height read from a header: 1..65535 pixels
 EVT_SIZE_MAX = 2048  # EVT 2.0 / 3.0 carry x and y on 11 bits
@@ -46,6 +52,7 @@ DESCRIPTIVE_KEYS = frozenset(
         "raw_header",
         "time_unit_in_file",
         "stream_id",
+        "has_labels",
     }
 )
 # Keys with a meaning of their own in ``meta``.
@@ -71,10 +78,19 @@ class ChunkEncoder(Protocol):
         """Release what the encoder holds after a failure; the caller removes the files."""
 
 
+class LabelEncoder(ChunkEncoder, Protocol):
+    """The encoder of a format with a label column (``FileFormat.labels``): opened with
+    ``spec.labels`` True, it is given the labels of every chunk with its events."""
+
+    def write(self, events: np.ndarray, labels: np.ndarray | None = None) -> None:
+        """Append events and, when the file has a label column, their uint8 labels (same length)."""
+
+
 @dataclasses.dataclass
 class EventSource:
-    """An opened file: its ``meta`` (``width``/``height`` None when the header has no size) and
-    an iterator over ``EVENT_DTYPE`` packets of any length, in file order."""
+    """An opened file: its ``meta`` (``width``/``height`` None when the header has no size;
+    ``has_labels`` True when the file has a label column) and an iterator over packets of any
+    length, in file order: ``EVENT_DTYPE``, or ``LABELED_DTYPE`` when the file has labels."""
 
     meta: Meta
     packets: Iterator[np.ndarray]
@@ -85,11 +101,15 @@ class EventSource:
 class FileFormat:
     """One suffix's reader and writer: ``open_source(path, chunk) -> EventSource`` (packets of at
     most about ``chunk`` events where the format lets the reader choose) and
-    ``open_encoder(tmp, spec) -> ChunkEncoder`` (None where the format cannot be read/written)."""
+    ``open_encoder(tmp, spec) -> ChunkEncoder`` (None where the format cannot be read/written);
+    ``labels``: whether the format has a label column (its encoder is then a
+    :class:`LabelEncoder`); ``title``: the format's name in messages."""
 
     name: str
     open_source: Callable[[Path, int], EventSource] | None
     open_encoder: Callable[[Path, WriteSpec], ChunkEncoder] | None
+    labels: bool = False
+    title: str = ""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -108,6 +128,7 @@ class WriteSpec:
     truth: Truth
     extras: dict[str, str | int | float | bool]
     raw_format: str
+    labels: bool = False  # the file gets a label column (set by the writer, not by meta)
 
     @classmethod
     def from_meta(cls, meta: Mapping[str, Any] | None, raw_format: str | None, size: Size) -> WriteSpec:
@@ -288,6 +309,8 @@ def as_event_array(events: Any) -> np.ndarray:
 def limits(dtype: np.dtype, name: str) -> tuple[int, int]:
     if name == "p":
         return 0, 1
+    if name == LABEL:
+        return 0, 255
     info = np.iinfo(dtype)
     return int(info.min), int(info.max)
 
@@ -312,22 +335,25 @@ def check_sorted(events: np.ndarray, offset: int = 0, previous_t: int | None = N
             )
 
 
-def from_columns(t_x_y_p: Sequence[Any], where: Path) -> np.ndarray:
-    """Pack decoded columns ``(t, x, y, p)`` into ``EVENT_DTYPE``, checking that the values fit."""
-    columns = [np.asarray(c) for c in t_x_y_p]
-    for name, col in zip(FIELDS, columns):
+def from_columns(t_x_y_p: Sequence[Any], where: Path, label: Any = None) -> np.ndarray:
+    """Pack decoded columns ``(t, x, y, p)`` into ``EVENT_DTYPE``, or with a ``label`` column
+    into ``LABELED_DTYPE``, checking that the values fit."""
+    names = FIELDS if label is None else (*FIELDS, LABEL)
+    columns = [np.asarray(c) for c in (t_x_y_p if label is None else [*t_x_y_p, label])]
+    for name, col in zip(names, columns):
         if col.ndim != 1:
             raise ValueError(f"{str(where)!r}: column {name!r} has shape {col.shape}, expected 1-D")
         if col.dtype.kind not in "biu":
             raise ValueError(f"{str(where)!r}: column {name!r} is {col.dtype}, expected integers")
     n = len(columns[0])
     if any(len(c) != n for c in columns):
-        raise ValueError(f"{str(where)!r}: columns t, x, y, p have different lengths")
-    out = np.empty(n, EVENT_DTYPE)
+        raise ValueError(f"{str(where)!r}: columns {', '.join(names)} have different lengths")
+    dtype = EVENT_DTYPE if label is None else LABELED_DTYPE
+    out = np.empty(n, dtype)
     if n == 0:
         return out
-    for name, col in zip(FIELDS, columns):
-        lo, hi = limits(EVENT_DTYPE[name], name)
+    for name, col in zip(names, columns):
+        lo, hi = limits(dtype[name], name)
         c_min, c_max = int(col.min()), int(col.max())
         if c_min < lo or c_max > hi:
             raise ValueError(
@@ -335,6 +361,40 @@ def from_columns(t_x_y_p: Sequence[Any], where: Path) -> np.ndarray:
             )
         out[name] = col
     return out
+
+
+def split_labels(packet: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """A decoded packet as ``EVENT_DTYPE`` events and their uint8 labels (None without a label
+    column); copies only a ``LABELED_DTYPE`` packet."""
+    if packet.dtype == EVENT_DTYPE:
+        return packet, None
+    events = np.empty(len(packet), EVENT_DTYPE)
+    for name in FIELDS:
+        events[name] = packet[name]
+    return events, np.ascontiguousarray(packet[LABEL])
+
+
+def as_labels(labels: Any, n: int) -> np.ndarray:
+    """``labels`` for ``n`` events as a 1-D uint8 array (no copy if it already is one), or
+    TypeError/ValueError saying what is wrong (nothing is written then)."""
+    if not isinstance(labels, np.ndarray):
+        raise TypeError(f"labels must be a 1-D NumPy integer array (uint8 codes); got {type(labels).__name__}")
+    if labels.ndim != 1 or labels.dtype.kind not in "iub":
+        raise TypeError(f"labels must be a 1-D integer array (uint8 codes); got {labels.dtype} of shape {labels.shape}")
+    if len(labels) != n:
+        raise ValueError(f"labels must have one code per event: {len(labels)} labels for {n} events")
+    if labels.dtype == np.uint8:
+        return labels
+    if n and (int(labels.min()) < 0 or int(labels.max()) > 255):
+        raise ValueError(f"labels must be codes in [0, 255]; got values in [{int(labels.min())}, {int(labels.max())}]")
+    return labels.astype(np.uint8)
+
+
+def label_header() -> str:
+    """The label codes in one line, as the files that have a label column describe them."""
+    from .. import _core
+
+    return ", ".join(f"{code} = {name}" for code, name in sorted(_core.EVENT_LABELS.items()))
 
 
 def from_packet(packet: np.ndarray, where: Path) -> np.ndarray:

@@ -8,7 +8,7 @@ those formats (:data:`ISOLATED`) are decoded in a child process:
 * the child is forked from a ``multiprocessing`` fork server that has the io modules, h5py and
   the optional decoders imported already, so a decode starts in a few tens of milliseconds;
 * the child sends the file's ``meta`` (pickled) and then each decoded chunk of ``EVENT_DTYPE``
-  records as raw bytes over a pipe, received straight into the array the caller gets (no extra
+  records (``LABELED_DTYPE`` for a file with a label column, tagged so) as raw bytes over a pipe, received straight into the array the caller gets (no extra
   copy); the OS pipe buffer is the only read-ahead, so memory stays O(chunk) on both sides;
 * a watchdog stops a child that sends nothing for :data:`NO_PROGRESS_TIMEOUT_S` seconds (the
   time between two chunks, not the whole decode: an hour-long recording still reads);
@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..sensor import EVENT_DTYPE
-from ._common import EventSource, FileFormat, decoded, decoding, one_line
+from ._common import LABELED_DTYPE, EventSource, FileFormat, decoded, decoding, one_line
 
 ISOLATED: frozenset[str] = frozenset({"aedat4", "hdf5", "raw", "dat", "es"})
 """Formats (``FileFormat.name``) decoded in a child process by default: those whose decoder is
@@ -63,7 +63,8 @@ LIBRARIES = {
 _EXTRAS = {"aedat4": "aedat", "raw": "faery", "dat": "faery", "es": "faery"}
 _PRELOAD = "evstwin.io._isolation_preload"
 
-_META, _EVENTS, _DONE, _ERROR = b"M", b"E", b"D", b"X"
+_META, _EVENTS, _LABELED, _DONE, _ERROR = b"M", b"E", b"L", b"D", b"X"
+_DTYPES = {_EVENTS: EVENT_DTYPE, _LABELED: LABELED_DTYPE}
 
 
 class DecoderCrashError(ValueError):
@@ -204,9 +205,9 @@ class _Child:
         """(tag, payload): ``_META`` with (meta, size_limit), ``_EVENTS`` with an array, or
         ``_DONE``; an error of the child is raised here."""
         tag = self._receive()
-        if tag[:1] == _EVENTS and len(tag) == 9:
+        if tag[:1] in _DTYPES and len(tag) == 9:
             count = int.from_bytes(tag[1:], "little")
-            out = np.empty(count, EVENT_DTYPE)
+            out = np.empty(count, _DTYPES[tag[:1]])
             if not self.connection.poll(NO_PROGRESS_TIMEOUT_S):
                 self._receive()  # raises the hang
             try:
@@ -293,8 +294,9 @@ def _require_extra(fmt: FileFormat) -> None:
 
 
 def _send_events(connection: Any, events: np.ndarray) -> None:
-    events = np.ascontiguousarray(events, dtype=EVENT_DTYPE)
-    connection.send_bytes(_EVENTS + len(events).to_bytes(8, "little"))
+    tag = _LABELED if events.dtype == LABELED_DTYPE else _EVENTS
+    events = np.ascontiguousarray(events, dtype=_DTYPES[tag])
+    connection.send_bytes(tag + len(events).to_bytes(8, "little"))
     connection.send_bytes(events.view(np.uint8))
 
 

@@ -120,4 +120,4 @@ def open_source(path: Path, chunk: int) -> EventSource:
     return EventSource(meta, decoded(path, "aedat", packets()))
 
 
-FORMAT = FileFormat("aedat4", open_source, Aedat4Encoder)
+FORMAT = FileFormat("aedat4", open_source, Aedat4Encoder, title="AEDAT 4.0")

@@ -73,4 +73,4 @@ def open_source(path: Path, chunk: int) -> EventSource:
     return EventSource(meta, decoded(path, "faery", packets()))
 
 
-FORMAT = FileFormat("es", open_source, EsEncoder)
+FORMAT = FileFormat("es", open_source, EsEncoder, title="Event Stream")

@@ -1,6 +1,8 @@
 """HDF5 (``.h5``, ``.hdf5``): the evstwin layout, written and read in chunks with h5py.
 
-Layout: ``/events/{t,x,y,p}`` (resizable, chunked, gzip + shuffle), root attributes (``layout``,
+Layout: ``/events/{t,x,y,p}`` (resizable, chunked, gzip + shuffle), optionally
+``/events/label`` (uint8, one code per event, chunked alike; its ``codes`` attribute names
+them: ``EVENT_LABELS``), root attributes (``layout``,
 ``width``, ``height``, ``evstwin_version``, ``scenario`` + ``scenario_encoding``, extra scalars),
 ground truth under ``/truth/<name>/<field>``, and a time index ``/ms_to_idx`` as in the DSEC
 files: entry ``m`` is the index of the first event with ``t >= t_origin_us + 1000 * m``, where
@@ -22,6 +24,7 @@ from .. import _core
 from ..sensor import EVENT_DTYPE
 from ._common import (
     FIELDS,
+    LABEL,
     LAYOUT,
     EventSource,
     FileFormat,
@@ -33,6 +36,7 @@ from ._common import (
     decoded,
     decoding,
     from_columns,
+    label_header,
 )
 
 H5_CHUNK = 1 << 16  # events per HDF5 chunk (512 KiB of t)
@@ -70,14 +74,16 @@ class Hdf5Encoder:
                 name,
                 shape=(0,),
                 maxshape=(None,),
-                dtype=EVENT_DTYPE[name],
+                dtype=EVENT_DTYPE[name] if name != LABEL else np.uint8,
                 chunks=(H5_CHUNK,),
                 compression="gzip",
                 compression_opts=4,
                 shuffle=True,
             )
-            for name in FIELDS
+            for name in FIELDS + ((LABEL,) if spec.labels else ())
         ]
+        if spec.labels:
+            self._columns[-1].attrs["codes"] = label_header()
         self._index = f.create_dataset(
             MS_INDEX,
             shape=(0,),
@@ -92,11 +98,14 @@ class Hdf5Encoder:
         self._origin: int | None = None
         self._next_ms = 0
 
-    def write(self, events: np.ndarray) -> None:
+    def write(self, events: np.ndarray, labels: np.ndarray | None = None) -> None:
         start, end = self._count, self._count + len(events)
         for name, dataset in zip(FIELDS, self._columns):
             dataset.resize((end,))
             dataset[start:end] = events[name]
+        if labels is not None:  # the writer gives them exactly when the file has the column
+            self._columns[-1].resize((end,))
+            self._columns[-1][start:end] = labels
         self._extend_index(events["t"], start)
         self._count = end
 
@@ -182,6 +191,21 @@ def _event_datasets(f: Any, path: Path) -> list[Any]:
     return columns
 
 
+def _label_dataset(f: Any, path: Path, n: int) -> Any:
+    """``/events/label``, or None when the file has no label column."""
+    import h5py
+
+    labels = f["events"].get(LABEL)
+    if labels is None:
+        return None
+    if not isinstance(labels, h5py.Dataset) or labels.shape != (n,) or labels.dtype.kind not in "biu":
+        raise ValueError(
+            f"{str(path)!r}: /events/label must be a 1-D integer dataset of {n} codes like /events/t; "
+            f"got {getattr(labels, 'shape', type(labels).__name__)}"
+        )
+    return labels
+
+
 def _read_meta(f: Any) -> Meta:
     import h5py
 
@@ -201,17 +225,21 @@ def open_source(path: Path, chunk: int) -> EventSource:
     import h5py
 
     with decoding(path, "h5py"), h5py.File(path, "r") as f:
-        _event_datasets(f, path)
+        columns = _event_datasets(f, path)
+        has_labels = _label_dataset(f, path, columns[0].shape[0]) is not None
         meta = _read_meta(f)
     meta.setdefault("width", None)
     meta.setdefault("height", None)
+    meta["has_labels"] = has_labels
 
     def packets() -> Iterator[np.ndarray]:
         with h5py.File(path, "r") as f:
             columns = _event_datasets(f, path)
             n = columns[0].shape[0]
+            labels = _label_dataset(f, path, n)
             for start in range(0, n, chunk):
-                yield from_columns([c[start : start + chunk] for c in columns], where=path)
+                label = None if labels is None else labels[start : start + chunk]
+                yield from_columns([c[start : start + chunk] for c in columns], where=path, label=label)
 
     return EventSource(meta, decoded(path, "h5py", packets()))
 
@@ -259,4 +287,4 @@ def _bisect(t: Any, n: int, t_us: int) -> int:
     return lo
 
 
-FORMAT = FileFormat("hdf5", open_source, Hdf5Encoder)
+FORMAT = FileFormat("hdf5", open_source, Hdf5Encoder, labels=True, title="HDF5")

@@ -1,4 +1,5 @@
-"""NumPy zip (``.npz``): ``events`` (an ``EVENT_DTYPE`` array) plus scalar and truth entries.
+"""NumPy zip (``.npz``): ``events`` (an ``EVENT_DTYPE`` array) plus scalar and truth entries, and
+optionally ``label`` (uint8, one code of ``EVENT_LABELS`` per event).
 
 Written in a stream: the chunks' records go to a temporary file beside the output; at close the
 archive is assembled with zipfile (deflate, ZIP64 allowed), the ``events.npy`` header written
@@ -22,6 +23,7 @@ from .. import _core
 from ..sensor import EVENT_DTYPE
 from ._common import (
     FIELDS,
+    LABEL,
     EventSource,
     FileFormat,
     Meta,
@@ -53,14 +55,26 @@ class NpzEncoder:
         self._tmp = tmp
         self._records_path = temporary_path(tmp, "records")
         self._records = open(self._records_path, "wb")  # noqa: SIM115 - closed by close/abort
+        self._labels_path = temporary_path(tmp, "labels") if spec.labels else None
+        self._labels = None if self._labels_path is None else open(self._labels_path, "wb")  # noqa: SIM115
         self._count = 0
 
-    def write(self, events: np.ndarray) -> None:
+    def write(self, events: np.ndarray, labels: np.ndarray | None = None) -> None:
         self._records.write(np.ascontiguousarray(events).tobytes())
+        if self._labels is not None and labels is not None:
+            self._labels.write(np.ascontiguousarray(labels, dtype=np.uint8).tobytes())
         self._count += len(events)
 
-    def close(self, spec: WriteSpec) -> None:
+    def _close_side_files(self) -> None:
         self._records.close()
+        if self._labels is not None:
+            self._labels.close()
+
+    def _remove_side_files(self) -> None:
+        remove_quietly(self._records_path, *([self._labels_path] if self._labels_path is not None else []))
+
+    def close(self, spec: WriteSpec) -> None:
+        self._close_side_files()
         scalars: dict[str, np.ndarray] = {
             "width": np.array(spec.width, np.int64),
             "height": np.array(spec.height, np.int64),
@@ -88,6 +102,14 @@ class NpzEncoder:
                     }
                     np.lib.format.write_array_header_1_0(entry, header)
                     shutil.copyfileobj(records, entry, _COPY_BLOCK)
+                if self._labels_path is not None:
+                    with _open_entry(archive, LABEL) as entry, open(self._labels_path, "rb") as labels:
+                        np.lib.format.write_array_header_1_0(entry, {
+                            "descr": np.lib.format.dtype_to_descr(np.dtype(np.uint8)),
+                            "fortran_order": False,
+                            "shape": (self._count,),
+                        })
+                        shutil.copyfileobj(labels, entry, _COPY_BLOCK)
                 for key, array in scalars.items():
                     with _open_entry(archive, key) as entry:
                         np.lib.format.write_array(entry, array, allow_pickle=False)
@@ -100,11 +122,11 @@ class NpzEncoder:
                         })
                         shutil.copyfileobj(raw, entry, _COPY_BLOCK)
         finally:
-            remove_quietly(self._records_path)
+            self._remove_side_files()
 
     def abort(self) -> None:
-        self._records.close()
-        remove_quietly(self._records_path)
+        self._close_side_files()
+        self._remove_side_files()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -156,7 +178,7 @@ def _read_meta(archive: zipfile.ZipFile, path: Path) -> Meta:
     meta: Meta = {}
     truth: Truth = {}
     for key, member in _members(archive).items():
-        if key in FIELDS or key == "events":
+        if key in FIELDS or key in ("events", LABEL):
             continue
         value = _read_small(archive, member, key, path)
         if key.startswith("truth/"):
@@ -179,42 +201,80 @@ def open_source(path: Path, chunk: int) -> EventSource:
         if "events" not in members and not set(FIELDS) <= set(members):
             raise ValueError(f"{str(path)!r}: no 'events' array (nor 't', 'x', 'y', 'p' arrays)")
         meta = _read_meta(archive, path)
+        meta["has_labels"] = LABEL in members
     meta.setdefault("width", None)
     meta.setdefault("height", None)
     return EventSource(meta, decoded(path, "zipfile", _packets(path, chunk)))
 
 
+class _LabelColumn:
+    """The ``label`` member read alongside the events, ``count`` codes at a time (or nothing
+    when the archive has none)."""
+
+    def __init__(self, archive: zipfile.ZipFile, members: dict[str, str], path: Path) -> None:
+        self._path = path
+        self._file = archive.open(members[LABEL]) if LABEL in members else None
+        if self._file is not None:
+            self.shape, self._dtype = _array_header(self._file, LABEL, path)
+            if len(self.shape) != 1 or self._dtype.kind not in "biu":
+                self._file.close()
+                raise ValueError(
+                    f"{str(path)!r}: 'label' has dtype {self._dtype} and shape {self.shape}, "
+                    "expected a 1-D integer array (one code per event)"
+                )
+
+    def check(self, n: int) -> None:
+        if self._file is not None and self.shape != (n,):
+            raise ValueError(f"{str(self._path)!r}: 'label' has {self.shape[0]} codes for {n} events")
+
+    def read(self, count: int) -> np.ndarray | None:
+        if self._file is None:
+            return None
+        return _read_records(self._file, self._dtype, count, LABEL, self._path)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+
+
 def _packets(path: Path, chunk: int) -> Iterator[np.ndarray]:
     with zipfile.ZipFile(path) as archive:
         members = _members(archive)
-        if "events" in members:
-            with archive.open(members["events"]) as f:
-                shape, dtype = _array_header(f, "events", path)
-                if dtype.names is None or set(dtype.names) != set(FIELDS) or len(shape) != 1:
-                    raise ValueError(
-                        f"{str(path)!r}: 'events' has dtype {dtype} and shape {shape}, "
-                        f"expected a 1-D array with fields {FIELDS}"
-                    )
-                for start in range(0, shape[0], chunk):
-                    raw = _read_records(f, dtype, min(chunk, shape[0] - start), "events", path)
-                    yield from_columns([raw[name] for name in FIELDS], where=path)
-            return
-        files = [archive.open(members[name]) for name in FIELDS]
+        labels = _LabelColumn(archive, members, path)
         try:
-            headers = [_array_header(f, name, path) for f, name in zip(files, FIELDS)]
-            n = headers[0][0][0] if len(headers[0][0]) == 1 else -1
-            if any(shape != (n,) for shape, _ in headers):
-                raise ValueError(f"{str(path)!r}: 't', 'x', 'y', 'p' have shapes {[h[0] for h in headers]}")
-            for start in range(0, n, chunk):
-                count = min(chunk, n - start)
-                columns: list[Any] = [
-                    _read_records(f, dtype, count, name, path)
-                    for f, (_, dtype), name in zip(files, headers, FIELDS)
-                ]
-                yield from_columns(columns, where=path)
+            if "events" in members:
+                with archive.open(members["events"]) as f:
+                    shape, dtype = _array_header(f, "events", path)
+                    if dtype.names is None or set(dtype.names) != set(FIELDS) or len(shape) != 1:
+                        raise ValueError(
+                            f"{str(path)!r}: 'events' has dtype {dtype} and shape {shape}, "
+                            f"expected a 1-D array with fields {FIELDS}"
+                        )
+                    labels.check(shape[0])
+                    for start in range(0, shape[0], chunk):
+                        count = min(chunk, shape[0] - start)
+                        raw = _read_records(f, dtype, count, "events", path)
+                        yield from_columns([raw[name] for name in FIELDS], where=path, label=labels.read(count))
+                return
+            files = [archive.open(members[name]) for name in FIELDS]
+            try:
+                headers = [_array_header(f, name, path) for f, name in zip(files, FIELDS)]
+                n = headers[0][0][0] if len(headers[0][0]) == 1 else -1
+                if any(shape != (n,) for shape, _ in headers):
+                    raise ValueError(f"{str(path)!r}: 't', 'x', 'y', 'p' have shapes {[h[0] for h in headers]}")
+                labels.check(n)
+                for start in range(0, n, chunk):
+                    count = min(chunk, n - start)
+                    columns: list[Any] = [
+                        _read_records(f, dtype, count, name, path)
+                        for f, (_, dtype), name in zip(files, headers, FIELDS)
+                    ]
+                    yield from_columns(columns, where=path, label=labels.read(count))
+            finally:
+                for f in files:
+                    f.close()
         finally:
-            for f in files:
-                f.close()
+            labels.close()
 
 
-FORMAT = FileFormat("npz", open_source, NpzEncoder)
+FORMAT = FileFormat("npz", open_source, NpzEncoder, labels=True, title="NPZ")

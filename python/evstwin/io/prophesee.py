@@ -349,5 +349,5 @@ def open_dat_source(path: Path, chunk: int) -> EventSource:
     return EventSource(meta, decoded(path, "faery", packets()))
 
 
-RAW_FORMAT = FileFormat("raw", open_raw_source, open_raw_encoder)
-DAT_FORMAT = FileFormat("dat", open_dat_source, DatEncoder)
+RAW_FORMAT = FileFormat("raw", open_raw_source, open_raw_encoder, title="Prophesee RAW (EVT)")
+DAT_FORMAT = FileFormat("dat", open_dat_source, DatEncoder, title="Prophesee DAT")

@@ -1,5 +1,6 @@
 """Reading event files: :func:`iter_events` (chunks, memory O(chunk)), :func:`read_events`
-(built on it) and :func:`read_time_window`."""
+(built on it) and :func:`read_time_window`; the label column of files that have one through
+``read_events(path, labels=True)`` and ``iter_events(path).labeled()``."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import numbers
 import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -24,6 +25,7 @@ from ._common import (
     decoded,
     decoding,
     rechunk,
+    split_labels,
 )
 from ._registry import format_for
 
@@ -61,6 +63,9 @@ class EventStream:
     without ``width``/``height``) and no ``size`` was given, ``meta['width']`` and
     ``meta['height']`` are None until the iteration has reached the end, then max + 1 with
     ``meta['size_source'] = 'events'``. Each iteration reads the file again.
+
+    Iterating gives ``EVENT_DTYPE`` arrays; :meth:`labeled` gives ``(events, labels)`` pairs
+    from a file with a label column (``meta['has_labels']``).
     """
 
     def __init__(self, path: Path, fmt: FileFormat, chunk: int, size: Size | None) -> None:
@@ -96,9 +101,28 @@ class EventStream:
                 self.path, meta["width"], meta["height"], source.size_limit
             )
         meta["size_inferred"] = meta["size_source"] is None
+        meta["has_labels"] = bool(meta.get("has_labels", False))
         return source
 
     def __iter__(self) -> Iterator[np.ndarray]:
+        for packet in self._packets():
+            yield split_labels(packet)[0]
+
+    def labeled(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """The events in chunks as :meth:`__iter__` gives them, each with its labels: uint8 codes
+        of ``EVENT_LABELS``, one per event, in the same order. ValueError naming the file when
+        it has no label column (``meta['has_labels']`` False)."""
+        if not self.meta.get("has_labels"):
+            raise ValueError(
+                f"{str(self.path)!r} has no label column (only .h5/.hdf5, .npz, .txt and .csv files "
+                "written with labels have one: simulate(..., labels=True), evstwin simulate --labels)"
+            )
+        for packet in self._packets():
+            events, labels = split_labels(packet)
+            assert labels is not None  # the source yields labelled packets when has_labels
+            yield events, labels
+
+    def _packets(self) -> Iterator[np.ndarray]:
         source = self._source if self._source is not None else self._open()
         self._source = None
         meta = source.meta
@@ -133,7 +157,8 @@ def iter_events(
 
     Returns an :class:`EventStream`: ``.meta`` as :func:`read_events` gives it (see there),
     iterable (again and again) over the events in the file's order; :func:`read_events` sorts
-    a file that is not sorted by time, this does not.
+    a file that is not sorted by time, this does not. ``.labeled()`` iterates ``(events,
+    labels)`` pairs instead, for a file with a label column.
     """
     p, fmt = _existing(path)
     if isinstance(chunk, bool) or not isinstance(chunk, numbers.Integral) or chunk < 1:
@@ -141,9 +166,21 @@ def iter_events(
     return EventStream(p, fmt, int(chunk), _check_size_argument(size))
 
 
+@overload
 def read_events(
-    path: PathLike, *, t0_zero: bool = False, size: tuple[int, int] | None = None
-) -> tuple[np.ndarray, Meta]:
+    path: PathLike, *, t0_zero: bool = ..., size: tuple[int, int] | None = ..., labels: Literal[False] = ...
+) -> tuple[np.ndarray, Meta]: ...
+
+
+@overload
+def read_events(
+    path: PathLike, *, t0_zero: bool = ..., size: tuple[int, int] | None = ..., labels: Literal[True]
+) -> tuple[np.ndarray, Meta, np.ndarray]: ...
+
+
+def read_events(
+    path: PathLike, *, t0_zero: bool = False, size: tuple[int, int] | None = None, labels: bool = False
+) -> tuple[np.ndarray, Meta] | tuple[np.ndarray, Meta, np.ndarray]:
     """Read an event file into an ``EVENT_DTYPE`` array sorted by ``t``.
 
     path: the file; its suffix picks the format (see :mod:`evstwin.io`).
@@ -151,33 +188,49 @@ def read_events(
         subtracted origin is returned as ``meta['t0_us']``. Default False: times are the
         recording's own, in microseconds.
     size: (width, height) [pixels] overriding the file's own size (checked against the events).
+    labels: if True, also return the file's label column: why each event fired, uint8 codes of
+        ``EVENT_LABELS`` (0 signal, 1 shot_noise, 2 leak, 3 background, 4 hot_pixel), one per
+        event in the order of the returned events (sorted with them). Only ``.h5``/``.hdf5``,
+        ``.npz``, ``.txt`` and ``.csv`` files have one; a file without it raises ValueError
+        (``meta['has_labels']`` tells beforehand, from ``iter_events(path).meta``).
 
-    Returns ``(events, meta)``. ``meta`` always has ``width`` and ``height`` [pixels],
+    Returns ``(events, meta)``, or ``(events, meta, labels)`` with ``labels=True``. ``meta`` always has ``width`` and ``height`` [pixels],
     ``size_source`` (``'header'``, ``'plugin'`` for a RAW header naming a known Prophesee
     plugin, ``'events'`` when taken as max + 1, ``'argument'``), ``size_inferred`` (True for
     ``'events'``), ``format`` (``'hdf5'``, ``'npz'``, ``'txt'``, ``'csv'``, ``'aedat4'``,
     ``'raw'``, ``'dat'`` or ``'es'``) and ``path`` (str), plus what the file holds:
     ``evstwin_version``, ``scenario`` (a dict when it was written from a dict, else a str),
-    ``truth`` (name -> field -> array), ``raw_format`` (``'evt3'``/``'evt2'``), ``resorted``
+    ``truth`` (name -> field -> array), ``raw_format`` (``'evt3'``/``'evt2'``), ``has_labels``
+    (whether the file has a label column, always present), ``resorted``
     (True when the file was not sorted by time), and any extra scalars written in ``meta``.
 
     Raises FileNotFoundError if the file does not exist, ValueError for an unknown suffix, a
     file that cannot be decoded, or a size that is invalid or contradicted by the events.
     """
     stream = iter_events(path, size=size)
-    chunks = list(stream)
+    codes: np.ndarray | None = None
+    if labels:
+        pairs = list(stream.labeled())
+        chunks = [events for events, _ in pairs]
+        codes = np.concatenate([c for _, c in pairs]) if pairs else np.empty(0, np.uint8)
+    else:
+        chunks = list(stream)
     meta = stream.meta
     events = np.concatenate(chunks) if chunks else np.empty(0, EVENT_DTYPE)
     if meta["width"] is None or meta["height"] is None:  # pragma: no cover - set by the iteration
         raise AssertionError("size unknown after reading")
     t = events["t"]
     if len(t) > 1 and bool(np.any(t[1:] < t[:-1])):
-        events = events[np.argsort(t, kind="stable")]
+        order = np.argsort(t, kind="stable")
+        events = events[order]
+        codes = None if codes is None else codes[order]
         meta["resorted"] = True
     if t0_zero and len(events):
         t0 = int(events["t"][0])
         events["t"] -= t0
         meta["t0_us"] = t0
+    if codes is not None:
+        return events, meta, codes
     return events, meta
 
 

@@ -1,7 +1,10 @@
 """Text: ``.txt`` (space separated) and ``.csv`` (comma separated), one ``t x y p`` line per event.
 
 Written by appending lines (a header ``# evstwin <version> width=W height=H`` and ``# t x y p``
-first). Read in blocks of about ``chunk`` lines (whole lines, cut at the last newline): ``#`` lines are comments (the first ``width=``/``height=``
+first). With labels, each line has a fifth column, ``label`` (a code of ``EVENT_LABELS``), and
+the header says so: ``# t x y p label`` and a line naming the codes. A file is read as labelled
+when its first data line has five columns (evstwin's, and the ``t x y p label`` text files of
+denoising data sets). Read in blocks of about ``chunk`` lines (whole lines, cut at the last newline): ``#`` lines are comments (the first ``width=``/``height=``
 in the comments before the data gives the size), one leading row of names is skipped. ``t`` is
 integer microseconds; a file whose first data lines have decimals in ``t`` is read as seconds
 (the convention of the UZH/RPG event-camera datasets) and rounded to microseconds. Polarity 0/1
@@ -22,7 +25,17 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from .. import _core
-from ._common import FIELDS, EventSource, FileFormat, Meta, WriteSpec, decoded, from_columns
+from ._common import (
+    FIELDS,
+    LABEL,
+    EventSource,
+    FileFormat,
+    Meta,
+    WriteSpec,
+    decoded,
+    from_columns,
+    label_header,
+)
 
 _HEADER_SIZE = re.compile(r"\bwidth\s*=\s*(-?\d+).*?\bheight\s*=\s*(-?\d+)")
 _HEADER_VERSION = re.compile(r"^#\s*evstwin\s+(\S+)")
@@ -37,15 +50,19 @@ class TextEncoder:
     def __init__(self, tmp: Path, spec: WriteSpec, sep: str) -> None:
         self._sep = sep
         self._file: BinaryIO = open(tmp, "wb")  # noqa: SIM115 - closed by close/abort
-        header = (
-            f"# evstwin {_core.__version__} width={spec.width} height={spec.height}\n# {sep.join(FIELDS)}\n"
-        )
+        names = FIELDS + ((LABEL,) if spec.labels else ())
+        header = f"# evstwin {_core.__version__} width={spec.width} height={spec.height}\n# {sep.join(names)}\n"
+        if spec.labels:
+            header += f"# label: {label_header()}\n"
         self._file.write(header.encode("ascii"))
 
-    def write(self, events: np.ndarray) -> None:
+    def write(self, events: np.ndarray, labels: np.ndarray | None = None) -> None:
         for start in range(0, len(events), _TXT_BLOCK):
             block = events[start : start + _TXT_BLOCK]
-            self._file.write(format_int_rows([block[name] for name in FIELDS], self._sep))
+            columns = [block[name] for name in FIELDS]
+            if labels is not None:
+                columns.append(labels[start : start + _TXT_BLOCK])
+            self._file.write(format_int_rows(columns, self._sep))
 
     def close(self, spec: WriteSpec) -> None:
         self._file.close()
@@ -100,11 +117,13 @@ def format_int_rows(columns: Sequence[np.ndarray], sep: str) -> bytes:
 # reading
 
 
-def _read_header(path: Path) -> tuple[Meta, int]:
-    """Size and version from the leading comments, and the number of lines before the data
-    (comments, blank lines and a row of names)."""
-    meta: Meta = {"width": None, "height": None}
+def _read_header(path: Path, delimiter: str | None) -> tuple[Meta, int]:
+    """Size and version from the leading comments, the number of lines before the data
+    (comments, blank lines and a row of names), and ``has_labels``: whether the first data line
+    has five columns."""
+    meta: Meta = {"width": None, "height": None, "has_labels": False}
     skip = 0
+    first: list[bytes] = []  # the first data line, unless it is a row of names
     with open(path, "rb") as f:
         for index, raw in enumerate(f):
             line = raw.decode("utf-8", "replace").strip()
@@ -118,8 +137,15 @@ def _read_header(path: Path) -> tuple[Meta, int]:
                 if version:
                     meta["evstwin_version"] = version.group(1)
                 continue
-            skip = index + 1 if _NAMES_ROW.match(line) else index
+            names = _NAMES_ROW.match(line) is not None
+            skip = index + 1 if names else index
+            first = [] if names else [raw]
             break
+        for raw in itertools.chain(first, f):  # the first line of numbers tells the columns
+            line = raw.decode("utf-8", "replace").split("#", 1)[0].strip()
+            if line:
+                meta["has_labels"] = len(line.split(delimiter)) == len(FIELDS) + 1
+                break
     return meta, skip
 
 
@@ -163,12 +189,12 @@ def _parse(
 def _seconds_to_us(table: np.ndarray, where: str) -> np.ndarray:
     if table.size == 0:
         return table.astype(np.int64)
-    if table.shape[1] != 4:
-        raise ValueError(f"{where}: expected 4 columns (t x y p); found {table.shape[1]}")
+    if table.shape[1] not in (4, 5):
+        raise ValueError(f"{where}: expected 4 columns (t x y p) or 5 (t x y p label); found {table.shape[1]}")
     if not np.all(np.isfinite(table)):
         raise ValueError(f"{where}: not a table of finite t x y p numbers")
     if np.any(table[:, 1:] != np.round(table[:, 1:])):
-        raise ValueError(f"{where}: x, y and p must be integers")
+        raise ValueError(f"{where}: x, y, p (and label) must be integers")
     if np.abs(table[:, 0]).max(initial=0.0) * 1e6 >= 2.0**62:
         raise ValueError(f"{where}: times (read as seconds) are out of range")
     out = np.empty(table.shape, np.int64)
@@ -178,7 +204,9 @@ def _seconds_to_us(table: np.ndarray, where: str) -> np.ndarray:
 
 
 def open_source(path: Path, chunk: int, delimiter: str | None) -> EventSource:
-    meta, skip = _read_header(path)
+    meta, skip = _read_header(path, delimiter)
+    columns = len(FIELDS) + 1 if meta["has_labels"] else len(FIELDS)
+    names = " ".join(FIELDS + ((LABEL,) if meta["has_labels"] else ()))
     meta["size_source"] = "header" if meta["width"] is not None else None
 
     block_bytes = max(1 << 16, min(chunk * _BYTES_PER_LINE, 1 << 26))
@@ -211,12 +239,16 @@ def open_source(path: Path, chunk: int, delimiter: str | None) -> EventSource:
             meta["time_unit_in_file"] = unit
             if table.size == 0:
                 continue
-            if table.shape[1] != 4:
-                raise ValueError(f"{str(path)!r}: expected 4 columns (t x y p); found {table.shape[1]}")
+            if table.shape[1] != columns:
+                raise ValueError(
+                    f"{str(path)!r}: expected {columns} columns ({names}) as on the first line; "
+                    f"found {table.shape[1]}"
+                )
             p = table[:, 3]
             if not np.isin(p, (-1, 0, 1)).all():
                 raise ValueError(f"{str(path)!r}: polarity column holds values other than 0/1 (or -1/1)")
-            yield from_columns([table[:, 0], table[:, 1], table[:, 2], (p > 0).astype(np.uint8)], path)
+            label = table[:, 4] if meta["has_labels"] else None
+            yield from_columns([table[:, 0], table[:, 1], table[:, 2], (p > 0).astype(np.uint8)], path, label)
         meta.setdefault("time_unit_in_file", "us")
 
     return EventSource(meta, decoded(path, "numpy", packets()))
@@ -238,5 +270,5 @@ def _csv_encoder(tmp: Path, spec: WriteSpec) -> TextEncoder:
     return TextEncoder(tmp, spec, ",")
 
 
-TXT_FORMAT = FileFormat("txt", _txt_source, _txt_encoder)
-CSV_FORMAT = FileFormat("csv", _csv_source, _csv_encoder)
+TXT_FORMAT = FileFormat("txt", _txt_source, _txt_encoder, labels=True, title="text")
+CSV_FORMAT = FileFormat("csv", _csv_source, _csv_encoder, labels=True, title="CSV")

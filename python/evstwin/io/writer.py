@@ -11,22 +11,34 @@ import weakref
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from ._common import (
     ChunkEncoder,
     FileFormat,
+    LabelEncoder,
     PathLike,
     SpooledColumn,
     WriteSpec,
     as_event_array,
+    as_labels,
     check_sorted,
     remove_quietly,
     temporary_path,
 )
-from ._registry import format_for
+from ._registry import FORMATS, format_for
+
+
+def _check_labels(path: Path, fmt: FileFormat, labels: bool) -> None:
+    """ValueError naming the format when ``labels`` asks for a label column it does not have."""
+    if labels and not fmt.labels:
+        holders = ", ".join(s for s, f in FORMATS.items() if f.labels)
+        raise ValueError(
+            f"cannot write labels to {str(path)!r}: {fmt.title or fmt.name} files have no label column; "
+            f"write {holders} to keep them, or leave labels out"
+        )
 
 
 def _destination(path: PathLike) -> tuple[Path, FileFormat]:
@@ -45,6 +57,7 @@ chunk (or the close) may need: a write that would go below it raises OSError(ENO
 # of what it holds in memory before writing (HDF5's chunk cache: one 64 Ki-event chunk of each
 # column; AEDAT: one pending packet). Text: a 20-digit t, two 5-digit coordinates, p, 4 separators.
 _BYTES_PER_EVENT = {"hdf5": 16, "npz": 16, "txt": 36, "csv": 36, "aedat4": 17, "raw": 8, "dat": 8, "es": 8}
+_BYTES_PER_LABEL = {"hdf5": 1, "npz": 1, "txt": 4, "csv": 4}  # a label column: a byte, or " 255"
 _BYTES_PER_US = {"hdf5": 8 / 1000, "raw": 2 / 4096, "es": 1 / 1000}
 _BUFFERED = {"hdf5": 1 << 20, "aedat4": 17 << 16}
 _BUFFERED_DEFAULT = 64 * 1024
@@ -114,6 +127,9 @@ class EventWriter:
     O(chunk) for every format. While it is open, a lock file beside ``path`` makes a second
     writer of the same path (in this process or another) fail at once, rather than both
     finishing and the last one silently winning.
+
+    A writer opened with ``labels=True`` writes a label column (``.h5``/``.hdf5``, ``.npz``,
+    ``.txt``, ``.csv``): every :meth:`write` then takes the chunk's labels with its events.
     """
 
     def __init__(self, path: Path, fmt: FileFormat, spec: WriteSpec) -> None:
@@ -144,6 +160,11 @@ class EventWriter:
             raise
 
     @property
+    def labels(self) -> bool:
+        """Whether the file gets a label column (every :meth:`write` must give the labels)."""
+        return self._spec.labels
+
+    @property
     def count(self) -> int:
         """Events written so far."""
         return self._count
@@ -153,16 +174,29 @@ class EventWriter:
         """(width, height) of the sensor [pixels]."""
         return self._spec.width, self._spec.height
 
-    def write(self, events: np.ndarray) -> None:
+    def write(self, events: np.ndarray, labels: np.ndarray | None = None) -> None:
         """Append ``events`` (``EVENT_DTYPE``, or the same fields in another order or integer
         width) sorted by ``t``, none earlier than the previous chunk's last event, with
         coordinates inside the sensor. A chunk that fails these checks raises ValueError/
         TypeError and writes nothing (the writer stays usable); an error of the encoder aborts
         the writer, as does a chunk the destination has no space for (OSError ENOSPC, checked
         before writing with :data:`SPACE_MARGIN_BYTES` to spare). Big-endian and other
-        non-native arrays are converted to their values."""
+        non-native arrays are converted to their values.
+
+        labels: the events' labels (1-D integer codes in [0, 255], one per event, as
+        ``Sensor.last_labels()`` gives them), required when the writer was opened with
+        ``labels=True`` and refused otherwise (ValueError, nothing written)."""
         self._check_open()
         ev = as_event_array(events)
+        if self._spec.labels and labels is None:
+            raise ValueError(
+                f"the writer of {str(self.path)!r} was opened with labels=True: give each chunk's labels"
+            )
+        if not self._spec.labels and labels is not None:
+            raise ValueError(
+                f"the writer of {str(self.path)!r} has no label column: open it with labels=True to write labels"
+            )
+        codes = None if labels is None else as_labels(labels, len(ev))
         if len(ev) == 0:
             return
         check_sorted(ev, self._count, self._last_t)
@@ -175,7 +209,10 @@ class EventWriter:
             )
         try:
             self._check_space(self._chunk_bytes(ev), f"the next {len(ev)} events")
-            self._encoder.write(ev)
+            if codes is None:
+                self._encoder.write(ev)
+            else:  # in step with the events: the same chunk, the same call
+                cast(LabelEncoder, self._encoder).write(ev, codes)
         except BaseException:
             self.abort()
             raise
@@ -191,8 +228,9 @@ class EventWriter:
         start = self._last_t if self._last_t is not None else int(ev["t"][0])
         span_us = max(0, int(ev["t"][-1]) - start)
         per_us = _BYTES_PER_US.get(self.format, 0.0)
+        per_event = _BYTES_PER_EVENT.get(self.format, 40) + (_BYTES_PER_LABEL[self.format] if self.labels else 0)
         return (
-            len(ev) * _BYTES_PER_EVENT.get(self.format, 40)
+            len(ev) * per_event
             + int(span_us * per_us)
             + _BUFFERED.get(self.format, _BUFFERED_DEFAULT)
         )
@@ -298,7 +336,8 @@ class EventWriter:
             for v in fields.values()
             if not isinstance(v, SpooledColumn)
         )
-        archive = self._count * _BYTES_PER_EVENT["npz"] if self.format == "npz" else 0
+        per_event = _BYTES_PER_EVENT["npz"] + (_BYTES_PER_LABEL["npz"] if self.labels else 0)
+        archive = self._count * per_event if self.format == "npz" else 0
         scenario = len(self._spec.scenario or "")
         return self._spooled_bytes + given + archive + scenario + _BUFFERED.get(self.format, _BUFFERED_DEFAULT)
 
@@ -357,7 +396,7 @@ def _lock_output(path: Path) -> Any:
 
 
 def open_event_writer(
-    path: PathLike, meta: Mapping[str, Any] | None = None, *, raw_format: str | None = None
+    path: PathLike, meta: Mapping[str, Any] | None = None, *, raw_format: str | None = None, labels: bool = False
 ) -> EventWriter:
     """Open ``path`` for writing events chunk by chunk (format from the suffix, as
     :func:`write_events`); use as a context manager, or call ``close()`` / ``abort()``.
@@ -366,17 +405,23 @@ def open_event_writer(
         headers of most formats carry them before the events). ``scenario``/``truth`` may also
         be given later with :meth:`EventWriter.update_meta`; they are written at close.
     raw_format: EVT version for ``.raw`` files (``'evt3'``, default, or ``'evt2'``).
+    labels: give the file a label column (``.h5``/``.hdf5``: ``/events/label``; ``.npz``:
+        ``label``; ``.txt``/``.csv``: a fifth column); each :meth:`EventWriter.write` then takes
+        the chunk's labels. Default False: the file has no label column, as before.
 
-    Raises ValueError for an unknown suffix or missing/invalid size, FileNotFoundError for a
-    missing directory, TypeError for meta of the wrong type.
+    Raises ValueError for an unknown suffix, missing/invalid size, or ``labels=True`` for a
+    format without a label column (AEDAT 4.0, Prophesee RAW/DAT, Event Stream: the message names
+    it), FileNotFoundError for a missing directory, TypeError for meta of the wrong type.
     """
     p, fmt = _destination(path)
+    _check_labels(p, fmt, labels)
     if meta is not None and not isinstance(meta, Mapping):
         raise TypeError(f"meta must be a mapping (dict); got {type(meta).__name__}")
     for key in ("width", "height"):
         if meta is None or meta.get(key) is None:
             raise ValueError(f"open_event_writer needs meta[{key!r}] (the sensor size in pixels); got none")
     spec = WriteSpec.from_meta(meta, raw_format, (1, 1))
+    spec.labels = bool(labels)
     return EventWriter(p, fmt, spec)
 
 
@@ -386,6 +431,7 @@ def write_events(
     meta: Mapping[str, Any] | None = None,
     *,
     raw_format: str | None = None,
+    labels: np.ndarray | None = None,
 ) -> Path:
     """Write events to ``path`` in the format given by its suffix; return the path written.
 
@@ -399,6 +445,11 @@ def write_events(
         Descriptive keys returned by ``read_events`` (``format``, ``path``, ...) are ignored.
     raw_format: EVT version for ``.raw`` files, overrides ``meta['raw_format']``;
         default ``'evt3'``.
+    labels: optional label column, one integer code in [0, 255] per event (why it fired:
+        ``EVENT_LABELS``, as ``SimulationResult.labels`` or ``read_events(..., labels=True)``
+        give them). Written by ``.h5``/``.hdf5``, ``.npz``, ``.txt`` and ``.csv``; other formats
+        refuse it with ValueError naming the format (they have no label column). Default None:
+        no label column.
 
     The events go through :func:`open_event_writer` as one chunk, so the file is the same as
     one written chunk by chunk. Raises TypeError for events of another dtype or meta of the
@@ -406,14 +457,16 @@ def write_events(
     sensor, or content the format cannot hold (the message says which formats can).
     """
     p = Path(os.fspath(path))
-    format_for(p, "write")
+    _check_labels(p, format_for(p, "write"), labels is not None)
     ev = as_event_array(events)
     check_sorted(ev)
+    codes = None if labels is None else as_labels(labels, len(ev))
     default = (int(ev["x"].max()) + 1, int(ev["y"].max()) + 1) if len(ev) else (1, 1)
     spec = WriteSpec.from_meta(meta, raw_format, default)
+    spec.labels = codes is not None
     p, fmt = _destination(p)
     with EventWriter(p, fmt, spec) as writer:
-        writer.write(ev)
+        writer.write(ev, codes)
     return p
 
 
