@@ -49,7 +49,7 @@ def agree(n1: int, n2: int, k: float = 4.0) -> bool:
         (0.0, {"pr_pole": True, "theta_on": 0.08, "theta_off": 0.06}),  # dark, two poles
         (0.0, {"pr_pole": False, "theta_on": 0.1, "theta_off": 0.08}),  # dark, source follower only
         (3e7, {"pr_pole": True, "theta_on": 0.06, "theta_off": 0.05}),  # lit: photon + dark noise
-        (1e10, {"pr_pole": True, "theta_on": 0.02, "theta_off": 0.02}),  # bright: the pole is fast
+        (1e10, {"pr_pole": True, "theta_on": 0.008, "theta_off": 0.008}),  # bright: the pole is fast
     ],
 )
 def test_noise_event_counts_do_not_depend_on_the_sample_rate(photon_rate: float, pixel: dict) -> None:
@@ -162,23 +162,26 @@ def test_leak_alone_fires_at_f_leak_with_a_random_phase_per_pixel() -> None:
 
 
 def test_a_static_background_is_stationary_from_the_first_sample() -> None:
-    # Shot noise, leak and eq. 12 background together: events per second in the first and the
-    # last tenth of the run agree within their Poisson spread.
-    params = PixelParams(pr_pole=True, theta_on=0.1, theta_off=0.07, leak_rate_hz=0.5, shot_noise_rate_hz=0.2)
-    ev, _ = static_run(params, 0.0, 20.0, 250.0, shape=(32, 32))
+    # Shot noise, leak and eq. 12 background together (the DAVIS346's dark noise and
+    # thresholds): events per second in the first and the last tenth of the run agree within
+    # their Poisson spread, all events and the leak's alone. (Where the shot noise alone fires
+    # often, the leak's phase at t = 0 is approximate: see the README.)
+    params = PixelParams(pr_pole=True, theta_on=0.2, theta_off=0.15, leak_rate_hz=0.5, shot_noise_rate_hz=0.2)
+    ev, labels = static_run(params, 0.0, 20.0, 250.0, shape=(64, 64))
     t = ev["t"] / 1e6
-    first, last = int(np.sum(t < 2.0)), int(np.sum(t >= 18.0))
-    assert first > 300
-    assert agree(first, last), (first, last)
-    labels = set(np.unique(static_run(params, 0.0, 20.0, 250.0, shape=(32, 32))[1]))
-    assert {LABELS["shot_noise"], LABELS["leak"], LABELS["background"]} <= labels
+    for sel in (np.ones(len(ev), bool), labels == LABELS["leak"]):
+        first, last = int(np.sum(sel & (t < 2.0))), int(np.sum(sel & (t >= 18.0)))
+        assert first > 1000
+        assert agree(first, last), (first, last)
+    assert {LABELS["leak"], LABELS["background"]} <= set(np.unique(labels))
 
 
 def test_the_paper_leak_still_fires_in_lockstep_on_request() -> None:
     params = PixelParams(photon_shot_noise=False, dark_model="none", shot_noise_rate_hz=0.0, leak_rate_hz=4.0,
                          cutoff_hz=None, refractory_s=0.0, leak_random_phase=False)
-    ev, _ = static_run(params, 1e9, 1.0, 1000.0, shape=(3, 3))
+    ev, _ = static_run(params, 1e9, 1.1, 1000.0, shape=(3, 3))
     assert set(ev["t"].tolist()) == {250_000, 500_000, 750_000, 1_000_000}
+    assert len(ev) == 4 * 9
 
 
 # -- hot pixels ------------------------------------------------------------------------------

@@ -322,12 +322,14 @@ struct PixelModel {
         s.t = t;
         s.n = 1;
         const Philox4x32Counter w = philox4x32({0u, 0u, pixel, PURPOSE_INIT}, key);
+        double noise_var_y = 0.0;
         if (continuous) {
             const double D = noise_intensity(photon_rate, mean_e);
             if (D > 0.0) {
                 const double a = pole_rate(ELEMENTARY_CHARGE_C * mean_e), b = sf_rate();
                 double szz, szy, syy;
                 noise_stationary(a, b, D, szz, szy, syy);
+                noise_var_y = syy;
                 double g1, g2;
                 normal_pair(w[0], w[1], g1, g2);
                 if (a > 0.0 && b > 0.0) {
@@ -343,7 +345,33 @@ struct PixelModel {
         }
         s.level_at_event = s.ref;
         s.noise_at_event = s.ny;
-        if (p.leak_random_phase && s.leak_hz > 0.0) s.ref -= uniform_open(w[2]) * s.theta_on;
+        if (p.leak_random_phase && s.leak_hz > 0.0) {
+            // The leak's phase as it stands in the steady state: the difference d = y - ref
+            // climbs at f_leak theta_on and restarts from 0 at every event. With eq. 12's
+            // background resetting it at rate rho, its density is exp(-lambda d) on
+            // [0, theta_on), lambda = rho / (f_leak theta_on) (uniform without a background).
+            // With shot noise, the reference was set at the last event's noise, not at the
+            // current one: an independent stationary draw, kept where the whole difference lies
+            // between the levels (so nothing fires at once). Resets by shot-noise crossings are
+            // left out (their rate has no closed form).
+            const double rho = (s.bg_on_hz + s.bg_off_hz) * background_factor(ELEMENTARY_CHARGE_C * mean_e);
+            const double lambda = rho / (s.leak_hz * s.theta_on);
+            const double sd = std::sqrt(noise_var_y);
+            CounterStream more(key, pixel, 0, PURPOSE_INIT + 1u);
+            for (int attempt = 0; attempt < 64; ++attempt) {
+                const double u = attempt == 0 ? uniform_open(w[2]) : more.uniform();
+                const double d0 = lambda * s.theta_on > 1e-9 ? -std::log1p(u * std::expm1(-lambda * s.theta_on)) / lambda
+                                                             : u * s.theta_on;
+                const double n_then = sd > 0.0 ? sd * normal_from_uniforms(more.uniform(), more.uniform()) : s.ny;
+                const double d = d0 + s.ny - n_then;
+                if (d < s.theta_on && d > -s.theta_off) {
+                    s.ref = s.y - d;
+                    s.noise_at_event = n_then;
+                    s.level_at_event = s.y - s.ny + n_then;
+                    break;
+                }
+            }
+        }
         s.next_hot_t = s.hot_hz > 0.0 ? t - std::log(uniform_open(w[3])) / s.hot_hz
                                       : std::numeric_limits<double>::infinity();
         s.hot_count = 0;
@@ -831,10 +859,46 @@ struct PixelModel {
         double t_noise = 0.0;
         const int noise_pol = has_background() ? background_event(s, current_a, c, key, pixel, t_noise) : -1;
 
-        // The bridge: only while the line itself crosses nothing after the refractory period
-        // (a crossing of the line fires anyway; the excursions around it are second order).
-        bool bridged = false;
-        if (k.bridge_var > 0.0) {
+        // With a photoreceptor pole faster than the sampling (a dt > 1), the noise is smooth
+        // below 1 / a but rough at the sample's scale, which neither the straight line nor a
+        // Brownian bridge describes well near a level: where a crossing is plausible, the
+        // interval is refined exactly (below). Elsewhere the line and the bridge do.
+        const bool two_poles = D > 0.0 && a > 0.0 && has_filter;
+        if (two_poles && a * c.dt > 1.0 && crossing_plausible(s, y, c, k.bridge_var)) {
+            refine_and_compare(s, x, z, yd, nz, ny, c, a, D, noise_pol, t_noise, key, pixel, emit);
+        } else {
+            compare_bridged(s, y, ny, c, k.bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit);
+        }
+        if (trace) *trace = {current_a, x, y, s.ref};
+        s.x = x;
+        s.z = z;
+        s.y = y;
+        s.nz = nz;
+        s.ny = ny;
+    }
+
+    /// Whether the comparator could fire in (c.t0, c.t1] toward y1: the line crosses a level,
+    /// or a Brownian bridge of the interval's middle variance would cross one with a
+    /// probability above 1e-6 (exp(-13.8)).
+    EVSTWIN_ALWAYS_INLINE bool crossing_plausible(const PixelState& s, double y1, const SampleConstants& c,
+                                                  double bridge_var) const {
+        const double g = (y1 - s.y) * c.inv_dt + s.leak_hz * s.theta_on;
+        const double d0 = s.y - s.ref, d1 = d0 + g * c.dt;
+        const double th_on = s.theta_on, th_off = s.theta_off;
+        if (!(d0 < th_on && d0 > -th_off && d1 < th_on && d1 > -th_off)) return true;
+        const double lim = 2.0 * 13.8 * bridge_var;
+        return (th_on - d0) * (th_on - d1) < lim || (th_off + d0) * (th_off + d1) < lim;
+    }
+
+    /// The comparator over (c.t0, c.t1] toward y1 (noise part ny1), with the crossings of a
+    /// Brownian bridge of middle variance bridge_var that the line misses: only while the line
+    /// itself crosses nothing after the refractory period (a crossing of the line fires
+    /// anyway; the excursions around it are second order). `purpose` keys the bridge's draws.
+    template <class Emit>
+    EVSTWIN_ALWAYS_INLINE void compare_bridged(PixelState& s, double y, double ny, const SampleConstants& c,
+                                               double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
+                                               std::uint32_t pixel, std::uint32_t purpose, Emit& emit) const {
+        if (bridge_var > 0.0) {
             const double t_start = std::max(c.t0, s.refr_until);
             if (t_start < c.t1) {
                 const double g = (y - s.y) * c.inv_dt + s.leak_hz * s.theta_on;
@@ -843,13 +907,13 @@ struct PixelModel {
                 const double th_on = s.theta_on, th_off = s.theta_off;
                 if (d_start < th_on && d_start > -th_off && d_end < th_on && d_end > -th_off) {
                     // The variance rate of the bridge that has this middle variance over dt.
-                    const double sigma2 = 4.0 * k.bridge_var * c.inv_dt;
+                    const double sigma2 = 4.0 * bridge_var * c.inv_dt;
                     const double span = c.t1 - t_start;
                     const double mid = 0.25 * sigma2 * span;
                     const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
                     const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
                     // The bridge's uniforms are drawn only where a crossing is possible at all.
-                    CounterStream more(key, pixel, s.n, PURPOSE_BRIDGE);
+                    CounterStream more(key, pixel, s.n, purpose);
                     const double u = p_on + p_off > 0.0 ? more.uniform() : 1.0;
                     if (u < p_on + p_off) {
                         const bool on = u < p_on;
@@ -876,19 +940,101 @@ struct PixelModel {
                             s.y = y_c;
                             s.ny = ny_c;
                             compare(s, y, ny, second, noise_first ? -1 : noise_pol, t_noise, emit);
-                            bridged = true;
+                            return;
                         }
                     }
                 }
             }
         }
-        if (!bridged) compare(s, y, ny, c, noise_pol, t_noise, emit);
-        if (trace) *trace = {current_a, x, y, s.ref};
-        s.x = x;
-        s.z = z;
-        s.y = y;
-        s.nz = nz;
-        s.ny = ny;
+        compare(s, y, ny, c, noise_pol, t_noise, emit);
+    }
+
+    /// The interval (c.t0, c.t1] cut into m = 2^L pieces with a h <= 1 (h = dt / m), the noise
+    /// state at each cut drawn exactly from its law given the states at both ends (a Levy
+    /// bridge construction of the two-pole OU process: midpoints first, then quarter points,
+    /// ...), the noise-free chain stepped through the cuts, and the comparator (with its
+    /// bridge, now over pieces the pole resolves) run piece by piece. x1, z1, yd1, nz1, ny1:
+    /// the sample's values at c.t1 (already drawn); s still holds those at c.t0.
+    template <class Emit>
+    void refine_and_compare(PixelState& s, double x1, double z1, double yd1, double nz1, double ny1,
+                            const SampleConstants& c, double a, double D, int noise_pol, double t_noise,
+                            Philox4x32Key key, std::uint32_t pixel, Emit& emit) const {
+        constexpr int MAX_LEVELS = 10;
+        int levels = 1;
+        while (levels < MAX_LEVELS && a * c.dt > static_cast<double>(1 << levels)) ++levels;
+        const int m = 1 << levels;
+        const double h = c.dt / m;
+        const double b = sf_rate();
+        double nzs[(1 << MAX_LEVELS) + 1], nys[(1 << MAX_LEVELS) + 1];
+        nzs[0] = s.nz;
+        nys[0] = s.ny;
+        nzs[m] = nz1;
+        nys[m] = ny1;
+        CounterStream normals(key, pixel, s.n, PURPOSE_REFINE);
+        for (int step = m / 2; step >= 1; step /= 2) {
+            // X_mid | X_0, X_1 for two halves of length T = step h: mean Phi X_0 + K (X_1 -
+            // Phi^2 X_0), covariance Q - K Phi Q, with K = Q Phi^T (Phi Q Phi^T + Q)^-1.
+            const double T = step * h;
+            const NoiseCoeffs q = noise_coeffs(a, b, D, T);
+            const double Qzz = q.l_zz * q.l_zz, Qzy = q.l_zz * q.l_yz, Qyy = q.l_yz * q.l_yz + q.l_yy * q.l_yy;
+            const double Pzz = q.phi_zz, Pyz = q.phi_yz, Pyy = q.phi_yy;  // Phi = [[Pzz, 0], [Pyz, Pyy]]
+            // A = Q Phi^T
+            const double Azz = Qzz * Pzz, Azy = Qzz * Pyz + Qzy * Pyy;
+            const double Ayz = Qzy * Pzz, Ayy = Qzy * Pyz + Qyy * Pyy;
+            // M = Phi A + Q (symmetric)
+            const double Mzz = Pzz * Azz + Qzz, Mzy = Pzz * Azy + Qzy, Myy = Pyz * Azy + Pyy * Ayy + Qyy;
+            const double det = Mzz * Myy - Mzy * Mzy;
+            // K = A M^-1
+            const double Kzz = (Azz * Myy - Azy * Mzy) / det, Kzy = (Azy * Mzz - Azz * Mzy) / det;
+            const double Kyz = (Ayz * Myy - Ayy * Mzy) / det, Kyy = (Ayy * Mzz - Ayz * Mzy) / det;
+            // C = Q - K A^T (A^T = Phi Q), and its Cholesky factor.
+            const double Czz = Qzz - (Kzz * Azz + Kzy * Azy);
+            const double Czy = Qzy - (Kzz * Ayz + Kzy * Ayy);
+            const double Cyy = Qyy - (Kyz * Ayz + Kyy * Ayy);
+            const double lzz = Czz > 0.0 ? std::sqrt(Czz) : 0.0;
+            const double lyz = lzz > 0.0 ? Czy / lzz : 0.0;
+            const double lyy = std::sqrt(std::max(0.0, Cyy - lyz * lyz));
+            for (int i = step; i < m; i += 2 * step) {
+                const double z0 = nzs[i - step], y0 = nys[i - step];
+                const double mz = Pzz * z0, my = Pyz * z0 + Pyy * y0;  // Phi X_0
+                const double ez = nzs[i + step] - Pzz * mz, ey = nys[i + step] - (Pyz * mz + Pyy * my);
+                const double g1 = normal_from_uniforms(normals.uniform(), normals.uniform());
+                const double g2 = normal_from_uniforms(normals.uniform(), normals.uniform());
+                nzs[i] = mz + Kzz * ez + Kzy * ey + lzz * g1;
+                nys[i] = my + Kyz * ez + Kyy * ey + lyz * g1 + lyy * g2;
+            }
+        }
+        // The pieces: the noise-free chain stepped exactly for the input linear in each piece
+        // (its end forced to the sample's own value), the comparator with the piece's bridge.
+        const double pole_decay = std::exp(-a * h), pole_ramp = one_minus_exp_over(a * h);
+        const double sf_decay = std::exp(-b * h), sf_ramp = one_minus_exp_over(b * h);
+        const double piece_bridge = noise_coeffs(a, b, D, h).bridge_var;
+        double x_prev = s.x, z_prev = s.z, yd_prev = s.y - s.ny;
+        for (int i = 1; i <= m; ++i) {
+            double xi, zi, ydi;
+            if (i == m) {
+                xi = x1;
+                zi = z1;
+                ydi = yd1;
+            } else {
+                xi = s.x + (x1 - s.x) * (static_cast<double>(i) / m);
+                zi = xi + (z_prev - x_prev) * pole_decay - (xi - x_prev) * pole_ramp;
+                ydi = zi + (yd_prev - z_prev) * sf_decay - (zi - z_prev) * sf_ramp;
+            }
+            SampleConstants piece = c;
+            piece.t0 = i == 1 ? c.t0 : c.t0 + (i - 1) * h;
+            piece.t1 = i == m ? c.t1 : c.t0 + i * h;
+            piece.dt = piece.t1 - piece.t0;
+            piece.inv_dt = 1.0 / piece.dt;
+            const bool here = noise_pol >= 0 && t_noise > piece.t0 - (i == 1 ? 1.0 : 0.0) && t_noise <= piece.t1;
+            compare_bridged(s, ydi + nys[i], nys[i], piece, piece_bridge, here ? noise_pol : -1, t_noise, key, pixel,
+                            PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
+            s.y = ydi + nys[i];
+            s.ny = nys[i];
+            x_prev = xi;
+            z_prev = zi;
+            yd_prev = ydi;
+        }
     }
 
     /// Why a threshold crossing of the line fired, at a point a share f into the interval:
