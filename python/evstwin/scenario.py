@@ -20,6 +20,10 @@ The tables mirror the Python objects:
                   ``max_events`` (most events of one engine call; default 1e8, see
                   ``Sensor.max_events``).
 ``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
+``[hot_pixels]``  an explicit hot-pixel map, in place of the draw of ``pixel.hot_pixel_fraction``:
+                  ``pixels = [[x, y, rate_hz], ...]`` and/or ``file = "map.npy"`` (a
+                  (height, width) array of rates [Hz], 0 = not hot); see
+                  ``PixelParams.hot_pixel_rate_hz`` for what a rate means.
 ``[[targets]]``   ``kind`` = ``static`` | ``linear`` | ``circular`` | ``rotating_bar`` |
                   ``tabulated``, its geometry, and one brightness: ``flux_ph_s``,
                   ``magnitude`` or ``light_curve = {t_s = [...], flux_ph_s|magnitude = [...]}``;
@@ -116,6 +120,7 @@ SCHEMA: dict[str, Any] = {
     "optics": {k: Any for k in _OPTICS_KEYS},
     "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int, "max_events": int},
     "background": {"photon_rate_ph_s": float, "sky_mag_per_arcsec2": float},
+    "hot_pixels": {"pixels": list, "file": str},
     "targets": list,
     "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
                    "counts_slope": float, "seed": int, "drift_px_s": Any, "drift_arcsec_s": Any},
@@ -438,6 +443,8 @@ class Scene:
     but not written as ground-truth tracks when they drift: thousands of tracks would cost 32
     bytes per star per sample, and the resolved scenario (seed, drift) makes them again."""
     readout: ReadoutParams | None = None
+    hot_pixel_rates_hz: np.ndarray | None = None
+    """[hot_pixels]: the (height, width) hot-pixel rates [Hz], or None (the draw applies)."""
     """The readout applied to the events (None: off, the engine's times kept)."""
 
     @property
@@ -591,6 +598,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             f"background={dict(bg)} ({background:.3g} photons/s)"
         )
     readout = _readout(s, preset)
+    hot = _hot_pixel_map(s.get("hot_pixels"), width, height)
     sp = s["sampling"]
     _check_work(s, width, height, shape, targets, sources)
     _check_intervals(params, float(sp["rate_hz"]))
@@ -598,6 +606,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
         rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
+        hot_pixel_rates_hz=hot,
         chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
         readout=readout,
     )
@@ -760,6 +769,46 @@ def _most_windows_at_once(targets: list[Target], width: int, height: int, half: 
     order = np.lexsort((-steps, times))
     deepest = int(np.cumsum(steps[order]).max(initial=0))
     return others + deepest
+
+
+MAX_HOT_PIXEL_RATE_HZ = 1e6
+"""The engine's largest hot-pixel rate [Hz] (``Sensor::set_hot_pixel_rates``)."""
+
+
+def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.ndarray | None:
+    """[hot_pixels] as a (height, width) array of rates [Hz] (None: no map, the draw applies).
+    A file's map comes first; listed pixels are set over it."""
+    if not table:
+        return None
+    rates = np.zeros((height, width))
+    if "file" in table:
+        path = table["file"]
+        try:
+            loaded = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise ScenarioError(f"hot_pixels.file={path!r} cannot be read as a .npy array: {exc}") from None
+        if not isinstance(loaded, np.ndarray) or loaded.shape != (height, width) or loaded.dtype.kind not in "iuf":
+            raise ScenarioError(f"hot_pixels.file={path!r} must hold a ({height}, {width}) array of rates [Hz] (the "
+                                f"sensor's height, width); got {getattr(loaded, 'dtype', '?')} {getattr(loaded, 'shape', '?')}")
+        bad = ~((loaded >= 0) & (loaded <= MAX_HOT_PIXEL_RATE_HZ))
+        if bad.any():
+            y, x = (int(v) for v in np.argwhere(bad)[0])
+            raise ScenarioError(f"hot_pixels.file={path!r}: rates must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}] Hz; got "
+                                f"{loaded[y, x]!r} at (x, y)=({x}, {y})")
+        rates[:] = loaded
+    for i, entry in enumerate(table.get("pixels", [])):
+        key = f"hot_pixels.pixels[{i}]"
+        ok = isinstance(entry, list) and len(entry) == 3 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry)
+        if not ok or any(isinstance(v, float) and not v.is_integer() for v in entry[:2]):
+            raise ScenarioError(f"{key} must be [x, y, rate_hz] (whole pixel coordinates and a rate in Hz); got {entry!r}")
+        x, y, r = int(entry[0]), int(entry[1]), float(entry[2])
+        if not (0 <= x < width and 0 <= y < height):
+            raise ScenarioError(f"{key}={entry!r} lies off the {width}x{height} sensor")
+        if not 0.0 <= r <= MAX_HOT_PIXEL_RATE_HZ:
+            raise ScenarioError(f"{key}: rate_hz must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}]; got {entry!r}")
+        rates[y, x] = r
+    return rates
 
 
 def _psf_shape(optics: Optics, table: dict[str, Any]) -> psf.PSFShape:

@@ -313,7 +313,8 @@ class _Runner:
                  truth_sink: Callable[[str, dict[str, np.ndarray]], None], labels: bool = False) -> None:
         self.scene = scene
         self.labels = labels
-        self.sensor = Sensor(scene.width, scene.height, scene.params, seed=scene.seed, num_threads=num_threads)
+        self.sensor = Sensor(scene.width, scene.height, scene.params, seed=scene.seed, num_threads=num_threads,
+                             hot_pixel_rates_hz=scene.hot_pixel_rates_hz)
         self.psf = scene.psf
         self.dt = 1.0 / scene.rate_hz
         self.n_base = max(1, math.ceil(scene.duration_s * scene.rate_hz - 1e-9))

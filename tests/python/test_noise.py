@@ -266,3 +266,55 @@ def test_continuous_noise_is_identical_across_threads_and_chunkings(threads: int
     many, l2 = static_run(params, 2e7, 4.0, 250.0, shape=(40, 40), chunk_s=0.028, num_threads=threads)
     assert len(one) > 100
     assert one.tobytes() == many.tobytes() and l1.tobytes() == l2.tobytes()
+
+
+# -- scenarios --------------------------------------------------------------------------------
+
+
+def _small_dark(**extra: object) -> dict:
+    s: dict = {"name": "dark", "duration_s": 2.0, "sensor": {"preset": "davis346", "width": 16, "height": 12},
+               "sampling": {"rate_hz": 250.0}, "pixel": {"leak_rate_hz": 0.0, "shot_noise_rate_hz": 0.0}}
+    s.update(extra)
+    return s
+
+
+def test_a_scenario_hot_pixel_map_from_a_list_and_a_file(tmp_path) -> None:
+    from evstwin import simulate
+
+    rates = np.zeros((12, 16))
+    rates[2, 3] = 80.0
+    path = tmp_path / "hot.npy"
+    np.save(path, rates)
+    r = simulate(_small_dark(hot_pixels={"file": str(path), "pixels": [[7, 5, 200.0]]}), num_threads=1, labels=True)
+    hot = r.events[r.labels == LABELS["hot_pixel"]]
+    assert set(zip(hot["x"].tolist(), hot["y"].tolist())) == {(3, 2), (7, 5)}
+    for (x, y), rate in (((3, 2), 80.0), ((7, 5), 200.0)):
+        n = int(np.sum((hot["x"] == x) & (hot["y"] == y)))
+        expect = 2.0 * rate / (1 + rate * 1e-3)  # the preset's 1 ms refractory period
+        assert abs(n - expect) < 4 * math.sqrt(expect), (x, y, n, expect)
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ({"pixels": [[16, 0, 5.0]]}, r"hot_pixels.pixels\[0\]=\[16, 0, 5.0\] lies off the 16x12 sensor"),
+        ({"pixels": [[1, 1]]}, r"hot_pixels.pixels\[0\] must be \[x, y, rate_hz\]"),
+        ({"pixels": [[1.5, 1, 5.0]]}, r"hot_pixels.pixels\[0\] must be \[x, y, rate_hz\]"),
+        ({"pixels": [[1, 1, -5.0]]}, r"hot_pixels.pixels\[0\]: rate_hz must be in \[0, 1e\+06\]"),
+        ({"file": "/nonexistent/hot.npy"}, r"hot_pixels.file='/nonexistent/hot.npy' cannot be read"),
+    ],
+)
+def test_bad_hot_pixel_maps_name_the_key(table: dict, message: str) -> None:
+    from evstwin.scenario import ScenarioError, build
+
+    with pytest.raises(ScenarioError, match=message):
+        build(_small_dark(hot_pixels=table))
+
+
+def test_a_hot_pixel_file_of_the_wrong_shape_is_refused(tmp_path) -> None:
+    from evstwin.scenario import ScenarioError, build
+
+    path = tmp_path / "hot.npy"
+    np.save(path, np.zeros((16, 12)))
+    with pytest.raises(ScenarioError, match=r"must hold a \(12, 16\) array of rates"):
+        build(_small_dark(hot_pixels={"file": str(path)}))
