@@ -44,6 +44,8 @@ class PixelParams:
     hot_pixel_fraction: float
     hot_pixel_rate_hz: float
     hot_pixel_rate_sigma: float
+    hot_pixel_duty: float
+    hot_pixel_burst_s: float
     noise_model: str
     def __init__(self) -> None: ...
     def validate(self) -> None: ...

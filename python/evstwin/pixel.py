@@ -65,6 +65,13 @@ class PixelParams:
     events a second)."""
     hot_pixel_rate_sigma: float = _DEFAULT.hot_pixel_rate_sigma
     """Log-normal spread of the hot-pixel rates (sigma of ln r), in [0, 3]."""
+    hot_pixel_duty: float = _DEFAULT.hot_pixel_duty
+    """Share of the time a hot pixel is active (random telegraph: it flickers in bursts and
+    fires only while active), in [1e-6, 1]; 1 = always active. Mean rate: duty x r / (1 + r
+    refractory_s)."""
+    hot_pixel_burst_s: float = _DEFAULT.hot_pixel_burst_s
+    """Mean length of a hot pixel's active period [s] (exponential); quiet periods last
+    burst (1 - duty) / duty on average."""
     noise_model: NoiseModel = _DEFAULT.noise_model  # type: ignore[assignment]
     """'continuous' (default): shot noise as a white process through the photoreceptor pole and
     source follower, advanced exactly between samples with threshold crossings inside an

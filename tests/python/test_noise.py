@@ -207,6 +207,29 @@ def test_a_hot_pixel_map_fires_at_its_rate_with_dead_time_alternating_polarity()
     assert len(ev) == np.sum((ev["x"] == 5) & (ev["y"] == 3)) + np.sum((ev["x"] == 1) & (ev["y"] == 6))
 
 
+def test_hot_pixels_flicker_in_bursts_with_the_duty_and_burst_length_given() -> None:
+    # A random telegraph (active a share d of the time, active periods of mean tau) gating a
+    # Poisson clock of rate r with dead time t_d: mean rate d r / (1 + r t_d), and the counts'
+    # index of dispersion about 1 + 2 r_eff (1 - d)^2 tau (r_eff = r / (1 + r t_d)).
+    d, tau, r, t_d, duration = 0.2, 0.08, 1000.0, 1.3e-4, 60.0
+    params = PixelParams(photon_shot_noise=False, dark_model="none", shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
+                         refractory_s=t_d, hot_pixel_duty=d, hot_pixel_burst_s=tau)
+    hot = np.full((4, 4), r)
+    sensor = Sensor(4, 4, params, seed=9, hot_pixel_rates_hz=hot)
+    t = np.arange(0, int(duration * 100) + 1) / 100.0
+    ev = sensor.run(np.full((len(t), 4, 4), 1e9), t)
+    r_eff = r / (1 + r * t_d)
+    expect = 16 * duration * d * r_eff
+    dispersion = 1 + 2 * r_eff * (1 - d) ** 2 * tau
+    assert abs(len(ev) - expect) < 5 * math.sqrt(dispersion * expect), (len(ev), expect)
+    one = ev[(ev["x"] == 0) & (ev["y"] == 0)]
+    isi = np.diff(one["t"]) / 1e6
+    assert isi.std() / isi.mean() > 3  # bursty: a Poisson clock would give 1
+    # The share of 10 ms bins with an event is about the duty (a burst fills its bins).
+    busy = np.unique(one["t"] // 10_000).size / (duration * 100)
+    assert abs(busy - d) < 0.08, busy
+
+
 def test_hot_pixels_are_a_fraction_fixed_per_seed() -> None:
     params = PixelParams(hot_pixel_fraction=0.01, hot_pixel_rate_hz=50.0, hot_pixel_rate_sigma=0.5)
     a = Sensor(100, 100, params, seed=4).hot_pixel_rates_hz()

@@ -83,6 +83,11 @@ struct PixelParams {
     double hot_pixel_fraction = 0.0;
     double hot_pixel_rate_hz = 100.0;
     double hot_pixel_rate_sigma = 0.0;
+    /// Hot pixels flicker in bursts (random telegraph noise, the usual cause of a flickering
+    /// pixel): each is active a share hot_pixel_duty of the time, in active periods of mean
+    /// hot_pixel_burst_s (exponential), and fires only then. 1 = always active.
+    double hot_pixel_duty = 1.0;
+    double hot_pixel_burst_s = 0.1;
     NoiseModel noise_model = NoiseModel::Continuous;
     double shot_noise_factor = 0.25;   ///< F, eq. 12; paper: 0.25
     double shot_noise_i_max_a = 3.16e-9;  ///< I_max, eq. 12 [A]; paper: 3.16 nA
@@ -148,6 +153,8 @@ inline void validate(const PixelParams& p) {
     require_range("hot_pixel_fraction", p.hot_pixel_fraction, 0.0, 1.0, "");
     require_range("hot_pixel_rate_hz", p.hot_pixel_rate_hz, 0.0, 1e6, " Hz");
     require_range("hot_pixel_rate_sigma", p.hot_pixel_rate_sigma, 0.0, 3.0, " (natural-log units)");
+    require_range("hot_pixel_duty", p.hot_pixel_duty, 1e-6, 1.0, " (share of the time)");
+    require_range("hot_pixel_burst_s", p.hot_pixel_burst_s, 1e-6, 1e6, " s");
     if (p.noise_model == NoiseModel::Continuous && p.dark_model == DarkModel::Paper)
         throw std::invalid_argument("dark_model='paper' (eq. 4: Poisson(rate) electrons per sample, whatever dt) is a "
                                     "per-sample model; use it with noise_model='sampled'");
@@ -192,9 +199,12 @@ struct PixelState {
     // exponential rate (0: not hot), next event time, polarity and event counter.
     double leak_hz = 0.0, bg_on_hz = 0.0, bg_off_hz = 0.0;
     double hot_hz = 0.0;
-    double next_hot_t = std::numeric_limits<double>::infinity();
-    std::uint64_t hot_count = 0;
-    std::uint8_t hot_pol = 0;
+    double next_hot_t = std::numeric_limits<double>::infinity();  ///< min(next event, next switch)
+    double hot_event_t = std::numeric_limits<double>::infinity();  ///< next event (inf while quiet)
+    double hot_switch_t = std::numeric_limits<double>::infinity(); ///< next active <-> quiet switch
+    double hot_last_t = -std::numeric_limits<double>::infinity();  ///< last event (for the dead time)
+    std::uint64_t hot_count = 0, hot_switches = 0;
+    std::uint8_t hot_pol = 0, hot_active = 1;
     /// Continuous model: what is left of the exponential budgets of eq. 12's ON and OFF clocks.
     double bg_clock_on = 0.0, bg_clock_off = 0.0;
 };
@@ -372,9 +382,19 @@ struct PixelModel {
                 }
             }
         }
-        s.next_hot_t = s.hot_hz > 0.0 ? t - std::log(uniform_open(w[3])) / s.hot_hz
-                                      : std::numeric_limits<double>::infinity();
-        s.hot_count = 0;
+        s.hot_count = s.hot_switches = 0;
+        s.hot_last_t = -std::numeric_limits<double>::infinity();
+        s.hot_event_t = s.hot_switch_t = s.next_hot_t = std::numeric_limits<double>::infinity();
+        if (s.hot_hz > 0.0) {
+            // The telegraph's state and the clocks as they stand in the steady state: active
+            // with probability duty, and (exponential waits being memoryless) fresh waits.
+            const Philox4x32Counter h = philox4x32({2u, 0u, pixel, PURPOSE_INIT}, key);
+            const bool bursts = p.hot_pixel_duty < 1.0;
+            s.hot_active = !bursts || uniform_open(h[0]) < p.hot_pixel_duty;
+            if (bursts) s.hot_switch_t = t - std::log(uniform_open(h[1])) * hot_dwell_s(s.hot_active);
+            if (s.hot_active) s.hot_event_t = t - std::log(uniform_open(w[3])) / s.hot_hz;
+            s.next_hot_t = std::min(s.hot_event_t, s.hot_switch_t);
+        }
         // The background clocks start with fresh budgets: a Poisson process is memoryless, so
         // it is stationary from t = 0.
         const Philox4x32Counter v = philox4x32({1u, 0u, pixel, PURPOSE_INIT}, key);
@@ -413,19 +433,41 @@ struct PixelModel {
         g2 = r * sn * (1.0 - 2.0 * static_cast<double>(w1 >> 31));
     }
 
+    /// Mean time a hot pixel stays active (or quiet) [s].
+    double hot_dwell_s(bool active) const {
+        return active ? p.hot_pixel_burst_s : p.hot_pixel_burst_s * (1.0 - p.hot_pixel_duty) / p.hot_pixel_duty;
+    }
+
     /// A hot pixel's events up to t1 (its own Poisson clock with dead time, alternating
-    /// polarity), independent of the comparator and of the sampling.
+    /// polarity, running only in the active periods of its telegraph), independent of the
+    /// comparator and of the sampling.
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void hot_events(PixelState& s, double t1, Philox4x32Key key, std::uint32_t pixel,
                                           Emit& emit) const {
         while (s.next_hot_t <= t1) {
-            emit(s.next_hot_t, static_cast<Polarity>(s.hot_pol), LABEL_HOT_PIXEL);
-            s.hot_pol ^= 1u;
-            ++s.hot_count;
-            const Philox4x32Counter w = philox4x32(
-                {static_cast<std::uint32_t>(s.hot_count), static_cast<std::uint32_t>(s.hot_count >> 32), pixel, PURPOSE_HOT},
-                key);
-            s.next_hot_t += p.refractory_s - std::log(uniform_open(w[0])) / s.hot_hz;
+            if (s.hot_event_t <= s.hot_switch_t) {
+                emit(s.hot_event_t, static_cast<Polarity>(s.hot_pol), LABEL_HOT_PIXEL);
+                s.hot_pol ^= 1u;
+                s.hot_last_t = s.hot_event_t;
+                ++s.hot_count;
+                const Philox4x32Counter w = philox4x32({static_cast<std::uint32_t>(s.hot_count),
+                                                        static_cast<std::uint32_t>(s.hot_count >> 32), pixel, PURPOSE_HOT},
+                                                       key);
+                s.hot_event_t += p.refractory_s - std::log(uniform_open(w[0])) / s.hot_hz;
+            } else {
+                ++s.hot_switches;
+                const Philox4x32Counter w = philox4x32({static_cast<std::uint32_t>(s.hot_switches),
+                                                        static_cast<std::uint32_t>(s.hot_switches >> 32), pixel,
+                                                        PURPOSE_HOT_SWITCH},
+                                                       key);
+                const double now = s.hot_switch_t;
+                s.hot_active ^= 1u;
+                s.hot_switch_t = now - std::log(uniform_open(w[0])) * hot_dwell_s(s.hot_active);
+                s.hot_event_t = s.hot_active ? std::max(now, s.hot_last_t + p.refractory_s) -
+                                                   std::log(uniform_open(w[1])) / s.hot_hz
+                                             : std::numeric_limits<double>::infinity();
+            }
+            s.next_hot_t = std::min(s.hot_event_t, s.hot_switch_t);
         }
     }
 

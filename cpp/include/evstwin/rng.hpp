@@ -52,6 +52,7 @@ enum Purpose : std::uint32_t {
     PURPOSE_PIXEL = 0x28000000u,          ///< a pixel's fixed properties: rate spreads, hot or not
     PURPOSE_HOT = 0x30000000u,            ///< a hot pixel's event clock (counter: its event index)
     PURPOSE_REFINE = 0x38000000u,         ///< the noise at the cuts of a refined interval (+ block)
+    PURPOSE_HOT_SWITCH = 0x3C000000u,     ///< a hot pixel's telegraph (counter: its switch index)
     PURPOSE_PAPER_DARK = 0x40000000u,     ///< eq. 4 dark draw (+ iteration)
     PURPOSE_MISMATCH_ON = 0x80000000u,    ///< per pixel ON threshold mismatch (+ retry)
     PURPOSE_MISMATCH_OFF = 0xC0000000u,   ///< per pixel OFF threshold mismatch (+ retry)
