@@ -473,6 +473,11 @@ DAVIS346 = SensorPreset(
 )
 """The paper's DAVIS346 with its Table 1 biases (theta 0.2060 / 0.0930, 1 ms, 10 Hz)."""
 
+IMX636_RECORDING = "../shared/data/imx636_pointsource_evt3.raw (faery's tests/data/evt3.raw, Prophesee EVK4)"
+"""The real IMX636 recording the preset's background figures were measured on."""
+IMX636_THETA = math.log(1.25)
+"""The IMX636 preset's ON and OFF thresholds [ln units]: a 25 % contrast step (an assumption)."""
+
 IMX636 = SensorPreset(
     name="imx636",
     description="Sony IMX636 (Prophesee Gen4.1 HD), as in the Prophesee EVK4 HD",
@@ -484,10 +489,20 @@ IMX636 = SensorPreset(
     mean_wavelength_m=DAVIS346_MEAN_WAVELENGTH_M,
     pixel=_DAVIS346_BASE.replace(
         fill_factor=1.0,
-        theta_on=FAST_PR_SLOW_SF_BALANCED_TH.thresholds()[0],
-        theta_off=FAST_PR_SLOW_SF_BALANCED_TH.thresholds()[1],
-        refractory_s=1e-3,
+        theta_on=IMX636_THETA,
+        theta_off=IMX636_THETA,
+        refractory_s=1.3e-4,
         cutoff_hz=10.0,
+        pr_pole=True,
+        leak_rate_hz=0.0,
+        shot_noise_on_rate_hz=3.9e-4,
+        shot_noise_off_rate_hz=1.69e-3,
+        shot_noise_factor=1.0,
+        background_rate_sigma=1.3,
+        hot_pixel_fraction=1.0 / (1280 * 720),
+        hot_pixel_rate_hz=880.0,
+        hot_pixel_duty=0.17,
+        hot_pixel_burst_s=0.08,
     ),
     biases=None,
     qe_notes=(
@@ -501,18 +516,37 @@ IMX636 = SensorPreset(
             "Finateu et al., 'A 1280x720 back-illuminated stacked temporal contrast event-based vision "
             "sensor with 4.86 um pixels, ...', ISSCC 2020: 1280 x 720, 4.86 um, BSI stacked"
         ),
+        (
+            f"{IMX636_RECORDING} (10.77 s, dark field): refractory 130 us, the shortest interval between two "
+            "events of its hot pixel (131 us)"
+        ),
+        (
+            f"{IMX636_RECORDING}, dark corner x >= 980, y >= 520 (60,000 pixels): background 3.9e-4 Hz ON and "
+            "1.69e-3 Hz OFF per pixel (19 % ON), counts over-dispersed as a log-normal rate of sigma 1.3 "
+            "(OFF; the rarer ON events spread wider, sigma ~3); no leak beyond those ON events"
+        ),
+        (
+            f"{IMX636_RECORDING}: one hot pixel in 921,600, at (187, 261), 1447 events (134 Hz, 78 % of "
+            "successive events alternate polarity), in bursts of ~80 ms (events ~1 ms apart) ~17 % of the "
+            "time: a telegraph of duty 0.17, bursts 0.08 s, rate 880 Hz while active"
+        ),
     ),
     assumptions=(
         "fill factor 1.0 (BSI + microlens, effective)",
         (
-            "thresholds, refractory, cutoff, noise and photodiode constants copied from the DAVIS346 "
-            "preset as placeholders: Prophesee biases are DAC settings, not the currents of eq. 8-9"
+            "thresholds ln(1.25) = 0.223 both ways (a 25 % contrast step), far enough above the filtered "
+            "shot noise that the dark background comes from eq. 12 as measured; Prophesee biases are DAC "
+            "settings, not the currents of eq. 8-9, so measure theta with S-curves (McReynolds et al. 2024, "
+            "arXiv:2404.07656) for a given camera"
         ),
+        "photodiode constants, dark rate and the 10 Hz source follower copied from the DAVIS346 preset",
         "mean wavelength 0.7 um as for the DAVIS346",
+        "eq. 12's illumination factor F = 1 (the recording is dark: it says nothing about F)",
     ),
     readout=IMX636_READOUT,
 )
-"""Sony IMX636 / Prophesee EVK4: geometry sourced, pixel behaviour placeholders (see assumptions)."""
+"""Sony IMX636 / Prophesee EVK4: geometry sourced; refractory period and background (rates per polarity,
+their spread, hot pixels) measured on a real recording; thresholds and photodiode assumed."""
 
 PRESETS: dict[str, SensorPreset] = {p.name: p for p in (DAVIS346, IMX636)}
 """Built-in sensor presets by name."""
