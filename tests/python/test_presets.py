@@ -181,7 +181,9 @@ def test_imx636_preset() -> None:
     assert (p.width, p.height, p.pixel_pitch_m, p.back_illuminated) == (1280, 720, 4.86e-6, True)
     assert p.fill_factor == p.pixel.fill_factor == 1.0
     assert p.biases is None
-    assert any("placeholder" in a for a in p.assumptions)
+    assert any("assumption" in a or "25 %" in a for a in p.assumptions)
+    assert any("recording" in src for src in p.sources)  # its background figures are measured
+    assert p.pixel.refractory_s == pytest.approx(1.3e-4) and p.pixel.hot_pixel_fraction > 0
     assert set(PRESETS) == {"davis346", "imx636"}
 
 
