@@ -182,7 +182,7 @@ def test_imx636_preset() -> None:
     assert p.fill_factor == p.pixel.fill_factor == 1.0
     assert p.biases is None
     assert any("assumption" in a or "25 %" in a for a in p.assumptions)
-    assert any("recording" in src for src in p.sources)  # its background figures are measured
+    assert sum("imx636_pointsource_evt3.raw" in src for src in p.sources) == 3  # measured on the recording
     assert p.pixel.refractory_s == pytest.approx(1.3e-4) and p.pixel.hot_pixel_fraction > 0
     assert set(PRESETS) == {"davis346", "imx636"}
 
