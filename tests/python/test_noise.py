@@ -281,12 +281,14 @@ def test_a_moving_source_without_noise_is_all_signal_and_dark_noise_is_shot_nois
     assert len(ev) > 50 and np.all(labels == LABELS["shot_noise"])
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-def test_continuous_noise_is_identical_across_threads_and_chunkings(threads: int) -> None:
-    params = PixelParams(pr_pole=True, theta_on=0.08, theta_off=0.06, leak_rate_hz=0.5, shot_noise_rate_hz=0.3,
-                         background_rate_sigma=0.8, leak_rate_sigma=0.5, hot_pixel_fraction=0.02)
-    one, l1 = static_run(params, 2e7, 4.0, 250.0, shape=(40, 40), chunk_s=4.0, num_threads=1)
-    many, l2 = static_run(params, 2e7, 4.0, 250.0, shape=(40, 40), chunk_s=0.028, num_threads=threads)
+@pytest.mark.parametrize(("threads", "photon_rate", "theta"), [(1, 2e7, 0.07), (2, 2e7, 0.07), (2, 1e10, 0.008)])
+def test_continuous_noise_is_identical_across_threads_and_chunkings(threads: int, photon_rate: float,
+                                                                    theta: float) -> None:
+    # (1e10 photons/s: a pole faster than the sampling, so the refined intervals run too.)
+    params = PixelParams(pr_pole=True, theta_on=theta, theta_off=theta, leak_rate_hz=0.5, shot_noise_rate_hz=0.3,
+                         background_rate_sigma=0.8, leak_rate_sigma=0.5, hot_pixel_fraction=0.02, hot_pixel_duty=0.5)
+    one, l1 = static_run(params, photon_rate, 4.0, 250.0, shape=(40, 40), chunk_s=4.0, num_threads=1)
+    many, l2 = static_run(params, photon_rate, 4.0, 250.0, shape=(40, 40), chunk_s=0.028, num_threads=threads)
     assert len(one) > 100
     assert one.tobytes() == many.tobytes() and l1.tobytes() == l2.tobytes()
 
