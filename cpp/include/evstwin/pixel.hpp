@@ -542,7 +542,7 @@ struct PixelModel {
         std::vector<std::uint32_t> count_word;
         std::vector<double> z, count;
         // The continuous model's: the sample's second word, the noise, the bridge's variance.
-        std::vector<std::uint32_t> word1;
+        std::vector<std::uint32_t> word1, busy_at;
         std::vector<double> nz, ny, bridge_var;
         double cached_rate = -1.0, cached_x = 0.0;
         // The photoreceptor pole's decay and ramp depend on the current only through the
@@ -555,7 +555,7 @@ struct PixelModel {
             if (x.size() < n) {
                 u_noise.resize(n); x.resize(n); current.resize(n); y.resize(n); busy.resize(n); count_word.resize(n);
                 z.resize(n); count.resize(n);
-                word1.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
+                word1.resize(n); busy_at.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
             }
         }
     };
@@ -603,6 +603,8 @@ struct PixelModel {
         scratch.resize(n);
         std::uint32_t* w0 = scratch.count_word.data();
         std::uint32_t* w1 = scratch.word1.data();
+        // The busy pixels' local indices and new levels, packed.
+        std::uint32_t* busy_at = scratch.busy_at.data();
         double* x = scratch.x.data();
         double* z = scratch.z.data();
         double* y = scratch.y.data();
@@ -610,7 +612,6 @@ struct PixelModel {
         double* ny = scratch.ny.data();
         double* cur = scratch.current.data();
         double* bvar = scratch.bridge_var.data();
-        std::uint8_t* busy = scratch.busy.data();
         PixelState* st = v.state;
         const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
         for (std::size_t j = 0; j < n; ++j) {
@@ -621,7 +622,8 @@ struct PixelModel {
         }
         const bool background = has_background();
         NoiseCache& cache = scratch.noise;
-        if (cache.dt != c.dt) fill_noise_cache(cache, static_cast<double>(rate[at(0)]), c);
+        if (cache.dt != c.dt) cache.photon_rate = std::numeric_limits<double>::quiet_NaN();  // refill below
+        std::size_t n_busy = 0;
         for (std::size_t j = 0; j < n; ++j) {
             PixelState& s = st[at(j)];
             const double r = static_cast<double>(rate[at(j)]);
@@ -629,41 +631,45 @@ struct PixelModel {
             double zj, yj, nzj, nyj;
             continuous_levels(s, cache, c, w0[j], w1[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
-            // The line (compare()'s fast path) and, around it, the bridge's exponents: a
-            // difference d inside both thresholds at both ends, with (th_on - d0)(th_on - d1)
-            // and (th_off + d0)(th_off + d1) above the bound (a positive product above a bound
-            // >= 0 also says that the second factor is positive).
+            // The line (compare()'s fast path) and, around it, the bridge's exponents: the
+            // difference d inside both thresholds at both ends, and (th_on - d0)(th_on - d1) and
+            // (th_off + d0)(th_off + d1) above the bound (a product above a bound >= 0 with its
+            // first factor positive also says that the second one is; std::min returns its first
+            // argument where a NaN is involved, and a NaN in the second one makes the first NaN).
             const double th_on = s.theta_on, th_off = s.theta_off;
             const double g = (yj - s.y) * c.inv_dt + s.leak_hz * th_on;
             const double db = s.y - s.ref;
             const double d1 = db + g * c.dt;
             const double on0 = th_on - db, off0 = th_off + db;
-            const bool quiet = !clock_ran_out & (s.next_hot_t > c.t1) & (s.refr_until <= c.t0) & (on0 > 0.0) &
-                               (off0 > 0.0) & (on0 * (th_on - d1) > cache.bridge_bound) &
-                               (off0 * (th_off + d1) > cache.bridge_bound);
-            x[j] = cache.x;
-            cur[j] = cache.current_a;
-            bvar[j] = cache.k.bridge_var;
-            z[j] = zj;
-            y[j] = yj;
-            nz[j] = nzj;
-            ny[j] = nyj;
-            busy[j] = !quiet;
-            if (quiet) s.ref = yj - d1;
-        }
-        for (std::size_t j = 0; j < n; ++j) {
-            PixelState& s = st[at(j)];
-            if (busy[j]) {
-                pixel = v.ids[at(j)];
-                continuous_finish(s, x[j], z[j], y[j], nz[j], ny[j], cur[j], bvar[j], c, key, pixel, emit, nullptr);
-                if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
+            const bool quiet = !clock_ran_out & (s.next_hot_t > c.t1) & (s.refr_until <= c.t0) &
+                               (std::min(on0, off0) > 0.0) &
+                               (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > cache.bridge_bound);
+            if (quiet) {
+                s.ref = yj - d1;
+                s.x = cache.x;
+                s.z = zj;
+                s.y = yj;
+                s.nz = nzj;
+                s.ny = nyj;
+                s.t = c.t1;
+                ++s.n;
             } else {
-                s.x = x[j];
-                s.z = z[j];
-                s.y = y[j];
-                s.nz = nz[j];
-                s.ny = ny[j];
+                busy_at[n_busy] = static_cast<std::uint32_t>(at(j));
+                x[n_busy] = cache.x;
+                cur[n_busy] = cache.current_a;
+                bvar[n_busy] = cache.k.bridge_var;
+                z[n_busy] = zj;
+                y[n_busy] = yj;
+                nz[n_busy] = nzj;
+                ny[n_busy] = nyj;
+                ++n_busy;
             }
+        }
+        for (std::size_t b = 0; b < n_busy; ++b) {
+            PixelState& s = st[busy_at[b]];
+            pixel = v.ids[busy_at[b]];
+            continuous_finish(s, x[b], z[b], y[b], nz[b], ny[b], cur[b], bvar[b], c, key, pixel, emit, nullptr);
+            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
             s.t = c.t1;
             ++s.n;
         }
