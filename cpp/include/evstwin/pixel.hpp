@@ -389,8 +389,9 @@ struct PixelModel {
                               t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800.0)))))));
         const double cs = 1 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (-1.0 / 3628800 +
                               t2 * (1.0 / 479001600.0 + t2 * (-1.0 / 87178291200.0)))))));
-        g1 = r * cs * (1.0 - 2.0 * static_cast<double>((w1 >> 30) & 1u));
-        g2 = r * sn * (1.0 - 2.0 * static_cast<double>(w1 >> 31));
+        static constexpr double SIGN[2] = {1.0, -1.0};
+        g1 = r * cs * SIGN[(w1 >> 30) & 1u];
+        g2 = r * sn * SIGN[w1 >> 31];
     }
 
     /// A hot pixel's events up to t1 (its own Poisson clock with dead time, alternating
