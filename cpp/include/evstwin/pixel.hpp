@@ -579,10 +579,18 @@ struct PixelModel {
                     PoissonSampler& poisson, BlockScratch& scratch, Emit&& emit, std::uint32_t& pixel) const {
         // All pixels active (the common case): index them directly, without the indirection.
         if (continuous) {
-            if (v.active == nullptr)
-                step_block_continuous<true>(v, rate, c, key, scratch, emit, pixel);
-            else
-                step_block_continuous<false>(v, rate, c, key, scratch, emit, pixel);
+            const bool sf_only = has_filter && !euler && !p.pr_pole;  // the default configuration
+            if (v.active == nullptr) {
+                if (sf_only)
+                    step_block_continuous<true, true>(v, rate, c, key, scratch, emit, pixel);
+                else
+                    step_block_continuous<true, false>(v, rate, c, key, scratch, emit, pixel);
+            } else {
+                if (sf_only)
+                    step_block_continuous<false, true>(v, rate, c, key, scratch, emit, pixel);
+                else
+                    step_block_continuous<false, false>(v, rate, c, key, scratch, emit, pixel);
+            }
         } else if (v.active == nullptr) {
             step_block_impl<true>(v, rate, c, key, poisson, scratch, emit, pixel);
         } else {
@@ -596,7 +604,7 @@ struct PixelModel {
     /// or the bridge could cross); continuous_finish() for the few pixels where it can; the
     /// commit. The quiet pixels do what continuous_finish() would do for them (nothing but
     /// the reference's leak): the same arithmetic in the same order, so the same events.
-    template <bool AllActive, class Real, class Emit>
+    template <bool AllActive, bool SfOnly, class Real, class Emit>
     EVSTWIN_ALWAYS_INLINE void step_block_continuous(const BlockView& v, const Real* rate, const SampleConstants& c,
                                                      Philox4x32Key key, BlockScratch& scratch, Emit&& emit,
                                                      std::uint32_t& pixel) const {
@@ -630,7 +638,7 @@ struct PixelModel {
             const double r = static_cast<double>(rate[at(j)]);
             if (r != cache.photon_rate) fill_noise_cache(cache, r, c);  // cache.dt is c.dt
             double zj, yj, nzj, nyj;
-            continuous_levels(s, cache, c, w0[j], w1[j], zj, yj, nzj, nyj);
+            continuous_levels<SfOnly>(s, cache, c, w0[j], w1[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
             // The line (compare()'s fast path) and, around it, the bridge's exponents: the
             // difference d inside both thresholds at both ends, and (th_on - d0)(th_on - d1) and
@@ -946,18 +954,22 @@ struct PixelModel {
     /// The continuous model's new levels over (c.t0, c.t1] from the sample's two random words:
     /// the noise-free chain (pole at the rate the mean current sets, source follower) and the
     /// noise (n_z, n_y) with its exact transition and innovation; y = noise-free + n_y.
+    /// SfOnly: the caller knows the configuration is the default one (the exact source follower,
+    /// no pole), so the branches on it are taken at compile time; the same arithmetic.
+    template <bool SfOnly = false>
     EVSTWIN_ALWAYS_INLINE void continuous_levels(const PixelState& s, const NoiseCache& cache, const SampleConstants& c,
                                                  std::uint32_t w0, std::uint32_t w1, double& z, double& y, double& nz,
                                                  double& ny) const {
-        const double x = cache.x, a = cache.a, D = cache.D;
+        const bool pole = !SfOnly && p.pr_pole, filter = SfOnly || has_filter, eul = !SfOnly && euler;
+        const double x = cache.x, D = cache.D;
         const NoiseCoeffs& k = cache.k;
         // Noise-free chain: pole (rate set by the mean current) and source follower.
-        z = p.pr_pole ? x + (s.z - s.x) * cache.pole_decay - (x - s.x) * cache.pole_ramp : x;
+        z = pole ? x + (s.z - s.x) * cache.pole_decay - (x - s.x) * cache.pole_ramp : x;
         const double yd0 = s.y - s.ny;
         double yd;
-        if (!has_filter)
+        if (!filter)
             yd = z;
-        else if (euler)
+        else if (eul)
             yd = c.sf_ramp * s.z + c.sf_decay * yd0;
         else
             yd = z + (yd0 - s.z) * c.sf_decay - (z - s.z) * c.sf_ramp;
@@ -967,8 +979,9 @@ struct PixelModel {
             double g1, g2;
             normal_pair(w0, w1, g1, g2);
             nz = k.phi_zz * s.nz + k.l_zz * g1;
-            ny = (a > 0.0 && has_filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
-                                         : k.phi_yy * s.ny + k.l_yy * g1;
+            // Without the pole its rate a is 0: the 1-D process of the source follower.
+            ny = (pole && cache.a > 0.0 && filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
+                                                   : k.phi_yy * s.ny + k.l_yy * g1;
         }
         y = yd + ny;
     }
