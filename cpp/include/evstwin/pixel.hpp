@@ -533,7 +533,8 @@ struct PixelModel {
         return on ? ON : OFF;
     }
 
-    /// Whether the block kernel below handles this configuration (the common ones).
+    /// Whether the block kernels below handle this configuration: every continuous one
+    /// (step_block_continuous), the common sampled ones (step_block_impl).
     bool has_block_kernel() const {
         if (continuous) return true;
         const bool pooled = p.photon_shot_noise && p.dark_model != DarkModel::Paper;
