@@ -385,7 +385,9 @@ struct PixelModel {
         normal_pair_at(normal_radius(w0), w1, g1, g2);
     }
     /// Box-Muller's radius sqrt(-2 ln u) from normal_pair's first word.
-    EVSTWIN_ALWAYS_INLINE static double normal_radius(std::uint32_t w0) { return std::sqrt(-2.0 * std::log(uniform_open(w0))); }
+    EVSTWIN_ALWAYS_INLINE static double normal_radius(std::uint32_t w0) {
+        return std::sqrt(-2.0 * std::log(uniform_open(w0)));
+    }
     /// normal_pair given the radius of its first word (normal_radius) and its second word.
     EVSTWIN_ALWAYS_INLINE static void normal_pair_at(double r, std::uint32_t w1, double& g1, double& g2) {
         const double t = (static_cast<double>(w1 & 0x3FFFFFFFu) + 0.5) * (0.5 * PI * 0x1p-30);  // [0, pi/2)
@@ -963,8 +965,9 @@ struct PixelModel {
     }
 
     /// The continuous model's new levels over (c.t0, c.t1] from the sample's two random words
-    /// (radius: normal_radius(w0), needed only where cache.D > 0): the noise-free chain (pole at the rate the mean current sets, source follower) and the
-    /// noise (n_z, n_y) with its exact transition and innovation; y = noise-free + n_y.
+    /// (radius: normal_radius(w0), needed only where cache.D > 0): the noise-free chain (pole
+    /// at the rate the mean current sets, source follower) and the noise (n_z, n_y) with its
+    /// exact transition and innovation; y = noise-free + n_y.
     /// SfOnly: the caller knows the configuration is the default one (the exact source follower,
     /// no pole), so the branches on it are taken at compile time; the same arithmetic.
     template <bool SfOnly = false>
