@@ -226,6 +226,14 @@ struct NoiseCache {
     double current_a = 0, x = 0, a = 0, D = 0;
     double pole_decay = 0, pole_ramp = 0;
     NoiseCoeffs k;
+    double bg_factor = 0;  ///< eq. 12's illumination factor at current_a (background_factor)
+    /// For the block kernel's quiet test: a pixel whose line stays inside both thresholds over
+    /// the whole interval cannot cross by the bridge when (theta - d0)(theta - d1) exceeds this
+    /// for both levels. Then both exponents of bridge_crossing_probability exceed 24, so
+    /// p_on + p_off < 2 exp(-24) = 7.6e-11, below the smallest uniform there is, 2^-33 =
+    /// 1.16e-10: the draw could not fire. 48 (1 + 1e-8) times the middle variance over the
+    /// interval (the margin covers the rounding of the exponent's division).
+    double bridge_bound = 0;
 };
 
 /// What one pixel-sample update reports for a probe (diagnostic trace).
@@ -422,15 +430,23 @@ struct PixelModel {
     /// bits of w1 pick (signs, without a branch): a third of the cost of libm's sincos, which
     /// dominated the noise update.
     EVSTWIN_ALWAYS_INLINE static void normal_pair(std::uint32_t w0, std::uint32_t w1, double& g1, double& g2) {
-        const double r = std::sqrt(-2.0 * std::log(uniform_open(w0)));
+        normal_pair_at(normal_radius(w0), w1, g1, g2);
+    }
+    /// Box-Muller's radius sqrt(-2 ln u) from normal_pair's first word.
+    EVSTWIN_ALWAYS_INLINE static double normal_radius(std::uint32_t w0) {
+        return std::sqrt(-2.0 * std::log(uniform_open(w0)));
+    }
+    /// normal_pair given the radius of its first word (normal_radius) and its second word.
+    EVSTWIN_ALWAYS_INLINE static void normal_pair_at(double r, std::uint32_t w1, double& g1, double& g2) {
         const double t = (static_cast<double>(w1 & 0x3FFFFFFFu) + 0.5) * (0.5 * PI * 0x1p-30);  // [0, pi/2)
         const double t2 = t * t;
         const double sn = t * (1 + t2 * (-1.0 / 6 + t2 * (1.0 / 120 + t2 * (-1.0 / 5040 + t2 * (1.0 / 362880 +
                               t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800.0)))))));
         const double cs = 1 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (-1.0 / 3628800 +
                               t2 * (1.0 / 479001600.0 + t2 * (-1.0 / 87178291200.0)))))));
-        g1 = r * cs * (1.0 - 2.0 * static_cast<double>((w1 >> 30) & 1u));
-        g2 = r * sn * (1.0 - 2.0 * static_cast<double>(w1 >> 31));
+        static constexpr double SIGN[2] = {1.0, -1.0};
+        g1 = r * cs * SIGN[(w1 >> 30) & 1u];
+        g2 = r * sn * SIGN[w1 >> 31];
     }
 
     /// Mean time a hot pixel stays active (or quiet) [s].
@@ -552,11 +568,28 @@ struct PixelModel {
     /// earlier reaches the comparator and the later is dropped (rare: r dt is small).
     EVSTWIN_ALWAYS_INLINE int background_event(PixelState& s, double current_a, const SampleConstants& c,
                                                Philox4x32Key key, std::uint32_t pixel, double& t_noise) const {
+        background_spend(s, background_factor(current_a), c);
+        return background_fire(s, current_a, c, key, pixel, t_noise);
+    }
+
+    /// The first half of background_event: spend one interval of both clocks' budgets, f being
+    /// background_factor() of the current. Returns whether a clock ran out (then
+    /// background_fire has an event to place).
+    EVSTWIN_ALWAYS_INLINE bool background_spend(PixelState& s, double f, const SampleConstants& c) const {
+        const double r_on = s.bg_on_hz * f, r_off = s.bg_off_hz * f;
+        const double on = s.bg_clock_on - r_on * c.dt, off = s.bg_clock_off - r_off * c.dt;
+        s.bg_clock_on = on;
+        s.bg_clock_off = off;
+        return !((on > 0.0) & (off > 0.0));
+    }
+
+    /// The second half: after background_spend, the event of a clock that ran out (its polarity,
+    /// its time in t_noise, fresh budgets) or -1.
+    EVSTWIN_ALWAYS_INLINE int background_fire(PixelState& s, double current_a, const SampleConstants& c,
+                                              Philox4x32Key key, std::uint32_t pixel, double& t_noise) const {
+        if (s.bg_clock_on > 0.0 && s.bg_clock_off > 0.0) return -1;
         const double f = background_factor(current_a);
         const double r_on = s.bg_on_hz * f, r_off = s.bg_off_hz * f;
-        s.bg_clock_on -= r_on * c.dt;
-        s.bg_clock_off -= r_off * c.dt;
-        if (s.bg_clock_on > 0.0 && s.bg_clock_off > 0.0) return -1;
         // The time each clock ran out: its budget left at t1 is negative by r (t1 - t).
         const double t_on = s.bg_clock_on > 0.0 ? std::numeric_limits<double>::infinity()
                                                 : c.t1 + s.bg_clock_on / r_on;
@@ -572,9 +605,10 @@ struct PixelModel {
         return on ? ON : OFF;
     }
 
-    /// Whether the block kernel below handles this configuration (the common ones).
+    /// Whether the block kernels below handle this configuration: every continuous one
+    /// (step_block_continuous), the common sampled ones (step_block_impl).
     bool has_block_kernel() const {
-        if (continuous) return false;
+        if (continuous) return true;
         const bool pooled = p.photon_shot_noise && p.dark_model != DarkModel::Paper;
         const bool deterministic = !p.photon_shot_noise && p.dark_model == DarkModel::None;
         return pooled || deterministic;
@@ -586,6 +620,9 @@ struct PixelModel {
         std::vector<std::uint8_t> busy;
         std::vector<std::uint32_t> count_word;
         std::vector<double> z, count;
+        // The continuous model's: the sample's second word, the noise, the bridge's variance.
+        std::vector<std::uint32_t> word1, busy_at;
+        std::vector<double> nz, ny, bridge_var, noise_d;
         double cached_rate = -1.0, cached_x = 0.0;
         // The photoreceptor pole's decay and ramp depend on the current only through the
         // electron count of the interval: kept per count for the current dt.
@@ -597,6 +634,8 @@ struct PixelModel {
             if (x.size() < n) {
                 u_noise.resize(n); x.resize(n); current.resize(n); y.resize(n); busy.resize(n); count_word.resize(n);
                 z.resize(n); count.resize(n);
+                word1.resize(n); busy_at.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
+                noise_d.resize(n);
             }
         }
     };
@@ -618,10 +657,118 @@ struct PixelModel {
     void step_block(const BlockView& v, const Real* rate, const SampleConstants& c, Philox4x32Key key,
                     PoissonSampler& poisson, BlockScratch& scratch, Emit&& emit, std::uint32_t& pixel) const {
         // All pixels active (the common case): index them directly, without the indirection.
-        if (v.active == nullptr)
+        if (continuous) {
+            const bool sf_only = has_filter && !euler && !p.pr_pole;  // the default configuration
+            if (v.active == nullptr) {
+                if (sf_only)
+                    step_block_continuous<true, true>(v, rate, c, key, scratch, emit, pixel);
+                else
+                    step_block_continuous<true, false>(v, rate, c, key, scratch, emit, pixel);
+            } else {
+                if (sf_only)
+                    step_block_continuous<false, true>(v, rate, c, key, scratch, emit, pixel);
+                else
+                    step_block_continuous<false, false>(v, rate, c, key, scratch, emit, pixel);
+            }
+        } else if (v.active == nullptr) {
             step_block_impl<true>(v, rate, c, key, poisson, scratch, emit, pixel);
-        else
+        } else {
             step_block_impl<false>(v, rate, c, key, poisson, scratch, emit, pixel);
+        }
+    }
+
+    /// step_continuous() for a block, as passes: the random words; the levels, the background
+    /// clocks' spending and a branch-free test of whether anything can happen in the interval
+    /// (a clock ran out, a hot pixel's event is due, refractory, the line reaches a threshold,
+    /// or the bridge could cross); continuous_finish() for the few pixels where it can; the
+    /// commit. The quiet pixels do what continuous_finish() would do for them (nothing but
+    /// the reference's leak): the same arithmetic in the same order, so the same events.
+    template <bool AllActive, bool SfOnly, class Real, class Emit>
+    EVSTWIN_ALWAYS_INLINE void step_block_continuous(const BlockView& v, const Real* rate, const SampleConstants& c,
+                                                     Philox4x32Key key, BlockScratch& scratch, Emit&& emit,
+                                                     std::uint32_t& pixel) const {
+        const std::size_t n = v.n_active;
+        scratch.resize(n);
+        std::uint32_t* w0 = scratch.count_word.data();
+        std::uint32_t* w1 = scratch.word1.data();
+        // The busy pixels' local indices and new levels, packed.
+        std::uint32_t* busy_at = scratch.busy_at.data();
+        double* x = scratch.x.data();
+        double* z = scratch.z.data();
+        double* y = scratch.y.data();
+        double* nz = scratch.nz.data();
+        double* ny = scratch.ny.data();
+        double* cur = scratch.current.data();
+        double* bvar = scratch.bridge_var.data();
+        double* noise_d = scratch.noise_d.data();
+        PixelState* st = v.state;
+        const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
+        for (std::size_t j = 0; j < n; ++j) {
+            std::uint32_t w[2];
+            sample_words(st[at(j)], key, v.ids[at(j)], w);
+            w0[j] = w[0];
+            w1[j] = w[1];
+        }
+        // Box-Muller's radii in a pass of their own: the log is a call, which would make the
+        // main pass save and restore its registers around it. Not needed without shot noise.
+        double* radius = scratch.u_noise.data();
+        const bool noisy = p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
+        for (std::size_t j = 0; j < n; ++j) radius[j] = noisy ? normal_radius(w0[j]) : 0.0;
+        const bool background = has_background();
+        NoiseCache& cache = scratch.noise;
+        if (cache.dt != c.dt) cache.photon_rate = std::numeric_limits<double>::quiet_NaN();  // refill below
+        std::size_t n_busy = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            PixelState& s = st[at(j)];
+            const double r = static_cast<double>(rate[at(j)]);
+            if (r != cache.photon_rate) fill_noise_cache(cache, r, c);  // cache.dt is c.dt
+            double zj, yj, nzj, nyj;
+            continuous_levels<SfOnly>(s, cache, c, radius[j], w1[j], zj, yj, nzj, nyj);
+            const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
+            // The line (compare()'s fast path) and, around it, the bridge's exponents: the
+            // difference d inside both thresholds at both ends, and (th_on - d0)(th_on - d1) and
+            // (th_off + d0)(th_off + d1) above the bound (a product above a bound >= 0 with its
+            // first factor positive also says that the second one is; std::min returns its first
+            // argument where a NaN is involved, and a NaN in the second one makes the first NaN).
+            const double th_on = s.theta_on, th_off = s.theta_off;
+            const double g = (yj - s.y) * c.inv_dt + s.leak_hz * th_on;
+            const double db = s.y - s.ref;
+            const double d1 = db + g * c.dt;
+            const double on0 = th_on - db, off0 = th_off + db;
+            const bool quiet = !clock_ran_out & (s.next_hot_t > c.t1) & (s.refr_until <= c.t0) &
+                               (std::min(on0, off0) > 0.0) &
+                               (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > cache.bridge_bound);
+            if (quiet) {
+                s.ref = yj - d1;
+                s.x = cache.x;
+                s.z = zj;
+                s.y = yj;
+                s.nz = nzj;
+                s.ny = nyj;
+                s.t = c.t1;
+                ++s.n;
+            } else {
+                busy_at[n_busy] = static_cast<std::uint32_t>(at(j));
+                x[n_busy] = cache.x;
+                cur[n_busy] = cache.current_a;
+                bvar[n_busy] = cache.k.bridge_var;
+                noise_d[n_busy] = cache.D;
+                z[n_busy] = zj;
+                y[n_busy] = yj;
+                nz[n_busy] = nzj;
+                ny[n_busy] = nyj;
+                ++n_busy;
+            }
+        }
+        for (std::size_t b = 0; b < n_busy; ++b) {
+            PixelState& s = st[busy_at[b]];
+            pixel = v.ids[busy_at[b]];
+            continuous_finish(s, x[b], z[b], y[b], nz[b], ny[b], cur[b], bvar[b], noise_d[b], c, key, pixel, emit,
+                              nullptr);
+            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
+            s.t = c.t1;
+            ++s.n;
+        }
     }
 
     template <bool AllActive, class Real, class Emit>
@@ -849,6 +996,28 @@ struct PixelModel {
     /// theta (1 + sigma z), redrawn below 1 % of nominal; once per pixel, not in the hot loop.
     double theta_with_sigma(double theta, Philox4x32Key key, std::uint32_t pixel, std::uint32_t purpose) const;
 
+    /// The continuous model's numbers for (photon_rate, c.dt) into `cache`, unless it holds
+    /// them already (most pixels share the background's rate).
+    EVSTWIN_ALWAYS_INLINE void noise_cache_for(NoiseCache& cache, double photon_rate, const SampleConstants& c) const {
+        if (photon_rate != cache.photon_rate || c.dt != cache.dt) fill_noise_cache(cache, photon_rate, c);
+    }
+    void fill_noise_cache(NoiseCache& cache, double photon_rate, const SampleConstants& c) const {
+        const double mean_e = mean_electron_rate(photon_rate);
+        cache.photon_rate = photon_rate;
+        cache.dt = c.dt;
+        cache.current_a = ELEMENTARY_CHARGE_C * mean_e;
+        cache.x = std::log(cache.current_a);
+        cache.a = pole_rate(cache.current_a);
+        cache.D = noise_intensity(photon_rate, mean_e);
+        const double u = cache.a * c.dt;
+        cache.pole_decay = std::exp(-u);
+        cache.pole_ramp = one_minus_exp_over(u);
+        cache.k = cache.D > 0.0 ? noise_coeffs(cache.a, sf_rate(), cache.D, c.dt) : NoiseCoeffs{};
+        // The bridge's middle variance over the whole interval, as step_continuous computes it.
+        cache.bridge_bound = 48.0 * (1.0 + 1e-8) * (0.25 * (4.0 * cache.k.bridge_var * c.inv_dt) * c.dt);
+        cache.bg_factor = background_factor(cache.current_a);
+    }
+
     /// Advance one pixel over (c.t0, c.t1] with the continuous noise model (noise.hpp): the
     /// noise-free chain follows the mean photocurrent exactly as in step() without noise; the
     /// shot noise (n_z, n_y) is advanced with its exact transition and innovation; eq. 12's
@@ -860,56 +1029,73 @@ struct PixelModel {
     EVSTWIN_ALWAYS_INLINE void step_continuous(PixelState& s, double photon_rate, const SampleConstants& c,
                                                Philox4x32Key key, std::uint32_t pixel, NoiseCache& cache, Emit&& emit,
                                                TraceSample* trace = nullptr) const {
-        if (photon_rate != cache.photon_rate || c.dt != cache.dt) {
-            const double mean_e = mean_electron_rate(photon_rate);
-            cache.photon_rate = photon_rate;
-            cache.dt = c.dt;
-            cache.current_a = ELEMENTARY_CHARGE_C * mean_e;
-            cache.x = std::log(cache.current_a);
-            cache.a = pole_rate(cache.current_a);
-            cache.D = noise_intensity(photon_rate, mean_e);
-            const double u = cache.a * c.dt;
-            cache.pole_decay = std::exp(-u);
-            cache.pole_ramp = one_minus_exp_over(u);
-            cache.k = cache.D > 0.0 ? noise_coeffs(cache.a, sf_rate(), cache.D, c.dt) : NoiseCoeffs{};
-        }
-        const double current_a = cache.current_a, x = cache.x, a = cache.a, D = cache.D;
+        noise_cache_for(cache, photon_rate, c);
+        std::uint32_t w[2];  // two words a sample, one Philox call for two samples
+        sample_words(s, key, pixel, w);
+        double z, y, nz, ny;
+        continuous_levels(s, cache, c, cache.D > 0.0 ? normal_radius(w[0]) : 0.0, w[1], z, y, nz, ny);
+        if (has_background()) background_spend(s, cache.bg_factor, c);
+        continuous_finish(s, cache.x, z, y, nz, ny, cache.current_a, cache.k.bridge_var, cache.D, c, key, pixel, emit,
+                          trace);
+    }
+
+    /// The continuous model's new levels over (c.t0, c.t1] from the sample's two random words
+    /// (radius: normal_radius(w0), needed only where cache.D > 0): the noise-free chain (pole
+    /// at the rate the mean current sets, source follower) and the noise (n_z, n_y) with its
+    /// exact transition and innovation; y = noise-free + n_y.
+    /// SfOnly: the caller knows the configuration is the default one (the exact source follower,
+    /// no pole), so the branches on it are taken at compile time; the same arithmetic.
+    template <bool SfOnly = false>
+    EVSTWIN_ALWAYS_INLINE void continuous_levels(const PixelState& s, const NoiseCache& cache, const SampleConstants& c,
+                                                 double radius, std::uint32_t w1, double& z, double& y, double& nz,
+                                                 double& ny) const {
+        const bool pole = !SfOnly && p.pr_pole, filter = SfOnly || has_filter, eul = !SfOnly && euler;
+        const double x = cache.x, D = cache.D;
         const NoiseCoeffs& k = cache.k;
         // Noise-free chain: pole (rate set by the mean current) and source follower.
-        const double z = p.pr_pole ? x + (s.z - s.x) * cache.pole_decay - (x - s.x) * cache.pole_ramp : x;
+        z = pole ? x + (s.z - s.x) * cache.pole_decay - (x - s.x) * cache.pole_ramp : x;
         const double yd0 = s.y - s.ny;
         double yd;
-        if (!has_filter)
+        if (!filter)
             yd = z;
-        else if (euler)
+        else if (eul)
             yd = c.sf_ramp * s.z + c.sf_decay * yd0;
         else
             yd = z + (yd0 - s.z) * c.sf_decay - (z - s.z) * c.sf_ramp;
-
-        std::uint32_t w[2];  // two words a sample, one Philox call for two samples
-        sample_words(s, key, pixel, w);
-        double nz = 0.0, ny = 0.0;
+        nz = 0.0;
+        ny = 0.0;
         if (D > 0.0) {
             double g1, g2;
-            normal_pair(w[0], w[1], g1, g2);
+            normal_pair_at(radius, w1, g1, g2);
             nz = k.phi_zz * s.nz + k.l_zz * g1;
-            ny = (a > 0.0 && has_filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
-                                         : k.phi_yy * s.ny + k.l_yy * g1;
+            // Without the pole its rate a is 0: the 1-D process of the source follower.
+            ny = (pole && cache.a > 0.0 && filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
+                                                   : k.phi_yy * s.ny + k.l_yy * g1;
         }
-        const double y = yd + ny;
+        y = yd + ny;
+    }
 
+    /// The rest of step_continuous once the levels are known and the background clocks spent
+    /// (background_spend): eq. 12's event, the bridge, the comparator and the new state
+    /// (x, z, y, nz, ny; advance() keeps s.t and s.n).
+    template <class Emit>
+    EVSTWIN_ALWAYS_INLINE void continuous_finish(PixelState& s, double x, double z, double y, double nz, double ny,
+                                                 double current_a, double bridge_var, double D, const SampleConstants& c,
+                                                 Philox4x32Key key, std::uint32_t pixel, Emit& emit,
+                                                 TraceSample* trace) const {
         double t_noise = 0.0;
-        const int noise_pol = has_background() ? background_event(s, current_a, c, key, pixel, t_noise) : -1;
+        const int noise_pol = has_background() ? background_fire(s, current_a, c, key, pixel, t_noise) : -1;
 
         // With a photoreceptor pole faster than the sampling (a dt > 1), the noise is smooth
         // below 1 / a but rough at the sample's scale, which neither the straight line nor a
         // Brownian bridge describes well near a level: where a crossing is plausible, the
         // interval is refined exactly (below). Elsewhere the line and the bridge do.
+        const double a = pole_rate(current_a);
         const bool two_poles = D > 0.0 && a > 0.0 && has_filter;
-        if (two_poles && a * c.dt > 1.0 && crossing_plausible(s, y, c, k.bridge_var)) {
-            refine_and_compare(s, x, z, yd, nz, ny, c, a, D, noise_pol, t_noise, key, pixel, emit);
+        if (two_poles && a * c.dt > 1.0 && crossing_plausible(s, y, c, bridge_var)) {
+            refine_and_compare(s, x, z, y - ny, nz, ny, c, a, D, noise_pol, t_noise, key, pixel, emit);
         } else {
-            compare_bridged(s, y, ny, c, k.bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit);
+            compare_bridged(s, y, ny, c, bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit);
         }
         if (trace) *trace = {current_a, x, y, s.ref};
         s.x = x;
@@ -954,9 +1140,11 @@ struct PixelModel {
                     const double mid = 0.25 * sigma2 * span;
                     const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
                     const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
-                    // The bridge's uniforms are drawn only where a crossing is possible at all.
+                    // The bridge's uniforms are drawn only where a crossing is possible at all:
+                    // no uniform lies below 2^-33 (uniform_open), so none is drawn for a smaller
+                    // probability, and the outcome is the same.
                     CounterStream more(key, pixel, s.n, purpose);
-                    const double u = p_on + p_off > 0.0 ? more.uniform() : 1.0;
+                    const double u = p_on + p_off > 0x1p-33 ? more.uniform() : 1.0;
                     if (u < p_on + p_off) {
                         const bool on = u < p_on;
                         const double u0 = on ? th_on - d_start : th_off + d_start;

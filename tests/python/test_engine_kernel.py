@@ -1,0 +1,101 @@
+"""The engine's block kernels against its per-pixel path: the same events, bit for bit.
+
+``Sensor.run`` advances whole blocks of pixels with a block kernel (``step_block`` in
+pixel.hpp) when every pixel of the block stands at the sample's start; ``run_probe`` with a
+probe pixel takes the per-pixel path (``advance``) for the whole sensor. The two must give
+the same events and labels, byte for byte, for every configuration, and both must stay the
+same across thread counts and chunkings.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from evstwin import PixelParams, Sensor
+
+W, H = 23, 17  # 391 pixels: a full block and a partial one
+
+CONFIGS: dict[str, dict[str, object]] = {
+    "default": {"threshold_sigma": 0.03},
+    "pole": {"pr_pole": True, "threshold_sigma": 0.03},
+    "pole_no_cutoff": {"pr_pole": True, "cutoff_hz": None},
+    "background": {"shot_noise_rate_hz": 5.0, "shot_noise_on_rate_hz": 8.0, "shot_noise_off_rate_hz": 3.0,
+                   "background_rate_sigma": 0.7, "shot_noise_factor": 2.0},
+    "background_strong": {"shot_noise_rate_hz": 300.0, "background_rate_sigma": 1.0, "refractory_s": 0.0},
+    "no_background": {"shot_noise_rate_hz": 0.0},
+    "leak": {"leak_rate_hz": 5.0, "leak_rate_sigma": 0.4, "leak_random_phase": True},
+    "hot": {"hot_pixel_fraction": 0.05, "hot_pixel_rate_hz": 80.0, "hot_pixel_rate_sigma": 0.5},
+    "noiseless": {"photon_shot_noise": False, "dark_model": "none"},
+    "dark_only": {"photon_shot_noise": False},
+    "euler": {"lowpass": "euler", "cutoff_hz": 30.0},
+    "fast": {"cutoff_hz": 2000.0, "refractory_s": 1e-4, "theta_on": 0.05, "theta_off": 0.04},
+    "sampled": {"noise_model": "sampled", "threshold_sigma": 0.03},
+    "sampled_pole": {"noise_model": "sampled", "pr_pole": True},
+}
+
+
+def scene(kind: str, n: int, seed: int, dtype: type = np.float64) -> tuple[np.ndarray, np.ndarray]:
+    """Irregular sample times and (n, H, W) photon rates: a moving bright spot, or darkness."""
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(2e-4, 3e-3, n))
+    if kind == "dark":
+        rate = np.full((n, H, W), 1.0)
+    else:
+        yy, xx = np.mgrid[0:H, 0:W]
+        cx = 3 + 16 * t / t[-1]
+        cy = 8 + 5 * np.sin(2 * np.pi * t / 0.1)
+        rate = 2e4 + 3e7 * np.exp(-((xx - cx[:, None, None]) ** 2 + (yy - cy[:, None, None]) ** 2) / 6.0)
+    return t, rate.astype(dtype)
+
+
+def same(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> bool:
+    return a[0].tobytes() == b[0].tobytes() and a[1].tobytes() == b[1].tobytes()
+
+
+def run_calls(params: PixelParams, kind: str, per_pixel: bool, threads: int, chunks: list[int],
+              sparse: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Events and labels of a run cut into `chunks`, through the kernel or the per-pixel path,
+    with (sparse) a finer sampling of some pixels between the chunks (run_pixels)."""
+    dtype = np.float32 if kind == "spot32" else np.float64
+    t, rate = scene("dark" if kind == "dark" else "spot", 160, 3, dtype)
+    sensor = Sensor(W, H, params, seed=5, num_threads=threads)
+    sub = np.arange(0, W * H, 7, dtype=np.uint32)
+    events, labels = [], []
+    edges = [0, *np.cumsum(chunks)]
+    for a, b in zip(edges[:-1], edges[1:]):
+        if per_pixel:
+            ev, _ = sensor.run_probe(rate[a:b], t[a:b], [(0, 0)])
+        else:
+            ev = sensor.run(rate[a:b], t[a:b])
+        events.append(ev)
+        labels.append(sensor.last_labels())
+        if sparse and b < len(t) - 1:
+            # Past the next base sample: the next run skips it for these pixels, then advances
+            # them from their own time (not the block's), so the block leaves the kernel once.
+            tt = t[b - 1] + np.linspace(1e-5, 1.5 * (t[b + 1] - t[b - 1]), 9)
+            rr = np.ascontiguousarray(rate[b].reshape(-1)[sub] * (1 + 0.5 * np.sin(np.arange(9)))[:, None], dtype)
+            events.append(sensor.run_pixels(sub, rr, tt))
+            labels.append(sensor.last_labels())
+    return np.concatenate(events), np.concatenate(labels)
+
+
+@pytest.mark.parametrize("name", sorted(CONFIGS))
+@pytest.mark.parametrize("kind", ["spot", "spot32", "dark"])
+def test_block_kernel_gives_the_per_pixel_events(name: str, kind: str) -> None:
+    params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
+    kernel = run_calls(params, kind, per_pixel=False, threads=1, chunks=[160], sparse=False)
+    per_pixel = run_calls(params, kind, per_pixel=True, threads=1, chunks=[160], sparse=False)
+    assert len(kernel[0]) > 0 or kind == "dark"
+    assert same(kernel, per_pixel), f"{name}/{kind}: {len(kernel[0])} events (kernel), {len(per_pixel[0])} (per pixel)"
+
+
+@pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "leak", "sampled"])
+def test_block_kernel_with_sparse_calls_threads_and_chunks(name: str) -> None:
+    params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
+    ref = run_calls(params, "spot", per_pixel=True, threads=1, chunks=[50, 3, 107], sparse=True)
+    for threads, chunks in [(1, [50, 3, 107]), (2, [50, 3, 107])]:
+        assert same(run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=True), ref)
+    plain = run_calls(params, "spot", per_pixel=False, threads=1, chunks=[160], sparse=False)
+    for threads, chunks in [(2, [160]), (1, [1, 40, 119]), (2, [80, 80])]:
+        assert same(run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=False), plain)
