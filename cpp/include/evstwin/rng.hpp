@@ -25,6 +25,10 @@ using Philox4x32Key = std::array<std::uint32_t, 2>;
 EVSTWIN_ALWAYS_INLINE Philox4x32Counter philox4x32(Philox4x32Counter c, Philox4x32Key k) {
     constexpr std::uint32_t M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
     constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
+    // Unrolled: the ten rounds' loop control was ~10 % of the noise update's instructions.
+#if defined(__GNUC__)
+#pragma GCC unroll 10
+#endif
     for (int round = 0; round < 10; ++round) {
         const std::uint64_t p0 = static_cast<std::uint64_t>(M0) * c[0];
         const std::uint64_t p1 = static_cast<std::uint64_t>(M1) * c[2];
