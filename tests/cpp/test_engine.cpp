@@ -2,6 +2,8 @@
 #include <evstwin/evstwin.hpp>
 
 #include <cstring>
+#include <initializer_list>
+#include <vector>
 
 #include "check.hpp"
 
@@ -25,6 +27,102 @@ TEST(philox_known_answer) {
     CHECK(r[0] == 0x6627e8d5u && r[1] == 0xe169c58du && r[2] == 0xbc57ac4cu && r[3] == 0x9b00dbd8u);
     r = philox4x32({0xffffffffu, 0xffffffffu, 0xffffffffu, 0xffffffffu}, {0xffffffffu, 0xffffffffu});
     CHECK(r[0] == 0x408f276du && r[1] == 0x41c83b0eu && r[2] == 0xa20bc7c6u && r[3] == 0x6d5451fdu);
+}
+
+/// n standard normals from the ziggurat, fed by Philox words keyed by their index.
+static std::vector<double> ziggurat_normals(std::size_t n, std::uint32_t purpose) {
+    std::vector<double> out(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        CounterStream words({1u, 2u}, static_cast<std::uint32_t>(i), 0, purpose);
+        auto more = [&] { return words.word(); };
+        out[i] = normal_ziggurat(words.word(), more);
+    }
+    return out;
+}
+
+TEST(ziggurat_is_a_standard_normal_tails_included) {
+    // Bin counts of 2e6 variates against the normal CDF, each within 5 binomial sigmas, out to
+    // |x| = 5 (the tail beyond r = 3.44 and the wedges take the slow path).
+    const std::size_t n = 2000000;
+    const auto x = ziggurat_normals(n, 7u);
+    double sum = 0, sum2 = 0;
+    for (double v : x) { sum += v; sum2 += v * v; }
+    CHECK_NEAR(sum / n, 0.0, 5.0 / std::sqrt(double(n)));
+    CHECK_NEAR(sum2 / n, 1.0, 5.0 * std::sqrt(2.0 / n));
+    const auto cdf = [](double v) { return 0.5 * std::erfc(-v / std::sqrt(2.0)); };
+    for (double lo = -5.0; lo < 5.0; lo += 0.5) {
+        const double hi = lo + 0.5;
+        std::size_t k = 0;
+        for (double v : x) k += (v >= lo && v < hi);
+        const double p = cdf(hi) - cdf(lo);
+        CHECK_NEAR(double(k), n * p, 5.0 * std::sqrt(n * p * (1 - p)) + 1.0);
+    }
+    std::size_t far = 0;
+    for (double v : x) far += std::fabs(v) > 4.0;
+    const double p4 = std::erfc(4.0 / std::sqrt(2.0));
+    CHECK_NEAR(double(far), n * p4, 5.0 * std::sqrt(n * p4) + 1.0);
+}
+
+TEST(noise_coefficients_compose_and_reach_the_stationary_law) {
+    // Exact discretisation: two steps of T are one step of 2T (Phi(2T) = Phi(T)^2 and
+    // Q(2T) = Phi Q Phi^T + Q), and a long step reaches the stationary covariance.
+    const double a = 300.0, b = 62.8, D = 1e-4;
+    for (double T : {1e-4, 4e-3, 0.05}) {
+        const NoiseCoeffs k1 = noise_coeffs(a, b, D, T), k2 = noise_coeffs(a, b, D, 2 * T);
+        const double qzz = k1.l_zz * k1.l_zz, qzy = k1.l_zz * k1.l_yz, qyy = k1.l_yz * k1.l_yz + k1.l_yy * k1.l_yy;
+        const double Pzz = k1.phi_zz, Pyz = k1.phi_yz, Pyy = k1.phi_yy;
+        CHECK_NEAR(k2.phi_zz, Pzz * Pzz, 1e-12);
+        CHECK_NEAR(k2.phi_yy, Pyy * Pyy, 1e-12);
+        CHECK_NEAR(k2.phi_yz, Pyz * Pzz + Pyy * Pyz, 1e-12);
+        const double Azz = Pzz * qzz * Pzz + qzz;
+        const double Azy = Pzz * (qzz * Pyz + qzy * Pyy) + qzy;
+        const double Ayy = Pyz * (Pyz * qzz + Pyy * qzy) + Pyy * (Pyz * qzy + Pyy * qyy) + qyy;
+        const double zz2 = k2.l_zz * k2.l_zz, zy2 = k2.l_zz * k2.l_yz, yy2 = k2.l_yz * k2.l_yz + k2.l_yy * k2.l_yy;
+        CHECK_NEAR(zz2, Azz, 1e-9 * Azz);
+        CHECK_NEAR(zy2, Azy, 1e-9 * std::fabs(Azy) + 1e-18);
+        CHECK_NEAR(yy2, Ayy, 1e-9 * Ayy);
+    }
+    const NoiseCoeffs far = noise_coeffs(a, b, D, 10.0);
+    double szz, szy, syy;
+    noise_stationary(a, b, D, szz, szy, syy);
+    CHECK_NEAR(far.l_zz * far.l_zz, szz, 1e-9 * szz);
+    CHECK_NEAR(far.l_yz * far.l_yz + far.l_yy * far.l_yy, syy, 1e-9 * syy);
+}
+
+TEST(brownian_bridge_crossing_probability_and_time_against_simulated_paths) {
+    // Bridges from u0 = 1 to u1 = 1 below a level at 0 (distances), sigma^2 T = 1: crossing
+    // probability exp(-2 u0 u1 / (sigma^2 T)); paths watched at m steps cross as often as a
+    // continuous bridge whose distances are larger by 0.5826 sigma sqrt(T / m) (Broadie,
+    // Glasserman & Kou 1997). And the first-passage quantiles: a share q of the crossing
+    // paths has crossed by bridge_first_passage(..., q).
+    const int paths = 10000, m = 2000;
+    const double u0 = 1.0, u1 = 1.0, T = 1.0, h = T / m, shift = 0.5826 * std::sqrt(h);
+    std::vector<double> first;
+    for (int pth = 0; pth < paths; ++pth) {
+        CounterStream words({3u, 4u}, static_cast<std::uint32_t>(pth), 0, 11u);
+        auto more = [&] { return words.word(); };
+        // A Brownian path from u0, then the bridge B(t) + (u1 - u0 - B(T)) t / T.
+        std::vector<double> w(m + 1, 0.0);
+        for (int i = 1; i <= m; ++i) w[i] = w[i - 1] + std::sqrt(h) * normal_ziggurat(words.word(), more);
+        for (int i = 1; i < m; ++i) {
+            const double t = i * h;
+            if (u0 + w[i] + (u1 - u0 - w[m]) * t / T <= 0.0) {
+                first.push_back(t);
+                break;
+            }
+        }
+    }
+    const double p_cont = bridge_crossing_probability(u0 + shift, u1 + shift, 0.25 * T);
+    const double p_mc = double(first.size()) / paths;
+    CHECK_NEAR(p_mc, p_cont, 5.0 * std::sqrt(p_cont * (1 - p_cont) / paths));
+    CHECK(std::fabs(bridge_crossing_probability(u0, u1, 0.25 * T) - std::exp(-2.0)) < 1e-12);
+    for (double q : {0.25, 0.5, 0.75}) {
+        const double tq = bridge_first_passage(u0, u1, 1.0, T, q);
+        std::size_t k = 0;
+        for (double t : first) k += t <= tq;
+        const double share = double(k) / first.size();
+        CHECK_NEAR(share, q, 5.0 * std::sqrt(q * (1 - q) / first.size()) + 0.02);
+    }
 }
 
 TEST(step_gives_floor_ln_r_over_theta_events) {

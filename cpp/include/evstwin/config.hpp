@@ -27,6 +27,15 @@
 #define EVSTWIN_ALWAYS_INLINE inline
 #endif
 
+// A rare path kept out of line, so the common one around it stays short.
+#if defined(__GNUC__) || defined(__clang__)
+#define EVSTWIN_NOINLINE __attribute__((noinline))
+#elif defined(_MSC_VER)
+#define EVSTWIN_NOINLINE __declspec(noinline)
+#else
+#define EVSTWIN_NOINLINE
+#endif
+
 namespace evstwin {
 
 /// Number of threads a parallel loop would use by default (1 without OpenMP).

@@ -432,6 +432,20 @@ struct PixelModel {
     EVSTWIN_ALWAYS_INLINE static void normal_pair(std::uint32_t w0, std::uint32_t w1, double& g1, double& g2) {
         normal_pair_at(normal_radius(w0), w1, g1, g2);
     }
+    /// The continuous model's two normals of a sample from its two random words, by the
+    /// ziggurat (rng.hpp): a table look-up for ~99 % of them instead of Box-Muller's log and
+    /// square root (~70 instructions an update). The rare rest draw further words keyed by
+    /// (pixel, sample), so both are pure functions of the counter.
+    EVSTWIN_ALWAYS_INLINE static void sample_normals(std::uint32_t w0, std::uint32_t w1, Philox4x32Key key,
+                                                     std::uint32_t pixel, std::uint64_t sample, double& g1, double& g2) {
+        std::optional<CounterStream> extra;
+        auto more = [&] {
+            if (!extra) extra.emplace(key, pixel, sample, PURPOSE_NORMAL);
+            return extra->word();
+        };
+        g1 = normal_ziggurat(w0, more);
+        g2 = normal_ziggurat(w1, more);
+    }
     /// Box-Muller's radius sqrt(-2 ln u) from normal_pair's first word.
     EVSTWIN_ALWAYS_INLINE static double normal_radius(std::uint32_t w0) {
         return std::sqrt(-2.0 * std::log(uniform_open(w0)));
@@ -709,11 +723,17 @@ struct PixelModel {
             w0[j] = w[0];
             w1[j] = w[1];
         }
-        // Box-Muller's radii in a pass of their own: the log is a call, which would make the
-        // main pass save and restore its registers around it. Not needed without shot noise.
-        double* radius = scratch.u_noise.data();
+        // The normals in a pass of their own (their rare slow path is a call, which would make
+        // the main pass save and restore its registers around it). Not needed without shot
+        // noise (the per-pixel path draws them only where the noise intensity is > 0, and so
+        // must this: a pixel's rate enters only through the cache, below).
+        double* g1s = scratch.u_noise.data();
+        double* g2s = scratch.count.data();
         const bool noisy = p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
-        for (std::size_t j = 0; j < n; ++j) radius[j] = noisy ? normal_radius(w0[j]) : 0.0;
+        for (std::size_t j = 0; j < n; ++j) {
+            g1s[j] = g2s[j] = 0.0;
+            if (noisy) sample_normals(w0[j], w1[j], key, v.ids[at(j)], st[at(j)].n, g1s[j], g2s[j]);
+        }
         const bool background = has_background();
         NoiseCache& cache = scratch.noise;
         if (cache.dt != c.dt) cache.photon_rate = std::numeric_limits<double>::quiet_NaN();  // refill below
@@ -723,7 +743,7 @@ struct PixelModel {
             const double r = static_cast<double>(rate[at(j)]);
             if (r != cache.photon_rate) fill_noise_cache(cache, r, c);  // cache.dt is c.dt
             double zj, yj, nzj, nyj;
-            continuous_levels<SfOnly>(s, cache, c, radius[j], w1[j], zj, yj, nzj, nyj);
+            continuous_levels<SfOnly>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
             // The line (compare()'s fast path) and, around it, the bridge's exponents: the
             // difference d inside both thresholds at both ends, and (th_on - d0)(th_on - d1) and
@@ -1033,21 +1053,23 @@ struct PixelModel {
         std::uint32_t w[2];  // two words a sample, one Philox call for two samples
         sample_words(s, key, pixel, w);
         double z, y, nz, ny;
-        continuous_levels(s, cache, c, cache.D > 0.0 ? normal_radius(w[0]) : 0.0, w[1], z, y, nz, ny);
+        double g1 = 0.0, g2 = 0.0;
+        if (cache.D > 0.0) sample_normals(w[0], w[1], key, pixel, s.n, g1, g2);
+        continuous_levels(s, cache, c, g1, g2, z, y, nz, ny);
         if (has_background()) background_spend(s, cache.bg_factor, c);
         continuous_finish(s, cache.x, z, y, nz, ny, cache.current_a, cache.k.bridge_var, cache.D, c, key, pixel, emit,
                           trace);
     }
 
-    /// The continuous model's new levels over (c.t0, c.t1] from the sample's two random words
-    /// (radius: normal_radius(w0), needed only where cache.D > 0): the noise-free chain (pole
+    /// The continuous model's new levels over (c.t0, c.t1] from the sample's two normals
+    /// (sample_normals, needed only where cache.D > 0): the noise-free chain (pole
     /// at the rate the mean current sets, source follower) and the noise (n_z, n_y) with its
     /// exact transition and innovation; y = noise-free + n_y.
     /// SfOnly: the caller knows the configuration is the default one (the exact source follower,
     /// no pole), so the branches on it are taken at compile time; the same arithmetic.
     template <bool SfOnly = false>
     EVSTWIN_ALWAYS_INLINE void continuous_levels(const PixelState& s, const NoiseCache& cache, const SampleConstants& c,
-                                                 double radius, std::uint32_t w1, double& z, double& y, double& nz,
+                                                 double g1, double g2, double& z, double& y, double& nz,
                                                  double& ny) const {
         const bool pole = !SfOnly && p.pr_pole, filter = SfOnly || has_filter, eul = !SfOnly && euler;
         const double x = cache.x, D = cache.D;
@@ -1065,8 +1087,6 @@ struct PixelModel {
         nz = 0.0;
         ny = 0.0;
         if (D > 0.0) {
-            double g1, g2;
-            normal_pair_at(radius, w1, g1, g2);
             nz = k.phi_zz * s.nz + k.l_zz * g1;
             // Without the pole its rate a is 0: the 1-D process of the source follower.
             ny = (pole && cache.a > 0.0 && filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2

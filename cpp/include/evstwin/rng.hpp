@@ -57,6 +57,7 @@ enum Purpose : std::uint32_t {
     PURPOSE_HOT = 0x30000000u,            ///< a hot pixel's event clock (counter: its event index)
     PURPOSE_REFINE = 0x38000000u,         ///< the noise at the cuts of a refined interval (+ block)
     PURPOSE_HOT_SWITCH = 0x3C000000u,     ///< a hot pixel's telegraph (counter: its switch index)
+    PURPOSE_NORMAL = 0x3E000000u,         ///< the ziggurat's further words (+ block)
     PURPOSE_PAPER_DARK = 0x40000000u,     ///< eq. 4 dark draw (+ iteration)
     PURPOSE_MISMATCH_ON = 0x80000000u,    ///< per pixel ON threshold mismatch (+ retry)
     PURPOSE_MISMATCH_OFF = 0xC0000000u,   ///< per pixel OFF threshold mismatch (+ retry)
@@ -72,6 +73,11 @@ public:
     double uniform() {
         if (used_ == 4) refill();
         return uniform_open(buf_[used_++]);
+    }
+    /// The next 32 random bits.
+    std::uint32_t word() {
+        if (used_ == 4) refill();
+        return buf_[used_++];
     }
 
 private:
@@ -97,6 +103,76 @@ inline Philox4x32Key key_from_seed(std::uint64_t seed) {
 /// Standard normal from two uniforms in (0, 1) (Box-Muller, first output).
 inline double normal_from_uniforms(double u1, double u2) {
     return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * 3.14159265358979323846 * u2);
+}
+
+/// The ziggurat's tables (Marsaglia & Tsang, "The ziggurat method for generating random
+/// variables", J. Stat. Softw. 5(8), 2000: 128 layers, tail at r = 3.442619855899), for a
+/// magnitude of 24 bits. Built once with std::exp / std::log; a pure function of nothing.
+struct ZigguratTables {
+    static constexpr double R = 3.442619855899;
+    double w[128];         ///< layer i's right edge / 2^24
+    std::uint32_t k[128];  ///< magnitudes below k[i] lie inside layer i's rectangle: accepted at once
+    double f[128];         ///< the density exp(-x^2 / 2) at layer i's right edge
+};
+inline ZigguratTables make_ziggurat_tables() {
+    ZigguratTables z{};
+    const double m = 16777216.0;  // 2^24
+    const double v = 9.91256303526217e-3;  // the area of each layer
+    double dn = ZigguratTables::R, tn = dn;
+    const double q = v / std::exp(-0.5 * dn * dn);
+    z.k[0] = static_cast<std::uint32_t>((dn / q) * m);
+    z.k[1] = 0;
+    z.w[0] = q / m;
+    z.w[127] = dn / m;
+    z.f[0] = 1.0;
+    z.f[127] = std::exp(-0.5 * dn * dn);
+    for (int i = 126; i >= 1; --i) {
+        dn = std::sqrt(-2.0 * std::log(v / dn + std::exp(-0.5 * dn * dn)));
+        z.k[i + 1] = static_cast<std::uint32_t>((dn / tn) * m);
+        tn = dn;
+        z.f[i] = std::exp(-0.5 * dn * dn);
+        z.w[i] = dn / m;
+    }
+    return z;
+}
+/// Built at start-up (a namespace-scope variable: no guard on every read, as a function's
+/// static would have).
+inline const ZigguratTables ZIGGURAT = make_ziggurat_tables();
+
+/// normal_ziggurat's rare path: a wedge, or the tail beyond r (Marsaglia's exponential method);
+/// further words from more(). Kept out of line so the common path stays a few instructions.
+template <class More>
+EVSTWIN_NOINLINE double normal_ziggurat_slow(std::uint32_t w, More& more) {
+    const ZigguratTables& z = ZIGGURAT;
+    for (;;) {
+        const std::uint32_t i = w & 127u, j = w >> 8;
+        const double sign = (w & 128u) ? -1.0 : 1.0;
+        const double x = static_cast<double>(j) * z.w[i];
+        if (j < z.k[i]) return sign * x;
+        if (i == 0) {
+            double xt, yt;
+            do {
+                xt = -std::log(uniform_open(more())) / ZigguratTables::R;
+                yt = -std::log(uniform_open(more()));
+            } while (yt + yt < xt * xt);
+            return sign * (ZigguratTables::R + xt);
+        }
+        if (z.f[i] + uniform_open(more()) * (z.f[i - 1] - z.f[i]) < std::exp(-0.5 * x * x)) return sign * x;
+        w = more();
+    }
+}
+
+/// One standard normal from a 32-bit word by the ziggurat: bits 0-6 pick the layer, bit 7 the
+/// sign, bits 8-31 the magnitude; ~99 % of words are accepted with a table look-up and a
+/// multiply (no log, no square root). The rest (a wedge, or the tail beyond r) draw further
+/// words from `more()`, so the variate stays a pure function of its counter. Exact, tails
+/// included (threshold crossings of the noise live in its tails).
+template <class More>
+EVSTWIN_ALWAYS_INLINE double normal_ziggurat(std::uint32_t w, More&& more) {
+    const std::uint32_t i = w & 127u, j = w >> 8;
+    const double x = static_cast<double>(j) * ZIGGURAT.w[i];
+    if (j < ZIGGURAT.k[i]) return (w & 128u) ? -x : x;
+    return normal_ziggurat_slow(w, more);
 }
 
 /// ln(k!) for integer k >= 0: a table below 256, Stirling's series above (relative error
