@@ -25,8 +25,8 @@ from __future__ import annotations
 
 from ..analysis import nice_bin_s
 from .comparison import DISTANCE_FORMULA, Comparison, PathLike, Recording, SimComparison, compare
-from .noise import NoiseCalibration, calibrate_noise
 from .montecarlo import MonteCarloSummary, aggregate
+from .noise import NoiseCalibration, calibrate_noise
 from .report import compare_files, compare_runs, format_info, info, show, timing_report
 from .timing import TruthTrack, format_timing_bias_summary, timing_bias, timing_bias_summary
 
