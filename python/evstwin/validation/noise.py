@@ -280,8 +280,9 @@ class NoiseCalibration:
         else:
             k = max(1, self.refractory_intervals // 1000)
             which = "the shortest" if k == 1 else f"number {k} from the shortest"
+            few = " (too few to say much)" if self.refractory_intervals < 100 else ""
             lines.append(f"refractory: {self.refractory_s * 1e6:.0f} us, {which} of {self.refractory_intervals} "
-                         "intervals of the busiest pixels (suggested, not written)")
+                         f"intervals of the busiest pixels{few} (suggested, not written)")
         lines.append(f"hot pixels: {len(self.hot)} of {self.pixels} (fraction {len(self.hot) / self.pixels:.3g}); "
                      f"engine rates assume a dead time of {self.dead_time_s * 1e6:.0f} us ({self.dead_time_source})")
         for hp in self.hot:
