@@ -1,4 +1,4 @@
-"""``evstwin info``, ``show``, ``compare`` and ``timing``: commands on recordings."""
+"""``evstwin info``, ``show``, ``compare``, ``timing`` and ``calibrate-noise``: commands on recordings."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ._common import add_force, add_size, check_output_dir
+from ._common import add_force, add_size, check_output_dir, check_output_file
 
 
 def register(sub: Any) -> None:
@@ -56,6 +56,22 @@ def register(sub: Any) -> None:
                         "between two passes")
     add_force(p)
     p.set_defaults(func=cmd_timing)
+
+    p = sub.add_parser("calibrate-noise",
+                       help="measure the background activity of a static or dark recording as scenario TOML")
+    p.add_argument("file", help="event file in any format read_events takes (a static or dark scene)")
+    p.add_argument("--roi", type=_roi, metavar="X0,Y0,W,H",
+                   help="window measured [px]: corner x0, y0 and size (default: the whole sensor)")
+    p.add_argument("-o", "--output",
+                   help="scenario TOML to write (default: none; the TOML goes to stdout, the summary to stderr)")
+    p.add_argument("--preset", default="auto",
+                   help="[sensor] preset written: a preset name, 'none', or 'auto' (default: a simulated file's own "
+                        "preset, else the built-in preset of the recording's size, none if there is none)")
+    p.add_argument("--alpha", type=float, default=1e-6,
+                   help="false-alarm probability per pixel of the hot-pixel test (default 1e-6)")
+    add_size(p)
+    add_force(p)
+    p.set_defaults(func=cmd_calibrate_noise)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -172,4 +188,28 @@ def cmd_timing(args: argparse.Namespace) -> int:
     _, text, png = timing_report(args.files, out, radius_px=args.radius_px, max_delay_s=args.max_delay_s)
     print(text)
     print(f"wrote {png} and {out / 'timing_bias.json'}")
+    return 0
+
+
+def _roi(text: str) -> tuple[int, int, int, int]:
+    from ..validation.noise import parse_roi
+
+    try:
+        return parse_roi(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def cmd_calibrate_noise(args: argparse.Namespace) -> int:
+    from ..validation.noise import calibrate_noise
+
+    out = check_output_file(args.output, args.force, "--output") if args.output is not None else None
+    cal = calibrate_noise(args.file, args.roi, size=args.size, preset=args.preset, alpha=args.alpha)
+    if out is None:
+        print(cal.summary(), file=sys.stderr)
+        print(cal.to_toml(), end="")
+        return 0
+    cal.write(out)
+    print(cal.summary())
+    print(f"wrote {out}")
     return 0

@@ -7,6 +7,8 @@
 * :func:`compare_files`, :func:`compare_runs`, :func:`info`, :func:`show`, :func:`timing_report`
   -- the file-level entry points the CLI uses (:mod:`.report`, the one module here that draws);
   they read recordings in chunks and return values or text, printing nothing.
+* :func:`calibrate_noise` -- the background activity of a static or dark recording as the
+  engine's eq. 12 model and hot-pixel map, written as scenario TOML (:mod:`.noise`).
 * :func:`timing_bias`, :func:`timing_bias_summary` -- delay of each event after the true
   crossing of a source over its pixel, against brightness and speed (the astrometry obstacle
   the paper names).
@@ -24,6 +26,7 @@ from __future__ import annotations
 from ..analysis import nice_bin_s
 from .comparison import DISTANCE_FORMULA, Comparison, PathLike, Recording, SimComparison, compare
 from .montecarlo import MonteCarloSummary, aggregate
+from .noise import NoiseCalibration, calibrate_noise
 from .report import compare_files, compare_runs, format_info, info, show, timing_report
 from .timing import TruthTrack, format_timing_bias_summary, timing_bias, timing_bias_summary
 
@@ -31,11 +34,13 @@ __all__ = [
     "Comparison",
     "DISTANCE_FORMULA",
     "MonteCarloSummary",
+    "NoiseCalibration",
     "PathLike",
     "Recording",
     "SimComparison",
     "TruthTrack",
     "aggregate",
+    "calibrate_noise",
     "compare",
     "compare_files",
     "compare_runs",
