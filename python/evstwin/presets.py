@@ -495,14 +495,14 @@ IMX636 = SensorPreset(
         cutoff_hz=10.0,
         pr_pole=True,
         leak_rate_hz=0.0,
-        shot_noise_on_rate_hz=3.9e-4,
+        shot_noise_on_rate_hz=2.2e-4,
         shot_noise_off_rate_hz=1.69e-3,
         shot_noise_factor=1.0,
-        background_rate_sigma=1.3,
+        background_rate_sigma=1.41,
         hot_pixel_fraction=1.0 / (1280 * 720),
-        hot_pixel_rate_hz=880.0,
-        hot_pixel_duty=0.17,
-        hot_pixel_burst_s=0.08,
+        hot_pixel_rate_hz=1170.0,
+        hot_pixel_duty=0.13,
+        hot_pixel_burst_s=0.046,
     ),
     biases=None,
     qe_notes=(
@@ -521,14 +521,15 @@ IMX636 = SensorPreset(
             "events of its hot pixel (131 us)"
         ),
         (
-            f"{IMX636_RECORDING}, dark corner x >= 980, y >= 520 (60,000 pixels): background 3.9e-4 Hz ON and "
-            "1.69e-3 Hz OFF per pixel (19 % ON), counts over-dispersed as a log-normal rate of sigma 1.3 "
-            "(OFF; the rarer ON events spread wider, sigma ~3); no leak beyond those ON events"
+            f"{IMX636_RECORDING}, dark corner x >= 980, y >= 520 (60,000 pixels; `evstwin calibrate-noise "
+            "... --roi 980,520,300,200`): background 2.20e-4 Hz ON and 1.69e-3 Hz OFF per pixel, log-normal "
+            "spread sigma 2.58 (ON) and 1.26 (OFF), 1.41 event-weighted; one ON-leaky pixel (1224, 658) apart "
+            "(113 events, 111 ON); no leak beyond the ON background"
         ),
         (
-            f"{IMX636_RECORDING}: one hot pixel in 921,600, at (187, 261), 1447 events (134 Hz, 78 % of "
-            "successive events alternate polarity), in bursts of ~80 ms (events ~1 ms apart) ~17 % of the "
-            "time: a telegraph of duty 0.17, bursts 0.08 s, rate 880 Hz while active"
+            f"{IMX636_RECORDING}: one hot pixel in 921,600 at (187, 261), 1447 events (134 Hz, 78 % of "
+            "successive events alternate polarity) in bursts (`calibrate-noise ... --roi 0,0,240,720`): "
+            "1015 Hz while active, i.e. r = 1170 Hz with 130 us dead time, duty 0.13, mean burst 46 ms"
         ),
     ),
     assumptions=(

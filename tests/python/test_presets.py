@@ -234,7 +234,7 @@ def test_dark_rate_from_eq3_matches_a_hand_computation() -> None:
 
 def test_imx636_dark_background_matches_the_recording_figures_per_polarity() -> None:
     # The preset's cited background (measured on the real IMX636 recording's dark corner):
-    # 3.9e-4 Hz ON and 1.69e-3 Hz OFF per pixel; a dark 100 x 100 window over 20 s.
+    # 2.2e-4 Hz ON and 1.69e-3 Hz OFF per pixel; a dark 100 x 100 window over 20 s.
     import numpy as np
 
     from evstwin import simulate
@@ -244,6 +244,6 @@ def test_imx636_dark_background_matches_the_recording_figures_per_polarity() -> 
     r = simulate(scenario, num_threads=1)
     n_on = int(np.sum(r.events["p"] == 1))
     n_off = len(r.events) - n_on
-    for count, rate in ((n_on, 3.9e-4), (n_off, 1.69e-3)):
+    for count, rate in ((n_on, 2.2e-4), (n_off, 1.69e-3)):
         expect = rate * 100 * 100 * 20.0
         assert abs(count - expect) < 5 * math.sqrt(expect), (count, expect)
