@@ -6,7 +6,7 @@ photoreceptor pole, at a base sample rate and 4x finer, and optionally the built
 (no sparse sub-sampling), each over several seeds. Prints event counts, their relative change
 and the spread between seeds, for both noise models.
 
-    python bench/noise_convergence.py [--duration 20] [--seeds 1,2,3] [--mcreynolds 5]
+    python bench/noise_convergence.py [--duration 20] [--seeds 1,2,3] [--factor 4] [--mcreynolds 5]
 """
 
 from __future__ import annotations
@@ -54,19 +54,20 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=20.0, help="sensor time of the static scenes [s]")
     ap.add_argument("--seeds", default="1,2,3", help="comma-separated seeds")
     ap.add_argument("--rate", type=float, default=250.0, help="base sample rate of the static scenes [Hz]")
+    ap.add_argument("--factor", type=float, default=4.0, help="how much finer the second sampling is (default 4)")
     ap.add_argument("--mcreynolds", type=float, default=0.0, help="also run mcreynolds for this many seconds")
     args = ap.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     start = time.perf_counter()
     print(f"static scenes, 32 x 32 px, {args.duration:g} s, seeds {seeds}: mean events at {args.rate:g} Hz "
-          f"and {4 * args.rate:g} Hz")
+          f"and {args.factor * args.rate:g} Hz")
     for model in ("continuous", "sampled"):
         print(f"\nnoise_model = {model}\n")
-        print(f"| scene | {args.rate:g} Hz | {4 * args.rate:g} Hz | change | seed spread |")
+        print(f"| scene | {args.rate:g} Hz | {args.factor * args.rate:g} Hz | change | seed spread |")
         print("|---|---|---|---|---|")
         for name, (ph, on, off) in SCENES.items():
             base = [static_count(model, ph, on, off, args.rate, args.duration, s) for s in seeds]
-            fine = [static_count(model, ph, on, off, 4 * args.rate, args.duration, s) for s in seeds]
+            fine = [static_count(model, ph, on, off, args.factor * args.rate, args.duration, s) for s in seeds]
             print(row(name, base, fine), flush=True)
     if args.mcreynolds > 0:
         print(f"\nmcreynolds, {args.mcreynolds:g} s, seeds {seeds}\n")
