@@ -203,7 +203,7 @@ def describe(roi: Roi | None, mask: np.ndarray | None) -> str:
     """One line on the pixels compared, for reports."""
     parts = []
     if roi is not None:
-        parts.append(f"roi {roi} ({roi.width}x{roi.height} px, events shifted by -{roi.x0},-{roi.y0})")
+        parts.append(f"roi {roi} ({roi.width}x{roi.height} px from ({roi.x0}, {roi.y0}), in its own coordinates)")
     if mask is not None and mask.any():
         parts.append(f"{int(np.count_nonzero(mask))} pixel(s) masked")
     return "; ".join(parts)

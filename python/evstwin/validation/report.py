@@ -218,8 +218,13 @@ def scan_recording(
     rec = analysis.CountedRecording.empty(meta.get("width"), meta.get("height"), rate_bin_us)
     parts: list[np.ndarray] = []
     lo = hi = 0
+    first_us: int | None = None  # the whole recording's span, before the cut
+    last_us = 0
     for ev in stream:
-        if cut is not None:
+        if cut is not None and len(ev):
+            t = ev["t"]
+            first_us = int(t.min()) if first_us is None else min(first_us, int(t.min()))
+            last_us = max(last_us, int(t.max()))
             ev = cut.crop(ev)
         if len(ev) == 0:
             continue
@@ -238,6 +243,8 @@ def scan_recording(
         if cut is not None:  # a file without a size: its events' extent is the sensor's
             r.check(int(meta["width"]), int(meta["height"]), f"{path}: roi")
             meta["sensor_width"], meta["sensor_height"] = int(meta["width"]), int(meta["height"])
+            if first_us is not None:  # the ROI's duration is the recording's, not its own events' span
+                meta.setdefault("duration_s", (last_us - first_us) * 1e-6)
         meta["width"], meta["height"], meta["roi"] = r.width, r.height, str(r)
     width, height = _size(meta, str(path))
     if width < 1 or height < 1:
