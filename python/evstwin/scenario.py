@@ -4,7 +4,12 @@ The tables mirror the Python objects:
 
 ``[sensor]``      ``preset`` (``davis346`` | ``imx636``; required, directly or through
                   ``base``), optional ``width``/``height`` (a
-                  smaller window of the sensor), ``bias_set`` (a name from
+                  smaller window of the sensor, at its origin: the targets' coordinates
+                  are the window's), ``roi = [x0, y0, w, h]`` (simulate only this
+                  rectangle of the width x height sensor: targets, star field and hot-pixel
+                  map stay in the sensor's coordinates and are cut and shifted to the ROI's,
+                  and the events come out as a w x h recording in the ROI's coordinates,
+                  x - x0 and y - y0), ``bias_set`` (a name from
                   ``evstwin.presets.BIAS_SETS``), ``k`` (eq. 8-9 factor).
 ``[biases]``      bias currents in amperes (``i_on_a`` ... ``i_refr_a``), overriding the set.
 ``[pixel]``       any ``PixelParams`` field by name; overrides what biases and preset derive.
@@ -77,6 +82,7 @@ from .targets import (
     drift_px_s_from_arcsec,
     drifting,
     random_star_field,
+    shifted,
 )
 
 if sys.version_info >= (3, 11):
@@ -114,7 +120,7 @@ SCHEMA: dict[str, Any] = {
     "base": str,
     "duration_s": float,
     "seed": int,
-    "sensor": {"preset": str, "width": int, "height": int, "bias_set": str, "k": float},
+    "sensor": {"preset": str, "width": int, "height": int, "roi": list, "bias_set": str, "k": float},
     "biases": {k: float for k in _BIAS_KEYS},
     "pixel": {name: Any for name in PixelParams.field_names()},
     "optics": {k: Any for k in _OPTICS_KEYS},
@@ -443,9 +449,12 @@ class Scene:
     but not written as ground-truth tracks when they drift: thousands of tracks would cost 32
     bytes per star per sample, and the resolved scenario (seed, drift) makes them again."""
     readout: ReadoutParams | None = None
+    """The readout applied to the events (None: off, the engine's times kept)."""
     hot_pixel_rates_hz: np.ndarray | None = None
     """[hot_pixels]: the (height, width) hot-pixel rates [Hz], or None (the draw applies)."""
-    """The readout applied to the events (None: off, the engine's times kept)."""
+    roi: tuple[int, int, int, int] | None = None
+    """sensor.roi: (x0, y0, w, h) of the sensor this scene simulates (``width`` x ``height`` =
+    w x h, every coordinate the ROI's); None: the whole (window of the) sensor."""
 
     @property
     def psf_sigma_px(self) -> float:
@@ -599,10 +608,16 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         )
     readout = _readout(s, preset)
     hot = _hot_pixel_map(s.get("hot_pixels"), width, height)
+    roi = _roi(s["sensor"].get("roi"), width, height)
+    if roi is not None:
+        x0, y0, width, height = roi
+        targets, sources, field_stars = _into_roi(targets, sources, field_stars, roi, shape.half_width_px, t_end)
+        hot = None if hot is None else np.ascontiguousarray(hot[y0 : y0 + height, x0 : x0 + width])
     sp = s["sampling"]
     _check_work(s, width, height, shape, targets, sources)
     _check_intervals(params, float(sp["rate_hz"]))
     return Scene(
+        roi=roi,
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
         rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
@@ -610,6 +625,48 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
         readout=readout,
     )
+
+
+def _roi(value: Any, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """sensor.roi as (x0, y0, w, h), checked against the width x height sensor."""
+    if value is None:
+        return None
+    ok = (isinstance(value, (list, tuple)) and len(value) == 4
+          and all(isinstance(v, int) and not isinstance(v, bool) for v in value))
+    if not ok:
+        raise ScenarioError(f"sensor.roi must be [x0, y0, width, height] in whole pixels; got {value!r}")
+    x0, y0, w, h = (int(v) for v in value)
+    if w < 1 or h < 1:
+        raise ScenarioError(f"sensor.roi={list(value)!r} is empty: width and height must be >= 1 px")
+    if x0 < 0 or y0 < 0 or x0 + w > width or y0 + h > height:
+        raise ScenarioError(f"sensor.roi={list(value)!r} (columns {x0}..{x0 + w - 1}, rows {y0}..{y0 + h - 1}) "
+                            f"is not inside the {width}x{height} sensor")
+    return x0, y0, w, h
+
+
+def _into_roi(targets: list[Target], sources: list[str], field_stars: int, roi: tuple[int, int, int, int],
+              half: int, t_end: float) -> tuple[list[Target], list[str], int]:
+    """The targets in the ROI's coordinates. A star field's static and linear stars whose PSF
+    window never touches the ROI during the run are dropped (they would light none of its
+    pixels), so the work follows the ROI, not the sensor; the named targets are all kept (their
+    ground truth, in the ROI's coordinates, and the sub-sampling they set stay as on the whole
+    sensor)."""
+    x0, y0, w, h = roi
+    n_named = len(targets) - field_stars
+    out = [shifted(t, -x0, -y0) for t in targets[:n_named]]
+    src = list(sources[:n_named])
+    lo_x, hi_x, lo_y, hi_y = -half - 0.5, w - 0.5 + half, -half - 0.5, h - 0.5 + half
+    kept = 0
+    for t, source in zip(targets[n_named:], sources[n_named:]):
+        t = shifted(t, -x0, -y0)
+        if isinstance(t, (StaticTarget, LinearTarget)):
+            xs, ys = t.position_px(np.array([0.0, t_end]))
+            if max(xs) < lo_x or min(xs) > hi_x or max(ys) < lo_y or min(ys) > hi_y:
+                continue  # its straight path's bounding box misses the ROI's reach
+        out.append(t)
+        src.append(source)
+        kept += 1
+    return out, src, kept
 
 
 def _field_drift(s: dict[str, Any], optics: Optics) -> tuple[tuple[float, float], str]:

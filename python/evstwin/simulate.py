@@ -228,6 +228,8 @@ def _meta(runner: _Runner, scene: Scene) -> dict[str, Any]:
         "evstwin_version": __version__,
         "readout_enabled": runner.readout is not None,
     }
+    if scene.roi is not None:  # sensor.roi: where this width x height recording lies on the sensor
+        meta["roi_x0_px"], meta["roi_y0_px"] = scene.roi[0], scene.roi[1]
     # Flat scalars: every event-file format stores scalar meta (io.writer), none a nested table.
     if runner.readout is not None:
         meta.update({f"readout_{k}": v for k, v in runner.readout.stats().items()})

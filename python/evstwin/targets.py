@@ -478,6 +478,57 @@ def drifting(target: Target, vx_px_s: float, vy_px_s: float) -> Target:
     return DriftingTarget(target, vx, vy)
 
 
+@dataclass(frozen=True, eq=False)
+class OffsetTarget(Target):
+    """``target`` seen in coordinates shifted by (dx_px, dy_px): ``position = target's +
+    (dx, dy)``; velocity, brightness and label are the target's. :func:`shifted` gives the
+    plain target where it can (static, linear, circular, tabulated) and this wrapper otherwise."""
+
+    target: Target
+    dx_px: float
+    dy_px: float
+    brightness: Brightness = dataclasses.field(init=False)
+    label: str = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.target, Target):
+            raise TypeError(f"target must be a Target; got {self.target!r}")
+        _finite("dx_px", self.dx_px)
+        _finite("dy_px", self.dy_px)
+        object.__setattr__(self, "brightness", self.target.brightness)
+        object.__setattr__(self, "label", self.target.label)
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        x, y = self.target.position_px(t_s)
+        return x + self.dx_px, y + self.dy_px
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        return self.target.velocity_px_s(t_s)
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        return self.target.max_speed_px_s(t0_s, t1_s)
+
+
+def shifted(target: Target, dx_px: float, dy_px: float) -> Target:
+    """``target`` in coordinates whose origin is moved by (-dx_px, -dy_px): every position
+    plus (dx_px, dy_px) [px] (a sensor window's coordinates: dx = -x0, dy = -y0). The same
+    kind of target where the shift is a change of its constants, else an :class:`OffsetTarget`."""
+    dx, dy = _finite("dx_px", dx_px), _finite("dy_px", dy_px)
+    if dx == 0.0 and dy == 0.0:
+        return target
+    if isinstance(target, StaticTarget):
+        return dataclasses.replace(target, x_px=target.x_px + dx, y_px=target.y_px + dy)
+    if isinstance(target, LinearTarget):
+        return dataclasses.replace(target, x0_px=target.x0_px + dx, y0_px=target.y0_px + dy)
+    if isinstance(target, CircularTarget):
+        return dataclasses.replace(target, centre_x_px=target.centre_x_px + dx, centre_y_px=target.centre_y_px + dy)
+    if isinstance(target, TabulatedTarget):
+        return dataclasses.replace(target, x_px=target.x_px + dx, y_px=target.y_px + dy)
+    if isinstance(target, DriftingTarget):
+        return DriftingTarget(shifted(target.target, dx, dy), target.vx_px_s, target.vy_px_s)
+    return OffsetTarget(target, dx, dy)
+
+
 def drift_px_s_from_arcsec(wx_arcsec_s: float, wy_arcsec_s: float, optics: Optics) -> tuple[float, float]:
     """A field drift across the sky [arcsec/s] in pixels per second through the plate scale
     (``optics.plate_scale_arcsec_per_px``; small-angle, as ``LinearTarget.from_angular_velocity``)."""

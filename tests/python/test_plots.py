@@ -127,7 +127,7 @@ def test_bin_error_has_pixel_share_axis(tmp_path):
     ax = fig.axes[0]
     assert ax.get_ylabel() == "bin error [pixels]"
     secondary = [c for c in ax.child_axes]
-    assert len(secondary) == 1 and "share of sensor pixels [%]" in secondary[0].get_ylabel()
+    assert len(secondary) == 1 and "share of compared pixels [%]" in secondary[0].get_ylabel()
     p = plots.plot_comparison_bin_error(COMP, tmp_path / "err.png", figsize=(6.0, 4.0))
     check_png(p, (6.0, 4.0))
 

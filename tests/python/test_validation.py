@@ -39,6 +39,10 @@ REAL = block_recording(COUNTS, 4)
 META = {"width": 4, "height": 2, "duration_s": 0.04}
 
 
+HALF_DISTANCE = 40 / 41 + math.log(81 / 41)
+"""The distance of REAL[::2] (every count halved) to REAL: see the test below."""
+
+
 def test_block_recording_is_what_the_arithmetic_assumes():
     assert REAL.size == 40 and REAL["p"].sum() == 20
     half = REAL[::2]
@@ -88,9 +92,11 @@ def test_compare_with_every_second_event_dropped():
     # Fig. 9: the largest |error| is 3 pixels of 8
     assert s.max_bin_error_share == pytest.approx(3 / 8)
     # W1 = mean |sorted real - sorted sim|: total (0+0+2+2+2+4+4+6)/8 = 2.5, ON and OFF 1.25;
-    # m_real = 40/8 = 5; distance = (2.5 + 1.25 + 1.25)/5 + |-0.5| + 0 = 1.5 (= 3 |k - 1|, k = 1/2)
+    # m_real = 40/8 = 5, N = 8: w1 = (2.5 + 1.25 + 1.25)/(5 + 1/8) = 40/41; rate = |ln(20.5/40.5)|;
+    # polarity = |ln(10.5/10.5) - ln(20.5/20.5)| = 0
     assert s.wasserstein == pytest.approx({"total": 2.5, "on": 1.25, "off": 1.25})
-    assert s.distance == pytest.approx(1.5)
+    assert s.distance_terms == pytest.approx({"w1": 40 / 41, "rate": math.log(81 / 41), "polarity": 0.0})
+    assert s.distance == pytest.approx(HALF_DISTANCE)
 
 
 def test_different_sizes_is_an_error():
@@ -144,7 +150,7 @@ def test_json_dict_has_every_number():
     sim = back["sims"][0]
     for key in ("path", "total", "on", "off", "on_off_ratio", "distance", "max_bin_error_share"):
         assert key in sim
-    assert sim["path"] == "half.npz" and sim["distance"] == pytest.approx(1.5)
+    assert sim["path"] == "half.npz" and sim["distance"] == pytest.approx(HALF_DISTANCE)
     assert sim["percent_error"]["total"][1] is None  # nan -> null
     assert sim["error_pixels"]["total"] == [0, 3, -1, 1, -2, 0, -1]
     assert back["edges"]["on"] == [0, 2, 4, 6, 8]
@@ -161,7 +167,7 @@ def test_to_text_table():
     )
     text = c.to_text()
     assert "real.aedat4 (real)" in text and "half.npz" in text
-    assert "-50.00%" in text and "1.5000" in text and "+37.50%" in text
+    assert "-50.00%" in text and f"{HALF_DISTANCE:.4f}" in text and "+37.50%" in text
 
 
 def test_aggregate_mean_and_std():
@@ -171,8 +177,8 @@ def test_aggregate_mean_and_std():
     assert mc.runs == 2
     s_mean, s_std = mc.mean["sims"][0], mc.std["sims"][0]
     assert s_mean["path"] == "sim"
-    assert s_mean["distance"] == pytest.approx(0.75)
-    assert s_std["distance"] == pytest.approx(1.5 / math.sqrt(2))  # sample std, ddof = 1
+    assert s_mean["distance"] == pytest.approx(HALF_DISTANCE / 2)
+    assert s_std["distance"] == pytest.approx(HALF_DISTANCE / math.sqrt(2))  # sample std, ddof = 1
     assert s_mean["total"] == pytest.approx(30) and s_std["total"] == pytest.approx(20 / math.sqrt(2))
     # bin [2,4): percent error 0 (both empty) in one run, undefined in the other -> mean 0, std null
     assert s_mean["percent_error"]["total"][1] == 0.0 and s_std["percent_error"]["total"][1] is None

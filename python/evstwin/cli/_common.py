@@ -50,3 +50,46 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (1 <= width <= 65535 and 1 <= height <= 65535):
         raise argparse.ArgumentTypeError(f"--size W,H must each be in 1..65535; got {text!r}")
     return width, height
+
+
+def add_region(p: argparse.ArgumentParser) -> None:
+    """``--roi``, ``--mask-pixels``, ``--mask-file`` and ``--mask-hot``: the pixels compared."""
+    p.add_argument("--roi", type=parse_roi, metavar="X0,Y0,W,H",
+                   help="compare only this rectangle of the sensor [px]: the recordings' events are cut to it "
+                        "and shifted to its corner, and scenarios simulate it alone (sensor.roi)")
+    p.add_argument("--mask-pixels", metavar="X,Y;X,Y",
+                   help="pixels (sensor coordinates) left out of both recordings' statistics, e.g. '187,261;5,9'")
+    p.add_argument("--mask-file", metavar="FILE",
+                   help="a text file of pixels to leave out, one 'x,y' or 'x y' a line ('#' comments)")
+    p.add_argument("--mask-hot", action="store_true",
+                   help="also leave out the real recording's hot pixels: counts improbable under a Poisson fit of "
+                        "the other pixels (at most 0.01 ordinary pixels flagged per recording; README, Validation)")
+
+
+def parse_roi(text: str) -> tuple[int, int, int, int]:
+    """``'980,520,300,200'`` -> (980, 520, 300, 200); whether it lies on the sensor is checked
+    once the sensor is known."""
+    from ..validation.region import Roi
+
+    try:
+        return Roi.of(text).as_tuple()
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).replace("roi takes", "--roi takes")) from None
+
+
+def region_args(args: argparse.Namespace) -> tuple[tuple[int, int, int, int] | None, list[tuple[int, int]], bool]:
+    """(roi, listed pixels, mask_hot) from the options of :func:`add_region`."""
+    from ..validation.region import parse_pixel_list, read_pixel_file
+
+    pixels: list[tuple[int, int]] = []
+    if args.mask_pixels:
+        try:
+            pixels += parse_pixel_list(args.mask_pixels)
+        except ValueError as exc:
+            raise ValueError(f"--mask-pixels {args.mask_pixels!r}: {exc}") from None
+    if args.mask_file:
+        try:
+            pixels += read_pixel_file(args.mask_file)
+        except OSError as exc:
+            raise ValueError(f"--mask-file {args.mask_file}: {exc.strerror or exc}") from None
+    return args.roi, pixels, bool(args.mask_hot)

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ._common import add_force, add_size, check_output_dir, check_output_file
+from ._common import add_force, add_region, add_size, check_output_dir, check_output_file, region_args
 
 
 def register(sub: Any) -> None:
@@ -43,6 +43,7 @@ def register(sub: Any) -> None:
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override a value of every scenario SIM, e.g. pixel.theta_on=0.25 (repeatable)")
     add_size(p)
+    add_region(p)
     add_force(p)
     p.set_defaults(func=cmd_compare)
 
@@ -105,7 +106,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from ..scenario import build
     from ..simulate import resolve_scenario, run_many
     from ..validation import compare_files, compare_runs
-    from ..validation.report import scan_recording
+    from ..validation.region import Roi, describe
+    from ..validation.report import region_mask, scan_recording
 
     if args.runs < 1:
         raise ValueError(f"--runs must be >= 1; got {args.runs}")
@@ -113,22 +115,34 @@ def cmd_compare(args: argparse.Namespace) -> int:
         raise ValueError(f"--bin-width must be > 0; got {args.bin_width}")
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration must be > 0 s; got {args.duration}")
+    roi, pixels, mask_hot = region_args(args)
     out = check_output_dir(args.out, args.force)
     # Everything is read and checked before a folder is made or a second simulated; the real
-    # recording is read in chunks (its per-pixel counts are all the comparison keeps).
-    real_rec, real_meta, _ = scan_recording(args.real, args.size, 0.0, 0.0)
-    width, height = real_rec.width, real_rec.height
+    # recording is read in chunks (its per-pixel counts are all the comparison keeps), cut to
+    # the ROI as it is read.
+    real_rec, real_meta, _ = scan_recording(args.real, args.size, 0.0, 0.0, roi=roi)
+    width, height = int(real_meta.get("sensor_width", real_rec.width)), int(real_meta.get("sensor_height", real_rec.height))
+    the_roi = None if roi is None else Roi.of(roi)
+    mask = region_mask(real_rec, real_meta, the_roi, pixels, mask_hot, sensor_size=(width, height))
     duration_s = args.duration if args.duration is not None else _span_s(real_rec, real_meta)
+    sets = list(args.sets)
+    if the_roi is not None:  # scenarios simulate the ROI alone: the cost follows its pixels
+        sets.append(f"sensor.roi=[{the_roi}]")
     for sim in args.sims:
         if _is_event_file(sim):
-            scan_recording(sim, None, 0.0, 0.0)  # readable, before anything is simulated
+            scan_recording(sim, None, 0.0, 0.0, roi=roi)  # readable, before anything is simulated
             continue
-        scene = build(resolve_scenario(sim, args.sets), duration_s=duration_s)
-        if (scene.width, scene.height) != (width, height):
+        scenario = resolve_scenario(sim, args.sets)
+        full = build(scenario, duration_s=duration_s)
+        if (full.width, full.height) != (width, height):
             raise ValueError(
-                f"scenario {sim!r} simulates a {scene.width}x{scene.height} sensor but {args.real} is "
+                f"scenario {sim!r} simulates a {full.width}x{full.height} sensor but {args.real} is "
                 f"{width}x{height}: set sensor.width/height (--set) or compare another scenario"
             )
+        if the_roi is not None:
+            build(resolve_scenario(sim, sets), duration_s=duration_s)
+    if the_roi is not None or mask is not None:
+        print(f"comparing {describe(the_roi, mask)}", file=sys.stderr)
     if not all(_is_event_file(sim) for sim in args.sims):
         source = "--duration" if args.duration is not None else "the real recording's span; --duration to change"
         print(f"simulating {duration_s:.6g} s per run ({source})", file=sys.stderr)
@@ -145,7 +159,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                 r.append(Path(sim))
             continue
         start = time.perf_counter()
-        results = run_many(sim, seeds=range(args.runs), duration_s=duration_s, sets=args.sets, progress=True)
+        results = run_many(sim, seeds=range(args.runs), duration_s=duration_s, sets=sets, progress=True)
         stem = Path(sim).stem if sim.endswith(".toml") else sim
         for seed, res in enumerate(results):
             path = out / f"{stem}_seed{seed}.h5"
@@ -153,13 +167,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
             runs[seed].append(path)
         print(f"simulated {sim}: {args.runs} run(s) of {duration_s:.6g} s in {time.perf_counter() - start:.1f} s",
               file=sys.stderr)
-    comparison = compare_files(args.real, runs[0], out, bin_width=args.bin_width, size=args.size)
+    comparison = compare_files(args.real, runs[0], out, bin_width=args.bin_width, size=args.size, roi=roi, mask=mask)
     report = comparison.to_json_dict()
     report["simulated_duration_s"] = duration_s
     print(comparison.to_text())
     if args.runs > 1:
         summary = compare_runs((real_rec, dict(real_meta, path=args.real)), runs, labels, out,
-                               bin_width=args.bin_width)
+                               bin_width=args.bin_width, roi=roi, mask=mask)
         report["monte_carlo"] = summary.to_json_dict()
         print(summary.to_text())
     with open(out / "compare.json", "w", encoding="utf-8") as fh:

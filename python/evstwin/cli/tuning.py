@@ -24,7 +24,7 @@ from ..tune import (
     parse_grid,
     sweep,
 )
-from ._common import add_force, add_size, check_output_dir
+from ._common import add_force, add_region, add_size, check_output_dir, region_args
 
 
 def register(subparsers: Any) -> None:
@@ -84,6 +84,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--out", help="output folder (default: <REAL stem>_fit)")
     add_size(p)
+    add_region(p)
     execution(p, "all cores; 2 with --scheduler local")
     p.set_defaults(func=_cmd_fit)
 
@@ -109,6 +110,7 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--resume", action="store_true", help="keep the finished rows of OUT/sweep.csv, run the rest"
     )
+    add_region(p)
     execution(p, "all cores; 2 with --scheduler local")
     p.set_defaults(func=_cmd_sweep)
 
@@ -172,6 +174,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     for text in args.sets:
         k, v = parse_assignment(text)
         scenario = set_value(scenario, k, v)
+    roi, pixels, mask_hot = region_args(args)
     out = check_output_dir(args.out if args.out else f"{Path(args.real).stem}_fit", args.force)
     events, meta = read_events(args.real, size=args.size)
     result = fit(
@@ -188,6 +191,9 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         sampler=args.sampler,
         batch_size=args.batch_size,
+        roi=roi,
+        mask_pixels=pixels,
+        mask_hot=mask_hot,
     )
     paths = result.write(out)
     paths.update(draw_fit(result, out))
@@ -213,6 +219,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ValueError(f"--real is for --objective match; got --objective {args.objective}")
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration must be > 0; got {args.duration}")
+    roi, pixels, mask_hot = region_args(args)
+    if args.objective != "match" and (roi is not None or pixels or mask_hot):
+        raise ValueError(f"--roi and the --mask options are for --objective match; got --objective {args.objective}")
     grid = parse_grid(args.grid)
     if not args.resume:
         check_output_dir(args.out, args.force)
@@ -233,6 +242,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         seed=args.seed,
         sets=args.sets,
         progress=not args.no_progress,
+        roi=roi,
+        mask_pixels=pixels,
+        mask_hot=mask_hot,
     )
     if result.csv_path is not None:
         draw_sweep(result)

@@ -218,10 +218,15 @@ def _fit_comparison(result: FitResult, out: Path) -> dict[str, Path]:
             result.real_events,
             {k: v for k, v in result.real_meta.items() if k in ("width", "height", "duration_s")},
         )
-    best = simulate(result.best_scenario, num_threads=1)
+    scenario = result.best_scenario
+    if result.roi is not None:  # the compared rectangle alone, as the fit simulated it
+        from ..scenario import set_value
+
+        scenario = set_value(scenario, "sensor.roi", list(result.roi))
+    best = simulate(scenario, num_threads=1)
     sim_path = out / "best_fit.h5"
     write_events(sim_path, best.events, best.meta)
-    comp = compare_files(real_path, [sim_path], out)
+    comp = compare_files(real_path, [sim_path], out, roi=result.roi, mask=result.mask)
     paths = {f"compare_{k}": Path(v) for k, v in comp.outputs.items()}
     paths["best_fit_events"] = sim_path
     return paths

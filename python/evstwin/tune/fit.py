@@ -71,6 +71,10 @@ class FitResult:
     executor: str = ""
     elapsed_s: float = 0.0
     failed: list[JobFailure] = field(default_factory=list)
+    roi: tuple[int, int, int, int] | None = None
+    """The compared rectangle (x0, y0, w, h) of the sensor; None: the whole sensor."""
+    mask: np.ndarray | None = field(default=None, repr=False)
+    """The (h, w) pixels of the compared region left out (listed and hot); None: none."""
 
     @property
     def best_trial(self) -> int:
@@ -124,6 +128,12 @@ class FitResult:
                 "executor": self.executor,
                 "elapsed_s": self.elapsed_s,
                 "distance_formula": DISTANCE_FORMULA,
+                "roi": list(self.roi) if self.roi is not None else None,
+                "masked_pixels": (
+                    [] if self.mask is None
+                    else [[int(x) + (self.roi[0] if self.roi else 0), int(y) + (self.roi[1] if self.roi else 0)]
+                          for y, x in np.argwhere(self.mask)]
+                ),
                 "failed": [dataclasses.asdict(f) for f in self.failed],
             }
         )
@@ -305,6 +315,9 @@ def fit(
     start: str | Mapping[str, float] | None = "scenario",
     bin_width: float = 2.0,
     nm_step: float = 0.1,
+    roi: Any = None,
+    mask_pixels: Sequence[tuple[int, int]] = (),
+    mask_hot: bool = False,
 ) -> FitResult:
     """Fit twin parameters to a real recording by minimising the comparison distance.
 
@@ -345,13 +358,15 @@ def fit(
         raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
     if not (isinstance(nm_step, (int, float)) and 0 < nm_step <= 0.5):
         raise ValueError(f"nm_step must be in (0, 0.5]; got {nm_step!r}")
-    objective = MatchObjective(real_events, real_meta, bin_width=bin_width)
+    objective = MatchObjective(
+        real_events, real_meta, bin_width=bin_width, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot
+    )
     base = load(scenario)
     sensor = build(base)
-    if (sensor.width, sensor.height) != (objective.width, objective.height):
+    if (sensor.width, sensor.height) != (objective.sensor_width, objective.sensor_height):
         raise ValueError(
             f"scenario sensor is {sensor.width}x{sensor.height} px but the real recording is "
-            f"{objective.width}x{objective.height}: set sensor.width / sensor.height"
+            f"{objective.sensor_width}x{objective.sensor_height}: set sensor.width / sensor.height"
         )
     keys, bnds = _resolve_bounds(params, bounds)
     _check_not_shadowed(base, keys, "fitted parameter")
@@ -495,6 +510,8 @@ def fit(
         executor=description,
         elapsed_s=time.perf_counter() - t0,
         failed=failed,
+        roi=None if objective.roi is None else objective.roi.as_tuple(),
+        mask=objective.mask,
     )
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -52,14 +52,40 @@ class MatchObjective(Objective):
     :data:`evstwin.validation.DISTANCE_FORMULA`), ``total_rel_error`` and
     ``on_off_ratio_rel_error`` (sim - real) / real, ``sim_events`` (count). The simulated
     duration is the real recording's.
+
+    roi: ``(x0, y0, w, h)`` [px] of the sensor (or ``'X0,Y0,W,H'``): the real events are cut
+    to it and shifted to its coordinates once, here, and every simulation runs the scenario
+    with ``sensor.roi`` set (only those w x h pixels are simulated). mask_pixels: (x, y)
+    pixels of the sensor left out of both recordings' statistics; mask_hot: also the real
+    recording's hot pixels (:func:`evstwin.validation.region.hot_pixels`, with
+    ``hot_false_alarms``). ``mask`` is the resulting (h, w) array (None: nothing masked).
+    A bad ROI, a listed pixel off the sensor, or nothing left to compare raise ValueError here,
+    before any job runs.
     """
 
     name = "match"
     metrics = ("distance", "total_rel_error", "on_off_ratio_rel_error", "sim_events")
     headline = ("distance",)
 
-    def __init__(self, real_events: np.ndarray, real_meta: Mapping[str, Any], bin_width: float = 2.0) -> None:
-        self.real_events = real_events
+    def __init__(
+        self,
+        real_events: np.ndarray,
+        real_meta: Mapping[str, Any],
+        bin_width: float = 2.0,
+        roi: Any = None,
+        mask_pixels: Sequence[tuple[int, int]] = (),
+        mask_hot: bool = False,
+        hot_false_alarms: float | None = None,
+    ) -> None:
+        from ..validation.region import (
+            HOT_FALSE_ALARMS,
+            Roi,
+            check_mask_leaves_pixels,
+            describe,
+            hot_pixels,
+            mask_array,
+        )
+
         self.real_meta = {
             k: v for k, v in real_meta.items() if k in ("width", "height", "duration_s", "path")
         }
@@ -67,15 +93,45 @@ class MatchObjective(Objective):
         self.duration_s = float(self.real_meta["duration_s"])
         if not self.duration_s > 0:
             raise ValueError(f"the real recording's duration must be > 0 s; got {self.duration_s:g}")
-        self.width = int(real_meta["width"])
-        self.height = int(real_meta["height"])
+        self.sensor_width = int(real_meta["width"])
+        self.sensor_height = int(real_meta["height"])
+        self.roi = None if roi is None else Roi.of(roi).check(self.sensor_width, self.sensor_height)
+        if self.roi is not None:
+            real_events = self.roi.crop(real_events)
+            self.real_meta["width"], self.real_meta["height"] = self.roi.width, self.roi.height
+        self.real_events = real_events
+        self.width = int(self.real_meta["width"])
+        self.height = int(self.real_meta["height"])
+        self.mask: np.ndarray | None = None
+        if mask_pixels or mask_hot:
+            mask = mask_array(mask_pixels, self.sensor_width, self.sensor_height, self.roi)
+            if mask_hot:
+                from ..analysis import pixel_counts
+
+                alarms = HOT_FALSE_ALARMS if hot_false_alarms is None else hot_false_alarms
+                mask |= hot_pixels(pixel_counts(real_events, self.width, self.height)["total"], mask, alarms)
+            check_mask_leaves_pixels(mask, self.roi)
+            self.mask = mask
+        self.region = describe(self.roi, self.mask)
         self.bin_width = float(bin_width)
+
+    def prepare(self, scenario: dict[str, Any]) -> dict[str, Any]:
+        if self.roi is None:
+            return scenario
+        from ..scenario import set_value
+
+        return set_value(scenario, "sensor.roi", list(self.roi.as_tuple()))
 
     def evaluate(self, result: Any) -> dict[str, float]:
         from ..validation import compare
 
         comp = compare(
-            self.real_events, self.real_meta, [(result.events, result.meta)], bin_width=self.bin_width
+            self.real_events,
+            self.real_meta,
+            [(result.events, result.meta)],
+            bin_width=self.bin_width,
+            mask=self.mask,
+            region=self.region,
         )
         s = comp.sims[0]
         return {
@@ -346,16 +402,22 @@ def make_objective(
     real: Recording | PathLike | None = None,
     target: str | None = None,
     bin_width: float = 2.0,
+    roi: Any = None,
+    mask_pixels: Sequence[tuple[int, int]] = (),
+    mask_hot: bool = False,
 ) -> Objective:
     """An :class:`Objective` from its name (``real`` is the recording of ``match``: events and
-    meta, or a file; ``target`` the target of ``detect``), or the object itself."""
+    meta, or a file; ``target`` the target of ``detect``; ``roi``, ``mask_pixels`` and
+    ``mask_hot`` those of :class:`MatchObjective`), or the object itself."""
     if isinstance(objective, Objective):
         return objective
+    if objective != "match" and (roi is not None or mask_pixels or mask_hot):
+        raise ValueError(f"roi and pixel masks are for objective 'match'; got objective {objective!r}")
     if objective == "match":
         if real is None:
             raise ValueError("objective 'match' needs a real recording (--real FILE)")
         events, meta = _read_real(real)
-        return MatchObjective(events, meta, bin_width=bin_width)
+        return MatchObjective(events, meta, bin_width=bin_width, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot)
     if objective == "detect":
         return DetectObjective(target=target)
     if objective == "noise":

@@ -209,6 +209,9 @@ def sweep(
     seed: int = 0,
     sets: Sequence[str] = (),
     progress: bool = False,
+    roi: Any = None,
+    mask_pixels: Sequence[tuple[int, int]] = (),
+    mask_hot: bool = False,
 ) -> SweepResult:
     """Evaluate every combination of ``grid`` over ``runs`` seeds (``seed .. seed+runs-1``).
 
@@ -219,6 +222,8 @@ def sweep(
         a moving target's label, default the first), 'noise', or an :class:`Objective`.
     duration_s: simulated duration [s] (default the scenario's; for 'match' the real one).
     sets: extra ``key=value`` overrides of the scenario.
+    roi, mask_pixels, mask_hot: for 'match', the region compared (see :class:`MatchObjective`):
+        ``(x0, y0, w, h)`` of the sensor, simulated alone; pixels left out.
     out_dir: where ``sweep.csv`` (rows, appended and flushed as each job finishes, rewritten
         sorted at the end), ``sweep_summary.csv`` and ``sweep.png`` go; an existing
         ``sweep.csv`` is an error unless ``resume``, which keeps its rows for this grid and runs
@@ -229,7 +234,7 @@ def sweep(
         raise ValueError(f"runs must be an integer >= 1; got {runs!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0; got {seed!r}")
-    obj = make_objective(objective, real=real, target=target)
+    obj = make_objective(objective, real=real, target=target, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot)
     base = load(scenario)
     for text in sets:
         k, v = parse_assignment(text)
@@ -248,9 +253,9 @@ def sweep(
         obj.check(build(obj.prepare(s)))
     if isinstance(obj, MatchObjective):
         w, h = build(base).width, build(base).height
-        if (w, h) != (obj.width, obj.height):
+        if (w, h) != (obj.sensor_width, obj.sensor_height):
             raise ValueError(
-                f"scenario sensor is {w}x{h} px but the real recording is {obj.width}x{obj.height}: "
+                f"scenario sensor is {w}x{h} px but the real recording is {obj.sensor_width}x{obj.sensor_height}: "
                 "set sensor.width / sensor.height"
             )
     seeds = [seed + k for k in range(runs)]

@@ -13,13 +13,19 @@
   crossing of a source over its pixel, against brightness and speed (the astrometry obstacle
   the paper names).
 
-The summary distance (0 for identical recordings, see :func:`compare`)::
+* :mod:`.region` -- a region of interest (:class:`~.region.Roi`), pixel masks and the
+  hot-pixel rule (:func:`~.region.hot_pixels`): which pixels a comparison looks at.
 
-    distance = (W1_total + W1_on + W1_off) / m_real + |rel. total error| + |rel. ON/OFF error|
+The summary distance (0 for identical recordings, finite for any two; see :func:`compare`)::
+
+    distance = (W1_total + W1_on + W1_off) / (m_real + 1/N)
+               + |ln((n_sim + 1/2) / (n_real + 1/2))| + |ln(O_sim / O_real)|
 
 where W1_k is the 1-Wasserstein distance between the real and simulated distributions over
-pixels of the per-pixel count of kind k (mean |sorted(real) - sorted(sim)|, the unbinned
-limit of the Fig. 7 histograms) and m_real is the real recording's mean per-pixel total count."""
+the N compared pixels of the per-pixel count of kind k (mean |sorted(real) - sorted(sim)|,
+the unbinned limit of the Fig. 7 histograms), m_real the real recording's mean per-pixel
+total, n the totals and O = (ON + 1/2) / (OFF + 1/2), the simulation's counts scaled to the
+real duration when the durations differ."""
 
 from __future__ import annotations
 

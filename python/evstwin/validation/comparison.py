@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -20,10 +21,13 @@ Recording = tuple[np.ndarray | CountedRecording, Mapping[str, Any]]
 
 
 DISTANCE_FORMULA = (
-    "(W1_total + W1_on + W1_off) / m_real + |total_rel_error| + |on_off_ratio_rel_error|; "
-    "W1_k = mean |sorted(real_k) - sorted(sim_k)| over pixels of the per-pixel count (or "
-    "rate) of kind k, m_real = mean per-pixel total of the real recording"
+    "sum_k W1_k / (m_real + 1/N) + |ln(R_sim / R_real)| + |ln(O_sim / O_real)|; k = total, ON, OFF; "
+    "W1_k = mean |sorted(real_k) - sorted(sim_k)| over the N compared pixels of the per-pixel count "
+    "(each simulated count scaled to the real duration when the durations differ), m_real = mean per-pixel "
+    "total of the real recording; R = events + 1/2, O = (ON + 1/2) / (OFF + 1/2), the simulation's counts "
+    "scaled to the real duration when the durations differ"
 )
+"""The summary distance of :func:`compare`, in one line (written into every report)."""
 
 
 @dataclass
@@ -60,6 +64,9 @@ class SimComparison:
     wasserstein: dict[str, float]
     distance: float
     max_bin_error_share: float
+    distance_terms: dict[str, float] = field(default_factory=dict)
+    """The three terms of ``distance``: ``w1`` (histogram shape and level), ``rate`` (total
+    rate) and ``polarity`` (ON/OFF balance)."""
 
     @property
     def label(self) -> str:
@@ -80,10 +87,15 @@ class Comparison:
     real_hist: dict[str, np.ndarray]
     adjustments: list[str] = field(default_factory=list)
     outputs: dict[str, str] = field(default_factory=dict)
+    masked_pixels: int = 0
+    """Pixels left out of every statistic (the ``mask`` of :func:`compare`)."""
+    region: str = ""
+    """The region compared, in words (ROI and mask; empty: the whole sensor)."""
 
     @property
     def pixel_count(self) -> int:
-        return self.real.pixel_count
+        """The pixels compared: the recording's, less the masked ones (the Fig. 9 share's base)."""
+        return self.real.pixel_count - self.masked_pixels
 
     @property
     def real_label(self) -> str:
@@ -91,7 +103,13 @@ class Comparison:
 
     def to_json_dict(self) -> dict[str, Any]:
         """Every number, JSON-ready (arrays as lists, inf and nan as null)."""
-        real = {"path": self.real_path, **self.real.to_dict(), "pixel_count": self.pixel_count}
+        real = {
+            "path": self.real_path,
+            **self.real.to_dict(),
+            "pixel_count": self.pixel_count,
+            "masked_pixels": self.masked_pixels,
+            "region": self.region,
+        }
         sims = []
         for s in self.sims:
             sims.append(
@@ -105,6 +123,7 @@ class Comparison:
                     "on_off_ratio_diff": s.on_off_ratio_diff,
                     "on_off_ratio_rel_error": s.on_off_ratio_rel_error,
                     "distance": s.distance,
+                    "distance_terms": s.distance_terms,
                     "max_bin_error_share": s.max_bin_error_share,
                     "wasserstein": s.wasserstein,
                     "histogram": s.hist,
@@ -168,8 +187,10 @@ class Comparison:
         unit = "events" if self.value_unit == "events" else "events/s"
         lines.append(
             f"histogram bin width {self.bin_width:g} {unit}; max err = largest |bin error| "
-            f"as a share of the {self.pixel_count} pixels"
+            f"as a share of the {self.pixel_count} pixels compared (Fig. 9)"
         )
+        if self.region:
+            lines.append(f"pixels: {self.region}")
         lines.append(f"distance = {DISTANCE_FORMULA}")
         lines.extend(f"note: {a}" for a in self.adjustments)
         return "\n".join(lines)
@@ -253,6 +274,8 @@ def compare(
     sims: Sequence[Recording],
     bin_width: float = 2,
     duration_rtol: float = 0.01,
+    mask: np.ndarray | None = None,
+    region: str = "",
 ) -> Comparison:
     """Compare a real recording with one or more simulations of the same sensor.
 
@@ -263,6 +286,11 @@ def compare(
         label; default 'real' and 'sim1', 'sim2', ...).
     bin_width: histogram bin width [events] (the paper: 2).
     duration_rtol: durations further apart than this relative tolerance are compared by rate.
+    mask: (height, width) bool, True = a pixel left out of every statistic of every recording
+        (its events are not counted in the totals, the ON/OFF balance or the histograms,
+        whose shares are of the N pixels left). Recordings cut to a region of interest are
+        compared as recordings of that region's size (:mod:`evstwin.validation.region`).
+    region: the region compared, in words, for the report.
 
     Different sensor sizes raise ValueError. Different durations: every per-pixel count is
     divided by its recording's duration and histogrammed in events/s with bin width
@@ -270,17 +298,28 @@ def compare(
     as rates, and the adjustment is written to ``adjustments``.
 
     The histograms of all recordings share one set of bin edges per kind, reaching the
-    largest value of any of them. ``distance`` per simulation (0 for identical recordings)::
+    largest value of any of them. ``distance`` per simulation, finite for any two recordings
+    (one with no OFF events, one with no events at all) and 0 for identical ones::
 
-        distance = (W1_total + W1_on + W1_off) / m_real
-                   + |total_rel_error| + |on_off_ratio_rel_error|
+        distance = (W1_total + W1_on + W1_off) / (m_real + 1/N)      "w1"
+                   + |ln(R_sim / R_real)|                              "rate"
+                   + |ln(O_sim / O_real)|                              "polarity"
 
-    with W1_k the 1-Wasserstein distance between the per-pixel count (or rate) distributions
-    of kind k (:func:`evstwin.analysis.wasserstein_1`) and m_real the real mean per-pixel
-    total. Each W1 term is dimensionless; a simulation that is the real one with every count
-    scaled by k scores 3 |k - 1|. If the real recording has no events, a W1 term is 0 when the
-    simulation has none either and inf otherwise. ``max_bin_error_share`` is the largest
-    |bin error| over the three histograms, as a share of the sensor's pixels (the paper's
+    * W1_k: the 1-Wasserstein distance between the per-pixel count distributions of kind k
+      over the N compared pixels (:func:`evstwin.analysis.wasserstein_1`), each simulated
+      count scaled by T_real / T_sim when compared by rate; m_real the real mean per-pixel
+      total. The ``1/N`` (one event shared by the pixels) keeps the term finite for an empty
+      real recording and changes it by a factor 1 / (1 + 1/total) otherwise.
+    * R = events + 1/2: the total, the simulation's scaled by T_real / T_sim when compared by
+      rate (so it is the rate times T_real, and half an event per real duration is added).
+    * O = (ON + 1/2) / (OFF + 1/2), counts scaled likewise: the ON/OFF ratio with the
+      Haldane-Anscombe 1/2, finite when either polarity is missing.
+
+    The logarithms make the terms symmetric (k times too many events costs what k times too
+    few does) and, for small errors, equal to the relative errors (``total_rel_error``,
+    ``on_off_ratio_rel_error``, still reported). A simulation that is the real one with every
+    count scaled by k scores about 3 |k - 1| + |ln k|. ``max_bin_error_share`` is the largest
+    |bin error| over the three histograms, as a share of the N pixels (the paper's Fig. 9,
     "less than 2 % of the total number of pixels").
     """
     if len(sims) == 0:
@@ -295,10 +334,27 @@ def compare(
                 f"sensor sizes differ: real {real_path} is {width}x{height}, simulation {p} is {w}x{h}; "
                 "simulate the real sensor's size"
             )
+    keep = np.ones((height, width), dtype=bool)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != (height, width):
+            raise ValueError(f"mask must be a (height, width) = ({height}, {width}) array; got shape {mask.shape}")
+        keep = ~mask
+    n_kept = int(np.count_nonzero(keep))
+    if n_kept == 0:
+        raise ValueError(f"the mask leaves no pixel of the {width}x{height} recording to compare")
+
+    def counted(events: np.ndarray | CountedRecording) -> dict[str, np.ndarray]:
+        counts = _pixel_counts(events, width, height)
+        return {k: np.asarray(v)[keep] for k, v in counts.items()}
 
     real_dur = _duration(real_events, real_meta)
-    real_stats = _stats(real_events, width, height, real_dur)
-    sim_stats = [_stats(e, width, height, _duration(e, m)) for e, m in sims]
+    real_counts = counted(real_events)
+    real_stats = _masked_stats(_stats(real_events, width, height, real_dur), real_counts, mask)
+    sim_counts = [counted(e) for e, _ in sims]
+    sim_stats = [
+        _masked_stats(_stats(e, width, height, _duration(e, m)), c, mask) for (e, m), c in zip(sims, sim_counts)
+    ]
     adjustments: list[str] = []
     differ = [
         (p, s.duration_s)
@@ -326,17 +382,16 @@ def compare(
         used_bw = float(bin_width)
         value_unit = "events"
 
-    def values(events: np.ndarray | CountedRecording, st: RecordingStats) -> dict[str, np.ndarray]:
+    def values(counts: dict[str, np.ndarray], st: RecordingStats) -> dict[str, np.ndarray]:
         # By rate, counts are rescaled to the real duration (count * T_real / T): the rate
         # times T_real. Binning these with the count bin width is binning rates with width
         # bin_width / T_real, and keeps the real recording's integer counts exact (no
         # rounding of count / T onto a bin edge).
-        counts = _pixel_counts(events, width, height)
         factor = real_dur / st.duration_s if by_rate else 1.0
         return {k: v * factor for k, v in counts.items()}
 
-    real_vals = values(real_events, real_stats)
-    sim_vals = [values(e, st) for (e, _), st in zip(sims, sim_stats)]
+    real_vals = values(real_counts, real_stats)
+    sim_vals = [values(c, st) for c, st in zip(sim_counts, sim_stats)]
     edges: dict[str, np.ndarray] = {}
     real_hist: dict[str, np.ndarray] = {}
     sim_hist: list[dict[str, np.ndarray]] = [{} for _ in sims]
@@ -347,7 +402,6 @@ def compare(
         for i, v in enumerate(sim_vals):
             _, sim_hist[i][k] = analysis.count_histogram(v[k], bin_width, max_count=top)
 
-    npix = width * height
     m_real = float(real_vals["total"].mean())
     results: list[SimComparison] = []
     for i, (path, st) in enumerate(zip(sim_paths, sim_stats)):
@@ -360,10 +414,7 @@ def compare(
             pe[(r == 0) & (s == 0)] = 0.0
             pct[k] = pe
         w1 = {k: analysis.wasserstein_1(real_vals[k], sim_vals[i][k]) for k in KINDS}
-        if m_real > 0:
-            w_term = sum(w1.values()) / m_real
-        else:
-            w_term = 0.0 if sum(w1.values()) == 0 else math.inf
+        terms = _distance_terms(w1, m_real, n_kept, real_stats, st, by_rate)
         if by_rate:  # report W1 in events/s like the histograms
             w1 = {k: v / real_dur for k, v in w1.items()}
         if by_rate:
@@ -383,11 +434,12 @@ def compare(
                 on_off_ratio_rel_error=ratio_rel,
                 hist=sim_hist[i],
                 error=err,
-                error_pixels={k: err[k] * npix for k in KINDS},
+                error_pixels={k: err[k] * n_kept for k in KINDS},
                 percent_error=pct,
                 wasserstein=w1,
-                distance=float(w_term + abs(tot_rel) + abs(ratio_rel)),
+                distance=float(sum(terms.values())),
                 max_bin_error_share=float(max(np.abs(err[k]).max() for k in KINDS)),
+                distance_terms=terms,
             )
         )
     return Comparison(
@@ -399,4 +451,39 @@ def compare(
         edges=edges,
         real_hist=real_hist,
         adjustments=adjustments,
+        masked_pixels=width * height - n_kept,
+        region=region,
     )
+
+
+def _masked_stats(st: RecordingStats, counts: Mapping[str, np.ndarray], mask: np.ndarray | None) -> RecordingStats:
+    """The recording's stats with the masked pixels' events taken out of the totals."""
+    if mask is None or not mask.any():
+        return st
+    on, off = int(counts["on"].sum()), int(counts["off"].sum())
+    total = on + off
+    return dataclasses.replace(
+        st,
+        total=total,
+        on=on,
+        off=off,
+        on_off_ratio=analysis.ratio(on, off),
+        mean_rate_hz=total / st.duration_s if st.duration_s > 0 else math.nan,
+    )
+
+
+def _distance_terms(
+    w1: Mapping[str, float], m_real: float, n_pixels: int, real: RecordingStats, sim: RecordingStats, by_rate: bool
+) -> dict[str, float]:
+    """The three terms of the distance (see :func:`compare`); finite for any counts."""
+    w_term = sum(w1.values()) / (m_real + 1.0 / n_pixels)
+    # Counts with half an event added, the simulation's scaled to the real duration when the
+    # durations differ (rates times T_real: equal rates give equal values), so an empty
+    # recording or a missing polarity stays finite, and a zero-length pair of equal
+    # durations compares by count.
+    f = real.duration_s / sim.duration_s if by_rate else 1.0
+    rate = abs(math.log((f * sim.total + 0.5) / (real.total + 0.5)))
+    polarity = abs(
+        math.log((f * sim.on + 0.5) / (f * sim.off + 0.5)) - math.log((real.on + 0.5) / (real.off + 0.5))
+    )
+    return {"w1": float(w_term), "rate": float(rate), "polarity": float(polarity)}

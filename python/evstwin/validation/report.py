@@ -20,6 +20,7 @@ from ..analysis import KINDS, nice_bin_s
 from ..sensor import EVENT_DTYPE
 from .comparison import Comparison, PathLike, _duration, _fmt, _label, _size, compare
 from .montecarlo import MonteCarloSummary, aggregate
+from .region import HOT_FALSE_ALARMS, Roi, RoiLike, check_mask_leaves_pixels, describe, hot_pixels, mask_array
 
 
 def compare_files(
@@ -33,6 +34,11 @@ def compare_files(
     t_offset_s: float = 0.0,
     rate_bin_s: float | None = None,
     size: tuple[int, int] | None = None,
+    roi: RoiLike | None = None,
+    mask_pixels: Sequence[tuple[int, int]] = (),
+    mask_hot: bool = False,
+    hot_false_alarms: float = HOT_FALSE_ALARMS,
+    mask: np.ndarray | None = None,
 ) -> Comparison:
     """Read the recordings (any format :func:`evstwin.io.read_events` takes, in chunks),
     compare them, and write ``out_dir/compare.json`` (every number) and the figures:
@@ -45,14 +51,37 @@ def compare_files(
     The written paths are in ``Comparison.outputs``. ``size`` (W, H) is the real recording's
     sensor size where its header has none. Every input is read and compared before
     ``out_dir`` is created.
+
+    roi: ``(x0, y0, w, h)`` (or ``'X0,Y0,W,H'``): compare only this rectangle of the real
+    sensor, every recording cut to it and shifted to its coordinates (a SIM already of the
+    ROI's size, simulated with ``sensor.roi``, is taken as it is). mask_pixels: (x, y) pixels
+    of the sensor left out of every statistic; mask_hot: also leave out the real recording's
+    hot pixels (:func:`evstwin.validation.region.hot_pixels`, ``hot_false_alarms``); mask: a
+    (h, w) bool array of the compared region, True = left out, added to those.
     """
     from .. import plots
 
     span_s = window_s * n_windows
     rate_bin_us = None if rate_bin_s is None else analysis._bin_us(rate_bin_s)
-    real_rec, real_meta, real_slice = scan_recording(real_path, size, t_offset_s, span_s, rate_bin_us=rate_bin_us)
-    sims = [scan_recording(p, None, t_offset_s, span_s, rate_bin_us=rate_bin_us) for p in sim_paths]
-    comp = compare(real_rec, real_meta, [(rec, meta) for rec, meta, _ in sims], bin_width=bin_width)
+    real_rec, real_meta, real_slice = scan_recording(
+        real_path, size, t_offset_s, span_s, rate_bin_us=rate_bin_us, roi=roi
+    )
+    the_roi = None if roi is None else Roi.of(roi)
+    found = region_mask(real_rec, real_meta, the_roi, mask_pixels, mask_hot, hot_false_alarms)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool) | (False if found is None else found)
+        check_mask_leaves_pixels(mask, the_roi)
+    else:
+        mask = found
+    sims = [scan_recording(p, None, t_offset_s, span_s, rate_bin_us=rate_bin_us, roi=the_roi) for p in sim_paths]
+    comp = compare(
+        real_rec,
+        real_meta,
+        [(rec, meta) for rec, meta, _ in sims],
+        bin_width=bin_width,
+        mask=mask,
+        region=describe(the_roi, mask),
+    )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     w, h = comp.real.width, comp.real.height
@@ -77,21 +106,28 @@ def compare_runs(
     labels: Sequence[str],
     out_dir: PathLike,
     bin_width: float = 2,
+    roi: RoiLike | None = None,
+    mask: np.ndarray | None = None,
 ) -> MonteCarloSummary:
     """The Monte Carlo of N runs (the paper's 20 seeds): compare the real recording (read by
     :func:`scan_recording`) with each run's simulated files (``runs[i]``: one path per
     simulation, called ``labels[j]``), aggregate, and draw ``out_dir/percent_error_mc.png``
-    and ``bin_error_mc.png`` (mean +- 1 std). Returns the summary."""
+    and ``bin_error_mc.png`` (mean +- 1 std). Returns the summary. ``real`` is already cut to
+    ``roi`` (as :func:`scan_recording` with ``roi`` gives it); the runs are cut here, and
+    ``mask`` (a (h, w) bool array of the ROI, True = left out) applies to all."""
     from .. import plots
 
     rec, meta = real
+    the_roi = None if roi is None else Roi.of(roi)
     comparisons = []
     for paths in runs:
         sims = []
         for path, label in zip(paths, labels):
-            sim_rec, sim_meta, _ = scan_recording(path, None, 0.0, 0.0)
+            sim_rec, sim_meta, _ = scan_recording(path, None, 0.0, 0.0, roi=the_roi)
             sims.append((sim_rec, dict(sim_meta, path=label)))
-        comparisons.append(compare(rec, meta, sims, bin_width=bin_width))
+        comparisons.append(
+            compare(rec, meta, sims, bin_width=bin_width, mask=mask, region=describe(the_roi, mask))
+        )
     summary = aggregate(comparisons)
     plots.plot_monte_carlo(summary, Path(out_dir))
     return summary
@@ -110,6 +146,38 @@ def _span_s(rec: analysis.CountedRecording) -> float | None:
     return None if rec.t_start_us is None else (rec.t_end_us - rec.t_start_us + 1) * 1e-6
 
 
+def region_mask(
+    real: analysis.CountedRecording,
+    real_meta: Mapping[str, Any],
+    roi: Roi | None,
+    mask_pixels: Sequence[tuple[int, int]] = (),
+    mask_hot: bool = False,
+    hot_false_alarms: float = HOT_FALSE_ALARMS,
+    sensor_size: tuple[int, int] | None = None,
+) -> np.ndarray | None:
+    """The (h, w) mask of the compared region (the ROI, else the sensor): the listed pixels
+    (sensor coordinates) and, with ``mask_hot``, the real recording's hot pixels; None when
+    nothing is masked. ``sensor_size``: the sensor's (width, height) (default: the recording's
+    own, which is the ROI's once cut, so give it whenever ``roi`` is set and pixels are
+    listed). ValueError when no pixel is left."""
+    if not mask_pixels and not mask_hot:
+        return None
+    w, h = sensor_size if sensor_size is not None else (int(real_meta["width"]), int(real_meta["height"]))
+    if roi is not None and sensor_size is None:
+        w, h = _sensor_size(real_meta, roi)
+    mask = mask_array(mask_pixels, w, h, roi)
+    if mask_hot:
+        mask |= hot_pixels(real.pixel_counts()["total"], mask, hot_false_alarms)
+    check_mask_leaves_pixels(mask, roi)
+    return mask
+
+
+def _sensor_size(meta: Mapping[str, Any], roi: Roi) -> tuple[int, int]:
+    """The full sensor's size of a recording cut to ``roi`` (its meta keeps the file's size
+    under 'sensor_width'/'sensor_height')."""
+    return int(meta.get("sensor_width", roi.x0 + roi.width)), int(meta.get("sensor_height", roi.y0 + roi.height))
+
+
 READ_CHUNK = 1_000_000
 """Events read at a time by the file-level functions (about 13 MB)."""
 
@@ -122,20 +190,42 @@ def scan_recording(
     *,
     chunk: int | None = None,
     rate_bin_us: int | None = None,
+    roi: RoiLike | None = None,
 ) -> tuple[analysis.CountedRecording, dict[str, Any], np.ndarray]:
     """One pass over a recording, ``chunk`` events (default :data:`READ_CHUNK`) at a time:
     its :class:`~evstwin.analysis.CountedRecording` (event-rate bins of ``rate_bin_us``,
     default chosen as it goes), its meta (with the size found from the events where the file
     has none), and the events of the figures' slice [first + t_offset_s, first + t_offset_s +
-    span_s), preceded by the first event (the figures measure their offset from it)."""
+    span_s), preceded by the first event (the figures measure their offset from it).
+
+    roi: cut every chunk to this rectangle of the file's sensor and shift it to the ROI's
+    coordinates (the result is a ``w x h`` recording; ``meta['roi']`` says which), after
+    checking the ROI lies on the sensor; a file that is already of the ROI's size (simulated
+    with ``sensor.roi``) is read as it is. The figures' slice starts at the first event inside
+    the ROI."""
     from ..io import iter_events
 
     stream = iter_events(path, chunk=chunk or READ_CHUNK, size=size)
     meta = dict(stream.meta)
+    cut: Roi | None = None
+    if roi is not None:
+        r = Roi.of(roi)
+        if (meta.get("width"), meta.get("height")) != (r.width, r.height):
+            if meta.get("width") is not None and meta.get("height") is not None:
+                r.check(int(meta["width"]), int(meta["height"]), f"{path}: roi")
+            cut = r
+        meta["width"], meta["height"] = r.width, r.height
     rec = analysis.CountedRecording.empty(meta.get("width"), meta.get("height"), rate_bin_us)
     parts: list[np.ndarray] = []
     lo = hi = 0
+    first_us: int | None = None  # the whole recording's span, before the cut
+    last_us = 0
     for ev in stream:
+        if cut is not None and len(ev):
+            t = ev["t"]
+            first_us = int(t.min()) if first_us is None else min(first_us, int(t.min()))
+            last_us = max(last_us, int(t.max()))
+            ev = cut.crop(ev)
         if len(ev) == 0:
             continue
         if rec.t_start_us is None:
@@ -148,6 +238,14 @@ def scan_recording(
             parts.append(ev[(ev["t"] >= lo) & (ev["t"] < hi)])
     meta = dict(stream.meta)  # with the size found from the events where the file has none
     meta.setdefault("path", str(path))
+    if roi is not None:
+        r = Roi.of(roi)
+        if cut is not None:  # a file without a size: its events' extent is the sensor's
+            r.check(int(meta["width"]), int(meta["height"]), f"{path}: roi")
+            meta["sensor_width"], meta["sensor_height"] = int(meta["width"]), int(meta["height"])
+            if first_us is not None:  # the ROI's duration is the recording's, not its own events' span
+                meta.setdefault("duration_s", (last_us - first_us) * 1e-6)
+        meta["width"], meta["height"], meta["roi"] = r.width, r.height, str(r)
     width, height = _size(meta, str(path))
     if width < 1 or height < 1:
         raise ValueError(f"{path}: no events and no sensor size in the file; give the size (--size W,H)")
