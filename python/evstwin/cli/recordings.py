@@ -9,7 +9,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ._common import add_force, add_region, add_size, check_output_dir, check_output_file, region_args
+from ._common import (
+    add_force,
+    add_region,
+    add_size,
+    check_output_dir,
+    check_output_file,
+    parse_roi,
+    region_args,
+)
 
 
 def register(sub: Any) -> None:
@@ -61,7 +69,7 @@ def register(sub: Any) -> None:
     p = sub.add_parser("calibrate-noise",
                        help="measure the background activity of a static or dark recording as scenario TOML")
     p.add_argument("file", help="event file in any format read_events takes (a static or dark scene)")
-    p.add_argument("--roi", type=_roi, metavar="X0,Y0,W,H",
+    p.add_argument("--roi", type=parse_roi, metavar="X0,Y0,W,H",
                    help="window measured [px]: corner x0, y0 and size (default: the whole sensor)")
     p.add_argument("-o", "--output",
                    help="scenario TOML to write (default: none; the TOML goes to stdout, the summary to stderr)")
@@ -203,15 +211,6 @@ def cmd_timing(args: argparse.Namespace) -> int:
     print(text)
     print(f"wrote {png} and {out / 'timing_bias.json'}")
     return 0
-
-
-def _roi(text: str) -> tuple[int, int, int, int]:
-    from ..validation.noise import parse_roi
-
-    try:
-        return parse_roi(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def cmd_calibrate_noise(args: argparse.Namespace) -> int:

@@ -483,15 +483,6 @@ def engine_rate(rho: float, dead_s: float) -> tuple[float, bool]:
 # --- the recording -----------------------------------------------------------------------------
 
 
-def parse_roi(text: str) -> tuple[int, int, int, int]:
-    """``'980,520,300,200'`` -> (x0, y0, width, height)."""
-    try:
-        x0, y0, w, h = (int(v) for v in text.split(","))
-    except ValueError:
-        raise ValueError(f"--roi takes X0,Y0,W,H in pixels (e.g. 980,520,300,200); got {text!r}") from None
-    return x0, y0, w, h
-
-
 def _check_roi(roi: Sequence[int] | None, width: int, height: int) -> tuple[int, int, int, int]:
     if roi is None:
         return 0, 0, width, height
