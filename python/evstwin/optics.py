@@ -1,6 +1,6 @@
 """Optics and photometry: from a star's magnitude (or a lab source) to photons/s on the sensor.
 
-The output of this module is what the PSF (``psf.py``) spreads over the pixels: the photon
+The output of this module is what the PSF (``evstwin.psf``) spreads over the pixels: the photon
 flux of a point source at the focal plane [photons/s], its position in pixel coordinates and
 the width of its image [px].
 
