@@ -100,6 +100,7 @@ def test_python_dash_m_works() -> None:
     assert done.stdout.startswith("evstwin 0.")
     listed = subprocess.run([sys.executable, "-m", "evstwin", "scenarios"], capture_output=True, text=True, check=True)
     assert "mcreynolds-run3" in listed.stdout and "geo-stare" in listed.stdout
+    assert "imx636-pointsource" in listed.stdout
 
 
 def test_timing_compares_bias_settings(simulated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -41,7 +41,8 @@ def spinning(rate_hz: float, max_shift_px: float = 0.25, sparse: bool = True, no
 
 def test_builtin_scenarios_build() -> None:
     names = builtin_names()
-    for required in ("mcreynolds", "mcreynolds-run1", "mcreynolds-run2", "mcreynolds-run3", "geo-stare"):
+    for required in ("mcreynolds", "mcreynolds-run1", "mcreynolds-run2", "mcreynolds-run3", "geo-stare",
+                     "imx636-pointsource"):
         assert required in names
     run3 = build("mcreynolds-run3")
     assert (round(run3.params.theta_on, 4), round(run3.params.theta_off, 4)) == (0.2577, 0.218)
