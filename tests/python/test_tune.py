@@ -656,3 +656,33 @@ def test_sweep_says_what_it_will_run_and_labels_its_figure(tmp_path: Path,
     assert readable("pixel.theta_on") == "ON threshold theta_on (log units)"
     assert readable("targets.0.wx_arcsec_s") == "wx (arcsec/s)"  # unknown keys: the unit of the suffix
     assert tune.draw_sweep(result).is_file()
+
+
+def test_fit_intervals_from_the_distance_curvature_bracket_the_best() -> None:
+    real = simulate(recovery_scenario(0.3, 0.2, 2000.0), seed=123, num_threads=1)
+    with pytest.raises(ValueError, match=r"intervals=True needs runs_per_trial >= 2.*runs_per_trial=1"):
+        tune.fit(real.events, real.meta, recovery_scenario(0.3, 0.2, 2000.0), params=["theta_on"], budget=2,
+                 intervals=True)
+    result = tune.fit(
+        real.events,
+        real.meta,
+        recovery_scenario(0.33, 0.2, 2000.0),
+        params=["theta_on", "theta_off"],
+        budget=16,
+        runs_per_trial=2,
+        seed=0,
+        workers=2,
+        intervals=True,
+    )
+    assert len(result.history) <= 16  # the probes are not search trials
+    for key in ("pixel.theta_on", "pixel.theta_off"):
+        lo, hi = result.intervals[key]
+        b = result.bounds[key]
+        assert b.low <= lo <= result.best_params[key] <= hi <= b.high
+        assert hi > lo
+    # theta_on is well constrained by the flickering sources: its interval is far narrower
+    # than its bound.
+    lo, hi = result.intervals["pixel.theta_on"]
+    b = result.bounds["pixel.theta_on"]
+    assert (hi - lo) < 0.5 * (b.high - b.low)
+    assert "interval" in result.to_text() and result.to_json_dict()["intervals"]

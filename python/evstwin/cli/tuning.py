@@ -63,6 +63,9 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--budget", type=int, default=40, help="number of trials (default 40)")
     p.add_argument("--runs-per-trial", type=int, default=1, help="seeds averaged per trial (default 1)")
+    p.add_argument("--intervals", action="store_true",
+                   help="also give each parameter an interval from the distance's curvature at the best (2 more "
+                        "trials a parameter; needs --runs-per-trial >= 2; default: off)")
     p.add_argument("--seed", type=int, default=0, help="sampler seed and first simulation seed (default 0)")
     p.add_argument(
         "--sampler",
@@ -194,6 +197,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         roi=roi,
         mask_pixels=pixels,
         mask_hot=mask_hot,
+        intervals=args.intervals,
     )
     paths = result.write(out)
     paths.update(draw_fit(result, out))

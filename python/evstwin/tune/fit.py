@@ -75,6 +75,10 @@ class FitResult:
     """The compared rectangle (x0, y0, w, h) of the sensor; None: the whole sensor."""
     mask: np.ndarray | None = field(default=None, repr=False)
     """The (h, w) pixels of the compared region left out (listed and hot); None: none."""
+    intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Each parameter's interval from the distance's curvature at the best (``intervals=True``):
+    the values that raise the mean distance by its own seed-to-seed standard error (see
+    :func:`fit`); empty when not asked for."""
 
     @property
     def best_trial(self) -> int:
@@ -83,13 +87,15 @@ class FitResult:
 
     def to_text(self) -> str:
         """The best parameters and distance as a table, for a terminal."""
-        rows = [("parameter", "best", "low", "high", "scale")]
+        rows = [("parameter", "best", "interval", "low", "high", "scale")]
         for p in self.params:
             b = self.bounds[p]
+            iv = self.intervals.get(p)
             rows.append(
-                (p, f"{self.best_params[p]:.6g}", f"{b.low:g}", f"{b.high:g}", "log" if b.log else "lin")
+                (p, f"{self.best_params[p]:.6g}", f"{iv[0]:.4g}..{iv[1]:.4g}" if iv else "-", f"{b.low:g}",
+                 f"{b.high:g}", "log" if b.log else "lin")
             )
-        widths = [max(len(r[i]) for r in rows) for i in range(5)]
+        widths = [max(len(r[i]) for r in rows) for i in range(6)]
         lines = [
             "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
             for r in rows
@@ -110,6 +116,7 @@ class FitResult:
             {
                 "best_params": self.best_params,
                 "best_distance": self.best_distance,
+                "intervals": {k: list(v) for k, v in self.intervals.items()},
                 "best_trial": self.best_trial,
                 "params": self.params,
                 "bounds": {
@@ -318,6 +325,7 @@ def fit(
     roi: Any = None,
     mask_pixels: Sequence[tuple[int, int]] = (),
     mask_hot: bool = False,
+    intervals: bool = False,
 ) -> FitResult:
     """Fit twin parameters to a real recording by minimising the comparison distance.
 
@@ -342,6 +350,13 @@ def fit(
         None (the middle of the bounds).
     scheduler, workers: where jobs run (see :func:`make_executor`). progress: a tqdm bar on
         stderr.
+    intervals: after the search, probe each parameter at the best +- 0.05 of its (log) bound
+        width with the same seeds (2 trials a parameter beyond the budget) and give it the
+        interval over which a parabola through those distances rises by the best trial's
+        standard error over its seeds: an uncertainty from the curvature of the distance,
+        in the sense "changes the simulator cannot tell from its own noise". Needs
+        runs_per_trial >= 2 (the noise is measured, not assumed). A flat or concave profile
+        gives the whole bound.
     """
     optuna = require("optuna")
 
@@ -356,6 +371,9 @@ def fit(
             raise ValueError(f"{name} must be an integer >= {low}; got {value!r}")
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
+    if intervals and runs_per_trial < 2:
+        raise ValueError("intervals=True needs runs_per_trial >= 2 (the distance's noise is measured over the "
+                         f"seeds); got runs_per_trial={runs_per_trial}")
     if not (isinstance(nm_step, (int, float)) and 0 < nm_step <= 0.5):
         raise ValueError(f"nm_step must be in (0, 0.5]; got {nm_step!r}")
     objective = MatchObjective(
@@ -485,6 +503,15 @@ def fit(
     if not finite:
         raise RuntimeError(f"every fit trial failed; first error: {history[0].error if history else 'none'}")
     best_rec = min(finite, key=lambda r: (r.distance, r.trial))
+    found: dict[str, tuple[float, float]] = {}
+    if intervals:
+        # The probes run like trials but stay out of the history (they are not the search's).
+        executor, bar, n_searched = make_executor(scheduler, workers), None, len(history)
+        try:
+            found = _curvature_intervals(run_trials, scaler, best_rec)
+        finally:
+            executor.close()
+            del history[n_searched:]
     best_scenario = base
     for k in keys:
         best_scenario = set_value(best_scenario, k, best_rec.params[k])
@@ -512,7 +539,54 @@ def fit(
         failed=failed,
         roi=None if objective.roi is None else objective.roi.as_tuple(),
         mask=objective.mask,
+        intervals=found,
     )
+
+
+INTERVAL_STEP = 0.05
+"""The probe step of fit's intervals, as a share of each parameter's (log) bound width."""
+
+
+def _curvature_intervals(
+    run_trials: Callable[[list[dict[str, float]], str], list[TrialRecord]], scaler: _Scaler, best: TrialRecord
+) -> dict[str, tuple[float, float]]:
+    """fit(intervals=True): per parameter, d(u) ~ d0 + c (u - u0)^2 / 2 from the best and two
+    probes (the stencil kept inside [0, 1]); the interval is u0 +- sqrt(2 sigma / c) with sigma
+    the standard error of the best's mean distance over its seeds."""
+    sigma = float(np.std(best.run_distances, ddof=1) / math.sqrt(len(best.run_distances)))
+    u0 = scaler.to_unit(best.params)
+    h = INTERVAL_STEP
+    points = []
+    centres = []
+    for i in range(len(scaler.keys)):
+        c = min(max(float(u0[i]), h), 1.0 - h)  # the stencil's centre, inside the bounds
+        centres.append(c)
+        for du in (-h, h):
+            u = u0.copy()
+            u[i] = c + du
+            points.append(scaler.from_unit(u))
+    # The centre itself, where it moved off the best (a best on a bound).
+    extra = [i for i, c in enumerate(centres) if c != u0[i]]
+    for i in extra:
+        u = u0.copy()
+        u[i] = centres[i]
+        points.append(scaler.from_unit(u))
+    recs = run_trials(points, "interval")
+    out: dict[str, tuple[float, float]] = {}
+    for i, key in enumerate(scaler.keys):
+        d_lo, d_hi = recs[2 * i].distance, recs[2 * i + 1].distance
+        d_c = recs[2 * len(scaler.keys) + extra.index(i)].distance if i in extra else best.distance
+        curvature = (d_lo + d_hi - 2.0 * d_c) / (h * h)
+        lo_u, hi_u = 0.0, 1.0
+        if math.isfinite(curvature) and curvature > 0.0 and sigma > 0.0:
+            half = math.sqrt(2.0 * sigma / curvature)
+            lo_u, hi_u = max(0.0, float(u0[i]) - half), min(1.0, float(u0[i]) + half)
+        lo = u0.copy()
+        lo[i] = lo_u
+        hi = u0.copy()
+        hi[i] = hi_u
+        out[key] = (scaler.from_unit(lo)[key], scaler.from_unit(hi)[key])
+    return out
 
 
 def _nelder_mead(
