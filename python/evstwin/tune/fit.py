@@ -589,6 +589,16 @@ def _curvature_intervals(
     return out
 
 
+NM_STALL_TRIALS_PER_PARAM = 4
+"""fit's Nelder-Mead restarts when this many trials per fitted parameter (at least 10) pass
+without a new best: on a noisy distance the simplex otherwise keeps shrinking around a point
+of a valley, spending the budget on differences below the seed-to-seed noise."""
+
+
+class _Stalled(Exception):
+    """Raised inside the Nelder-Mead objective when no new best came for a while."""
+
+
 def _nelder_mead(
     run_trials: Callable[[list[dict[str, float]], str], list[TrialRecord]],
     scaler: _Scaler,
@@ -596,43 +606,64 @@ def _nelder_mead(
     budget: int,
     step: float,
 ) -> None:
-    """SciPy's bounded Nelder-Mead on [0, 1]^n from x0, restarted from the best point with a
-    halved simplex while trials remain and a restart improves (one trial per evaluation)."""
+    """SciPy's bounded Nelder-Mead on [0, 1]^n from x0 (one trial per evaluation), restarted
+    from the best point with a fresh simplex until the budget is spent: when SciPy's run
+    converges, and when NM_STALL_TRIALS_PER_PARAM x n trials pass without a new best. A restart
+    keeps the edge while the previous run improved the best and halves it otherwise (down to
+    step / 8, then it starts again from step), and points the simplex the other way each
+    time. Deterministic: no random numbers."""
     from scipy.optimize import minimize
 
+    n = x0.size
+    stall_after = max(10, NM_STALL_TRIALS_PER_PARAM * n)
     used = [0]
     cache: dict[bytes, float] = {}
+    best_u, best_f = np.clip(x0, 0.0, 1.0), [math.inf]
+    since_best = [0]
 
     def f(u: np.ndarray) -> float:
+        nonlocal best_u
         u = np.clip(u, 0.0, 1.0)
         key = u.tobytes()
         if key in cache:  # scipy re-evaluates clipped points: no new simulation
             return cache[key]
         if used[0] >= budget:
             raise _BudgetSpent
+        if since_best[0] >= stall_after:
+            raise _Stalled
         used[0] += 1
         d = run_trials([scaler.from_unit(u)], "nm")[0].distance
         cache[key] = d if math.isfinite(d) else math.inf
+        if cache[key] < best_f[0]:
+            best_u, best_f[0], since_best[0] = u.copy(), cache[key], 0
+        else:
+            since_best[0] += 1
         return cache[key]
 
-    n = x0.size
-    best_u, best_f = np.clip(x0, 0.0, 1.0), math.inf
-    while used[0] < budget and step > 1e-3:
-        # Initial simplex: x0 and one vertex per axis, stepped towards the middle of the box.
-        direction = np.where(best_u < 0.5, 1.0, -1.0)
-        simplex = np.vstack([best_u] + [best_u + step * direction[i] * np.eye(n)[i] for i in range(n)])
+    edge, restart = step, 0
+    while used[0] < budget:
+        before = best_f[0]
+        since_best[0] = 0
+        # The simplex: the best point and one vertex per axis, stepped towards the middle of
+        # the box on the first run, then alternately away from it and towards it.
+        direction = np.where(best_u < 0.5, 1.0, -1.0) * (-1.0 if restart % 2 else 1.0)
+        vertices = [np.clip(best_u + edge * direction[i] * np.eye(n)[i], 0.0, 1.0) for i in range(n)]
+        for i, v in enumerate(vertices):  # a vertex clipped onto the best: step the other way
+            if np.array_equal(v, best_u):
+                vertices[i] = np.clip(best_u - edge * direction[i] * np.eye(n)[i], 0.0, 1.0)
         try:
-            res = minimize(
+            minimize(
                 f,
                 best_u,
                 method="Nelder-Mead",
                 bounds=[(0.0, 1.0)] * n,
-                options={"initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-4, "maxfev": 10 * budget},
+                options={"initial_simplex": np.vstack([best_u, *vertices]), "xatol": 1e-3, "fatol": 1e-4,
+                         "maxfev": 10 * budget},
             )
-            u, value = np.clip(res.x, 0.0, 1.0), float(res.fun)
         except _BudgetSpent:
             return
-        if not value < best_f and math.isfinite(best_f):
-            return  # a restart that does not improve: converged
-        best_u, best_f = u, min(value, best_f)
-        step /= 2.0
+        except _Stalled:
+            pass
+        restart += 1
+        if not best_f[0] < before:
+            edge = edge / 2.0 if edge > step / 8.0 * 1.0001 else step
