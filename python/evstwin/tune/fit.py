@@ -238,8 +238,10 @@ SAMPLERS = ("nm", "tpe+nm", "tpe", "cmaes", "random")
 
 * ``nm`` (default): SciPy's bounded Nelder-Mead from the starting point, in coordinates
   scaled to [0, 1] over each bound (log-scaled where the bound is), restarted from the best
-  point while the budget lasts. Local and deterministic: the automated form of the paper's
-  sec. 3.3 hand tuning. Trials run one after another (the runs of a trial in parallel).
+  point with a fresh simplex whenever SciPy's run converges or stalls (no new best in
+  :data:`NM_STALL_TRIALS_PER_PARAM` trials a parameter), until the budget is spent. Local and
+  deterministic: the automated form of the paper's sec. 3.3 hand tuning. Trials run one after
+  another (the runs of a trial in parallel).
 * ``tpe``: Optuna's multivariate TPE (seeded), global, trials batched to the workers with
   ask/tell. ``random``: Optuna's seeded random sampler, the same way.
 * ``tpe+nm``: TPE for half the budget, then Nelder-Mead from the best point found.
