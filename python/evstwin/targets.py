@@ -409,32 +409,35 @@ class TabulatedTarget(Target):
 @dataclass(frozen=True, eq=False)
 class DriftingTarget(Target):
     """A target given in field coordinates, carried by a field that drifts across the sensor
-    at (vx_px_s, vy_px_s) [px/s]: ``sensor position = target.position_px(t) + v t`` (field and
+    at (vx_px_s, vy_px_s) [px/s] and seen through an offset (dx_px, dy_px) [px] (a sensor
+    window's coordinates): ``position = target.position_px(t) + (dx, dy) + v t`` (field and
     sensor coordinates coincide at t = 0, the start of a simulation). Its velocity is its own
     plus the drift; brightness and label are the target's.
 
-    Use :func:`drifting`, which gives a plain LinearTarget where the sum is one (static and
-    linear targets), and this wrapper for the others.
+    Use :func:`drifting` and :func:`shifted`, which give the plain kind of target where the
+    result is one (static, linear, circular, tabulated), and this wrapper for the others.
     """
 
     target: Target
     vx_px_s: float
     vy_px_s: float
+    dx_px: float = 0.0
+    dy_px: float = 0.0
     brightness: Brightness = dataclasses.field(init=False)
     label: str = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.target, Target):
             raise TypeError(f"target must be a Target; got {self.target!r}")
-        _finite("vx_px_s", self.vx_px_s)
-        _finite("vy_px_s", self.vy_px_s)
+        for name in ("vx_px_s", "vy_px_s", "dx_px", "dy_px"):
+            _finite(name, getattr(self, name))
         object.__setattr__(self, "brightness", self.target.brightness)
         object.__setattr__(self, "label", self.target.label)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         t = _times(t_s)
         x, y = self.target.position_px(t)
-        return x + self.vx_px_s * t, y + self.vy_px_s * t
+        return x + self.dx_px + self.vx_px_s * t, y + self.dy_px + self.vy_px_s * t
 
     def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         vx, vy = self.target.velocity_px_s(t_s)
@@ -445,6 +448,8 @@ class DriftingTarget(Target):
         the bound |own| + |drift| (reached by a circular target once per turn), which only
         ever samples more finely than needed."""
         inner = self.target
+        if self.vx_px_s == 0.0 and self.vy_px_s == 0.0:
+            return inner.max_speed_px_s(t0_s, t1_s)
         if isinstance(inner, TabulatedTarget) and inner.t_s.size >= 2:
             t0, t1 = _interval(t0_s, t1_s)
             inner._check_range(np.array([t0, t1]), "t0_s/t1_s")
@@ -478,41 +483,11 @@ def drifting(target: Target, vx_px_s: float, vy_px_s: float) -> Target:
     return DriftingTarget(target, vx, vy)
 
 
-@dataclass(frozen=True, eq=False)
-class OffsetTarget(Target):
-    """``target`` seen in coordinates shifted by (dx_px, dy_px): ``position = target's +
-    (dx, dy)``; velocity, brightness and label are the target's. :func:`shifted` gives the
-    plain target where it can (static, linear, circular, tabulated) and this wrapper otherwise."""
-
-    target: Target
-    dx_px: float
-    dy_px: float
-    brightness: Brightness = dataclasses.field(init=False)
-    label: str = dataclasses.field(init=False)
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.target, Target):
-            raise TypeError(f"target must be a Target; got {self.target!r}")
-        _finite("dx_px", self.dx_px)
-        _finite("dy_px", self.dy_px)
-        object.__setattr__(self, "brightness", self.target.brightness)
-        object.__setattr__(self, "label", self.target.label)
-
-    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        x, y = self.target.position_px(t_s)
-        return x + self.dx_px, y + self.dy_px
-
-    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        return self.target.velocity_px_s(t_s)
-
-    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
-        return self.target.max_speed_px_s(t0_s, t1_s)
-
-
 def shifted(target: Target, dx_px: float, dy_px: float) -> Target:
     """``target`` in coordinates whose origin is moved by (-dx_px, -dy_px): every position
     plus (dx_px, dy_px) [px] (a sensor window's coordinates: dx = -x0, dy = -y0). The same
-    kind of target where the shift is a change of its constants, else an :class:`OffsetTarget`."""
+    kind of target where the shift is a change of its constants, else a :class:`DriftingTarget`
+    with that offset."""
     dx, dy = _finite("dx_px", dx_px), _finite("dy_px", dy_px)
     if dx == 0.0 and dy == 0.0:
         return target
@@ -525,8 +500,8 @@ def shifted(target: Target, dx_px: float, dy_px: float) -> Target:
     if isinstance(target, TabulatedTarget):
         return dataclasses.replace(target, x_px=target.x_px + dx, y_px=target.y_px + dy)
     if isinstance(target, DriftingTarget):
-        return DriftingTarget(shifted(target.target, dx, dy), target.vx_px_s, target.vy_px_s)
-    return OffsetTarget(target, dx, dy)
+        return dataclasses.replace(target, dx_px=target.dx_px + dx, dy_px=target.dy_px + dy)
+    return DriftingTarget(target, 0.0, 0.0, dx, dy)
 
 
 def drift_px_s_from_arcsec(wx_arcsec_s: float, wy_arcsec_s: float, optics: Optics) -> tuple[float, float]:

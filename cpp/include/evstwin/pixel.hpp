@@ -251,7 +251,6 @@ struct PixelModel {
     double dark_mean_e_per_s = 0;
     bool has_filter = false;
     bool euler = false;
-    double shot_slope_per_a = 0;  ///< (F - 1) R_n / I_max: eq. 12's slope in the current
     bool continuous = false;      ///< NoiseModel::Continuous
     double bg_on_hz = 0, bg_off_hz = 0;  ///< eq. 12's R_n per polarity
     double inv_i_max = 0;                ///< 1 / I_max of eq. 12
@@ -262,7 +261,6 @@ struct PixelModel {
         dark_mean_e_per_s = p.dark_model == DarkModel::None ? 0.0 : p.dark_rate_e_per_s;
         has_filter = p.cutoff_hz.has_value();
         euler = p.lowpass == LowPass::Euler;
-        shot_slope_per_a = (p.shot_noise_factor - 1.0) * p.shot_noise_rate_hz / p.shot_noise_i_max_a;
         continuous = p.noise_model == NoiseModel::Continuous;
         bg_on_hz = p.shot_noise_on_rate_hz.value_or(p.shot_noise_rate_hz);
         bg_off_hz = p.shot_noise_off_rate_hz.value_or(p.shot_noise_rate_hz);
@@ -424,13 +422,21 @@ struct PixelModel {
     /// Source-follower rate 2 pi f_sf [1/s] (0 without the filter).
     double sf_rate() const { return has_filter ? 2.0 * PI * *p.cutoff_hz : 0.0; }
 
-    /// Two independent standard normals from two random words (Box-Muller, both outputs). The
-    /// angle's cosine and sine come from Taylor polynomials on a quarter turn (error < 1e-9,
-    /// far below what the normals are used for), reflected into the quadrant that the top two
-    /// bits of w1 pick (signs, without a branch): a third of the cost of libm's sincos, which
-    /// dominated the noise update.
-    EVSTWIN_ALWAYS_INLINE static void normal_pair(std::uint32_t w0, std::uint32_t w1, double& g1, double& g2) {
-        normal_pair_at(normal_radius(w0), w1, g1, g2);
+    /// Two independent standard normals from two random words (Box-Muller, both outputs), for
+    /// a pixel's first sample (its stationary noise). The angle's cosine and sine come from
+    /// Taylor polynomials on a quarter turn (error < 1e-9), reflected into the quadrant that
+    /// the top two bits of w1 pick.
+    static void normal_pair(std::uint32_t w0, std::uint32_t w1, double& g1, double& g2) {
+        const double r = std::sqrt(-2.0 * std::log(uniform_open(w0)));
+        const double t = (static_cast<double>(w1 & 0x3FFFFFFFu) + 0.5) * (0.5 * PI * 0x1p-30);  // [0, pi/2)
+        const double t2 = t * t;
+        const double sn = t * (1 + t2 * (-1.0 / 6 + t2 * (1.0 / 120 + t2 * (-1.0 / 5040 + t2 * (1.0 / 362880 +
+                              t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800.0)))))));
+        const double cs = 1 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (-1.0 / 3628800 +
+                              t2 * (1.0 / 479001600.0 + t2 * (-1.0 / 87178291200.0)))))));
+        static constexpr double SIGN[2] = {1.0, -1.0};
+        g1 = r * cs * SIGN[(w1 >> 30) & 1u];
+        g2 = r * sn * SIGN[w1 >> 31];
     }
     /// The continuous model's two normals of a sample from its two random words, by the
     /// ziggurat (rng.hpp): a table look-up for ~99 % of them instead of Box-Muller's log and
@@ -445,22 +451,6 @@ struct PixelModel {
         };
         g1 = normal_ziggurat(w0, more);
         g2 = normal_ziggurat(w1, more);
-    }
-    /// Box-Muller's radius sqrt(-2 ln u) from normal_pair's first word.
-    EVSTWIN_ALWAYS_INLINE static double normal_radius(std::uint32_t w0) {
-        return std::sqrt(-2.0 * std::log(uniform_open(w0)));
-    }
-    /// normal_pair given the radius of its first word (normal_radius) and its second word.
-    EVSTWIN_ALWAYS_INLINE static void normal_pair_at(double r, std::uint32_t w1, double& g1, double& g2) {
-        const double t = (static_cast<double>(w1 & 0x3FFFFFFFu) + 0.5) * (0.5 * PI * 0x1p-30);  // [0, pi/2)
-        const double t2 = t * t;
-        const double sn = t * (1 + t2 * (-1.0 / 6 + t2 * (1.0 / 120 + t2 * (-1.0 / 5040 + t2 * (1.0 / 362880 +
-                              t2 * (-1.0 / 39916800 + t2 * (1.0 / 6227020800.0)))))));
-        const double cs = 1 + t2 * (-0.5 + t2 * (1.0 / 24 + t2 * (-1.0 / 720 + t2 * (1.0 / 40320 + t2 * (-1.0 / 3628800 +
-                              t2 * (1.0 / 479001600.0 + t2 * (-1.0 / 87178291200.0)))))));
-        static constexpr double SIGN[2] = {1.0, -1.0};
-        g1 = r * cs * SIGN[(w1 >> 30) & 1u];
-        g2 = r * sn * SIGN[w1 >> 31];
     }
 
     /// Mean time a hot pixel stays active (or quiet) [s].

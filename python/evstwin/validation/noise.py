@@ -494,14 +494,10 @@ def _check_roi(roi: Sequence[int] | None, width: int, height: int) -> tuple[int,
 
 
 def _in_roi(ev: np.ndarray, roi: tuple[int, int, int, int]) -> np.ndarray:
-    x0, y0, w, h = roi
-    x = ev["x"].astype(np.int64) - x0
-    y = ev["y"].astype(np.int64) - y0
-    keep = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    out = ev[keep].copy()
-    out["x"] = x[keep]
-    out["y"] = y[keep]
-    return out
+    """The events inside the window, in its coordinates (``Roi.crop``)."""
+    from .region import Roi
+
+    return Roi.of(roi).crop(ev)
 
 
 def _pick_preset(preset: str | None, width: int, height: int, meta: dict[str, Any]) -> str | None:
