@@ -24,6 +24,7 @@
 // that filter.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -117,6 +118,49 @@ inline void noise_stationary(double a, double b, double D, double& szz, double& 
         szz = szy = 0.0;
         syy = 0.5 * D * (a > 0 ? a : b);
     }
+}
+
+/// int_{l1}^{l0} h(l) dl [ln units / s]: the stationary noise n_y's rate h(l) of first reaching
+/// a level l (its standard deviation sd > 0), integrated over the levels a slowly moving
+/// threshold sweeps, for a leak cycle's survival (l1 <= l0). With x = l / sd:
+/// - the slower pole, rate c = min(a, b), sets an escape rate over a high level: the inverse
+///   of an OU process's mean first-passage time, sqrt(2 pi) / (c x) exp(x^2 / 2) (1 + 1 / x^2)
+///   asymptotically, so h = c x phi(x) x^2 / (x^2 + 1); within 3 % of the exact mean time's
+///   inverse at x >= 2.7, 20 % at x = 2; its integral is closed-form with E1 (A&S 5.1.56);
+/// - with two poles n_y is differentiable and Rice's up-crossing rate
+///   sqrt(a b) / (2 pi) exp(-x^2 / 2) = k phi(x), k = sqrt(a b / (2 pi)), bounds the first
+///   crossings; where it is the smaller (x > k / c) it is used;
+/// - below x = 1.5 the asymptotic forms fail; h is held at c / T(1.5) = 0.2167 c (T the
+///   exact mean first-passage time from the mean): there the crossing comes within a few
+///   1 / c, far shorter than a leak cycle, either way.
+/// Used only to start a pixel at its steady-state leak phase (PixelModel::init).
+inline double leak_noise_hazard_integral(double l1, double l0, double sd, double a, double b) {
+    if (!(l0 > l1) || !(sd > 0.0)) return 0.0;
+    constexpr double INV_SQRT2 = 0.70710678118654752440, INV_SQRT_2PI = 0.39894228040143267794;
+    constexpr double X_HELD = 1.5, H_HELD = 0.2167;  // c / T(1.5) in units of c
+    const bool two = a > 0.0 && b > 0.0;
+    const double c = two ? std::min(a, b) : (a > 0.0 ? a : b);
+    const double k = two ? std::sqrt(a * b) * INV_SQRT_2PI : std::numeric_limits<double>::infinity();
+    const auto phi = [](double x) { return INV_SQRT_2PI * std::exp(-0.5 * x * x); };
+    const auto Phi = [](double x) { return 0.5 * std::erfc(-x * INV_SQRT2); };
+    // Antiderivative of x phi(x) x^2 / (x^2 + 1): -phi(x) (1 - R(w) / (x^2 + 1)), w = (x^2 + 1) / 2,
+    // R(w) = w e^w E1(w) by Abramowitz & Stegun 5.1.56 (w >= 1, error < 5e-5).
+    const auto escape = [&](double x) {
+        const double w = 0.5 * (x * x + 1.0);
+        const double r = (w * w + 2.334733 * w + 0.250621) / (w * w + 3.330657 * w + 1.681534);
+        return -phi(x) * (1.0 - r / (x * x + 1.0));
+    };
+    const double x0 = l0 / sd, x1 = l1 / sd;
+    double integral = 0.0;  // int h dx
+    if (x1 < X_HELD) integral += (std::min(x0, X_HELD) - x1) * std::min(k * phi(X_HELD), H_HELD * c);
+    const double lo = std::max(x1, X_HELD), hi = x0, cross = std::max(k / c, X_HELD);
+    if (hi > lo) {
+        const double esc_hi = std::min(hi, cross);  // escape-rate part, [lo, min(hi, k / c)]
+        if (esc_hi > lo) integral += c * (escape(esc_hi) - escape(lo));
+        const double rice_lo = std::max(lo, cross);  // Rice part, [max(lo, k / c), hi]
+        if (hi > rice_lo) integral += k * (Phi(hi) - Phi(rice_lo));
+    }
+    return sd * integral;
 }
 
 /// Probability that a Brownian bridge whose distance to a level is u0 > 0 and u1 > 0 at the

@@ -339,10 +339,13 @@ struct PixelModel {
         s.n = 1;
         const Philox4x32Counter w = philox4x32({0u, 0u, pixel, PURPOSE_INIT}, key);
         double noise_var_y = 0.0;
+        double pole_a = 0.0, pole_b = 0.0;
         if (continuous) {
             const double D = noise_intensity(photon_rate, mean_e);
             if (D > 0.0) {
                 const double a = pole_rate(ELEMENTARY_CHARGE_C * mean_e), b = sf_rate();
+                pole_a = a;
+                pole_b = b;
                 double szz, szy, syy;
                 noise_stationary(a, b, D, szz, szy, syy);
                 noise_var_y = syy;
@@ -368,8 +371,13 @@ struct PixelModel {
             // [0, theta_on), lambda = rho / (f_leak theta_on) (uniform without a background).
             // With shot noise, the reference was set at the last event's noise, not at the
             // current one: an independent stationary draw, kept where the whole difference lies
-            // between the levels (so nothing fires at once). Resets by shot-noise crossings are
-            // left out (their rate has no closed form).
+            // between the levels (so nothing fires at once). The noise also ends a leak cycle
+            // early: once the leak has brought the level L = theta_on + n_then - d0 that the
+            // noise must reach down to a few sigma, the noise crosses it. A cycle survives to
+            // d0 with probability exp(-int h(L) dL / (f_leak theta_on)), h the noise's rate of
+            // reaching L (leak_noise_hazard); the phase is drawn with that weight too, so a
+            // pixel does not start where, in the steady state, the noise would already have
+            // fired it (without it a 3e-3 Hz leak fired 4x its rate in the first second).
             const double rho = (s.bg_on_hz + s.bg_off_hz) * background_factor(ELEMENTARY_CHARGE_C * mean_e);
             const double lambda = rho / (s.leak_hz * s.theta_on);
             const double sd = std::sqrt(noise_var_y);
@@ -380,6 +388,11 @@ struct PixelModel {
                                                              : u * s.theta_on;
                 const double n_then = sd > 0.0 ? sd * normal_from_uniforms(more.uniform(), more.uniform()) : s.ny;
                 const double d = d0 + s.ny - n_then;
+                if (sd > 0.0) {
+                    const double level0 = s.theta_on + n_then;
+                    const double reach = leak_noise_hazard_integral(level0 - d0, level0, sd, pole_a, pole_b);
+                    if (!(more.uniform() < std::exp(-reach / (s.leak_hz * s.theta_on)))) continue;
+                }
                 if (d < s.theta_on && d > -s.theta_off) {
                     s.ref = s.y - d;
                     s.noise_at_event = n_then;
