@@ -3,6 +3,7 @@
 
 #include <cstring>
 #include <initializer_list>
+#include <utility>
 #include <vector>
 
 #include "check.hpp"
@@ -87,6 +88,36 @@ TEST(noise_coefficients_compose_and_reach_the_stationary_law) {
     noise_stationary(a, b, D, szz, szy, syy);
     CHECK_NEAR(far.l_zz * far.l_zz, szz, 1e-9 * szz);
     CHECK_NEAR(far.l_yz * far.l_yz + far.l_yy * far.l_yy, syy, 1e-9 * syy);
+}
+
+TEST(leak_noise_hazard_integral_against_quadrature_of_its_rate) {
+    // The closed forms (E1 by A&S 5.1.56, erfc) against a fine Simpson rule over the rate the
+    // header documents, for one pole, two comparable poles and a << b, and additivity.
+    const double pi = 3.14159265358979323846;
+    auto phi = [&](double x) { return std::exp(-0.5 * x * x) / std::sqrt(2 * pi); };
+    for (const auto& [a, b] : std::vector<std::pair<double, double>>{{0.0, 63.0}, {71.0, 63.0}, {1.0e4, 63.0}, {63.0, 4.0e3}}) {
+        const double sd = 1.7e-3;
+        const bool two = a > 0 && b > 0;
+        const double c = two ? std::min(a, b) : (a > 0 ? a : b);
+        const double k = two ? std::sqrt(a * b / (2 * pi)) : 1e300;
+        auto rate = [&](double x) {
+            if (x < 1.5) return std::min(k * phi(1.5), 0.2167 * c);
+            return x < std::max(k / c, 1.5) ? c * x * phi(x) * x * x / (x * x + 1) : k * phi(x);
+        };
+        for (const auto& [x1, x0] : std::vector<std::pair<double, double>>{{-2.0, 0.5}, {0.0, 3.0}, {2.0, 6.0}, {-1.0, 40.0}}) {
+            const int n = 200000;  // Simpson over [x1, min(x0, 12)]; beyond 12 the rate is < 1e-30 c
+            const double hi = std::min(x0, 12.0), h = (hi - x1) / n;
+            double sum = rate(x1) + rate(hi);
+            for (int i = 1; i < n; ++i) sum += (i % 2 ? 4 : 2) * rate(x1 + i * h);
+            const double want = sd * sum * h / 3;
+            const double got = leak_noise_hazard_integral(x1 * sd, x0 * sd, sd, a, b);
+            CHECK_NEAR(got, want, 2e-4 * want + 1e-12);
+            const double mid = 0.5 * (x0 + x1) * sd;
+            CHECK_NEAR(leak_noise_hazard_integral(x1 * sd, mid, sd, a, b) + leak_noise_hazard_integral(mid, x0 * sd, sd, a, b),
+                       got, 1e-9 * got + 1e-15);
+        }
+    }
+    CHECK(leak_noise_hazard_integral(0.01, 0.01, 1e-3, 10.0, 10.0) == 0.0);
 }
 
 TEST(brownian_bridge_crossing_probability_and_time_against_simulated_paths) {
