@@ -599,9 +599,9 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             px_deg = optics.plate_scale_arcsec_per_px / 3600.0
             density = sf.get("density_per_deg2")
             if density is None:
-                from .sky import stars
+                from .sky import stars as sky_stars
 
-                density = _wrap("star_field", stars.density_per_deg2, sf.get("mag_min", 6.0), sf.get("mag_max", 12.0),
+                density = _wrap("star_field", sky_stars.density_per_deg2, sf.get("mag_min", 6.0), sf.get("mag_max", 12.0),
                                 sf.get("density_scale", 1.0))
             n_stars = density * width * height * px_deg * px_deg
         if n_stars is not None and n_stars > 0 and not n_stars * swept <= MAX_STARS:

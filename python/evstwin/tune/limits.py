@@ -188,7 +188,7 @@ class Setup:
         scale = preset.pixel_pitch_m / self.focal_length_m * 180.0 * 3600.0 / math.pi
         bias = f", biases {self.bias_set}" if self.bias_set else ""
         seeing = "no seeing" if self.seeing_fwhm_arcsec is None else f"seeing {self.seeing_fwhm_arcsec:g}\""
-        extra = (", jitter {:g}\"".format(self.jitter_rms_arcsec) if self.jitter_rms_arcsec > 0 else "") + (
+        extra = (f", jitter {self.jitter_rms_arcsec:g}\"" if self.jitter_rms_arcsec > 0 else "") + (
             ", scintillation" if self.scintillation else "")
         return (f"{preset.name}{bias}; {self.focal_length_m * 1e3:g} mm f/{self.f_ratio:.3g} (D {d * 1e3:.3g} mm), "
                 f"{scale:.3g}\"/px; sky {self.sky_mag_per_arcsec2:g} mag/arcsec2, {seeing}{extra}; {self.pointing} "
@@ -477,6 +477,8 @@ def limiting_magnitude(
     )
     plate_arcsec = build(base).optics.plate_scale_rad_per_px / ARCSEC_RAD
     setup_text = setup.describe() if setup is not None else f"scenario {base['name']}; {pointing} pointing"
+    if sets:
+        setup_text += "; " + ", ".join(sets)
     table = []
     for rate in rates:
         rows = {
