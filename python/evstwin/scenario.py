@@ -914,7 +914,10 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.
             raise ScenarioError(f"hot_pixels.file={path!r}: rates must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}] Hz; got "
                                 f"{loaded[y, x]!r} at (x, y)=({x}, {y})")
         rates[:] = loaded
-    for i, entry in enumerate(table.get("pixels", [])):
+    pixels = table.get("pixels", [])
+    if not isinstance(pixels, list):
+        raise ScenarioError(f"hot_pixels.pixels must be an array of [x, y, rate_hz]; got {pixels!r}")
+    for i, entry in enumerate(pixels):
         key = f"hot_pixels.pixels[{i}]"
         ok = isinstance(entry, list) and len(entry) == 3 and all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry)
