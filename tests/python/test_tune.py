@@ -853,3 +853,15 @@ def test_limiting_magnitude_setup_bad_input_one_line(tmp_path: Path, capsys, arg
     for w in words:
         assert w in err
     assert not out.exists()
+
+
+def test_announce_uses_a_timed_job_when_given() -> None:
+    from types import SimpleNamespace
+
+    from evstwin.tune.execution import LocalExecutor, announce
+
+    scene = SimpleNamespace(width=128, height=64, rate_hz=100.0, duration_s=4.0)
+    text = announce("sweep (detect)", 5, scene, LocalExecutor(2), job_seconds=3.0)
+    assert "~3.0 s a job, ~9 s in all" in text and "one job timed here" in text  # ceil(5 / 2) rounds of 3 s
+    rough = announce("sweep (detect)", 5, scene, LocalExecutor(2))
+    assert "~0.2 s a job" in rough and "pixel-updates/s" in rough  # 128 x 64 x 100 x 4 / 15e6

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import math
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -462,6 +463,21 @@ def limiting_magnitude(
         raise ValueError(f"target label {label!r} is not unique: give the targets distinct labels")
     objective.target = label
     grid = {"targets.0.wx_arcsec_s": rates, "targets.0.magnitude": mags}
+    job_seconds = None
+    if progress:
+        # The estimate printed before the run: one job timed here, the fastest rate (the most
+        # sub-sampling) and the brightest magnitude (the most events), an upper bound per job.
+        from .execution import evaluate
+
+        slowest: dict[str, Any] = {"targets.0.wx_arcsec_s": max(rates), "targets.0.magnitude": mags[0]}
+        if duration_s is not None:
+            slowest["duration_s"] = float(duration_s)
+        t0 = time.perf_counter()
+        try:
+            evaluate(base, slowest, seed, objective)
+            job_seconds = time.perf_counter() - t0
+        except ValueError:
+            job_seconds = None  # the sweep checks every point first and says what is wrong
     result = sweep(
         base,
         grid,
@@ -474,6 +490,7 @@ def limiting_magnitude(
         duration_s=duration_s,
         seed=seed,
         progress=progress,
+        job_seconds=job_seconds,
     )
     plate_arcsec = build(base).optics.plate_scale_rad_per_px / ARCSEC_RAD
     setup_text = setup.describe() if setup is not None else f"scenario {base['name']}; {pointing} pointing"
