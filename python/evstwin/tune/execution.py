@@ -368,7 +368,7 @@ def announce(what: str, n_jobs: int, scene: Any, executor: Any, job_seconds: flo
     total_s = per_job_s * math.ceil(n_jobs / workers)
     where = executor.description if executor is not None else "nothing to run"
     basis = (f"from {UPDATES_PER_S_PER_WORKER / 1e6:g} M pixel-updates/s per worker; sub-sampled moving targets take "
-             "longer" if job_seconds is None else "from one job timed here, the slowest point: an upper bound")
+             "longer" if job_seconds is None else "from one job timed here; each worker also pays its start-up, imports and PSF tables")
     return (f"{what}: {n_jobs} job(s) of {scene.width}x{scene.height} px for {scene.duration_s:g} s of sensor "
             f"time at {scene.rate_hz:g} Hz on {where}; estimate ~{per_job_s:.1f} s a job, "
             f"~{_duration_text(total_s)} in all ({basis})")

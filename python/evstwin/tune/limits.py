@@ -466,7 +466,7 @@ def limiting_magnitude(
     job_seconds = None
     if progress:
         # The estimate printed before the run: one job timed here, the fastest rate (the most
-        # sub-sampling) and the brightest magnitude (the most events), an upper bound per job.
+        # sub-sampling) and the brightest magnitude (the most events): the slowest point.
         from .execution import evaluate
 
         slowest: dict[str, Any] = {"targets.0.wx_arcsec_s": max(rates), "targets.0.magnitude": mags[0]}
