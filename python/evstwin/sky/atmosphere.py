@@ -147,7 +147,8 @@ def seeing_psf(optics: Optics, seeing_fwhm_arcsec: float, beta: float = KOLMOGOR
     fwhm = seeing / optics.plate_scale_arcsec_per_px
     if not 0.05 <= fwhm <= 100.0:
         raise ValueError(f"seeing_fwhm_arcsec={seeing_fwhm_arcsec!r} is {fwhm:.3g} px at "
-                         f"{optics.plate_scale_arcsec_per_px:.4g} arcsec/px; it must be in [0.05, 100] px")
+                         f"{optics.plate_scale_arcsec_per_px:.4g} arcsec/px; it must be in [0.05, 100] px (a seeing "
+                         "far inside a pixel changes nothing: leave it out)")
     return _seeing_psf(optics, seeing, b)
 
 
