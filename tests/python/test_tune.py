@@ -842,6 +842,8 @@ def test_target_tracking_measures_the_target_at_rest(tmp_path: Path) -> None:
      ["--scenario", "not both"]),
     (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--rates-arcsec-s", "0,5"],
      ["rates-arcsec-s", "0.0"]),
+    (["--preset", "imx636", "--focal-length-mm", "200", "--f-number", "2.8", "--scintillation"],
+     ["--rate-hz 100", "--rate-hz 540 or more"]),  # tau = D_eff / 20 m/s = 74 mm / 20 m/s = 3.7 ms
 ])
 def test_limiting_magnitude_setup_bad_input_one_line(tmp_path: Path, capsys, argv: list[str], words: list[str]) -> None:
     from evstwin import cli
