@@ -39,6 +39,15 @@ The tables mirror the Python objects:
                   ``drift_arcsec_s = [wx, wy]`` (through the plate scale): every star moves,
                   and stars drift in from the area the drift sweeps during the run. A table
                   with only a drift makes no random stars (it moves the field-frame targets).
+                  ``distribution = "all-sky"`` draws the sky's star counts instead of
+                  the power law (``evstwin.sky.stars``; no n_stars/density_per_deg2: the
+                  count follows from the field of view), scaled by ``density_scale``.
+``[atmosphere]``  seeing, image motion and scintillation (``evstwin.sky.atmosphere``):
+                  ``seeing_fwhm_arcsec`` (a Moffat of that FWHM, ``moffat_beta`` default
+                  4.765, convolved with the optics' PSF), ``jitter_rms_arcsec`` and
+                  ``jitter_tau_s`` (tip-tilt of the whole field), ``scintillation = true``
+                  with ``site_altitude_m``, ``airmass`` or ``elevation_deg``,
+                  ``scintillation_c_y``, ``wind_speed_m_s``, ``scintillation_tau_s``.
 ``[readout]``     the sensor's readout (``evstwin.readout``): ``enabled`` (default: true when
                   the preset has readout figures, as the DAVIS346 and IMX636 do), and
                   ``max_rate_hz``, ``fifo_depth``, ``tick_s`` overriding the preset's.
@@ -70,6 +79,7 @@ from .pixel import PixelParams
 from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
 from .readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S, ReadoutParams
 from .sensor import MAX_MAX_EVENTS
+from .sky.atmosphere import ATMOSPHERE_KEYS, Atmosphere, atmosphere_from_table
 from .targets import (
     MAX_STARS,
     CircularTarget,
@@ -129,7 +139,9 @@ SCHEMA: dict[str, Any] = {
     "hot_pixels": {"pixels": list, "file": str},
     "targets": list,
     "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
-                   "counts_slope": float, "seed": int, "drift_px_s": Any, "drift_arcsec_s": Any},
+                   "counts_slope": float, "seed": int, "drift_px_s": Any, "drift_arcsec_s": Any,
+                   "distribution": str, "density_scale": float},
+    "atmosphere": {k: Any for k in ATMOSPHERE_KEYS},
     "readout": {"enabled": bool, "max_rate_hz": float, "fifo_depth": int, "tick_s": float},
 }
 DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50}
@@ -455,6 +467,9 @@ class Scene:
     roi: tuple[int, int, int, int] | None = None
     """sensor.roi: (x0, y0, w, h) of the sensor this scene simulates (``width`` x ``height`` =
     w x h, every coordinate the ROI's); None: the whole (window of the) sensor."""
+    atmosphere: Atmosphere | None = None
+    """[atmosphere]: the seeing that sets the PSF (the targets already carry the image motion
+    and scintillation); None: no atmosphere, the optics' PSF."""
 
     @property
     def psf_sigma_px(self) -> float:
@@ -463,7 +478,10 @@ class Scene:
 
     @property
     def psf(self) -> psf.PSFShape:
-        """The PSF its sources are rendered with (``optics.psf``; cached per optics)."""
+        """The PSF its sources are rendered with (``optics.psf``, or with [atmosphere] seeing
+        the seeing convolved with it; cached)."""
+        if self.atmosphere is not None:
+            return self.atmosphere.psf(self.optics)
         return psf.from_optics(self.optics)
 
 
@@ -561,19 +579,31 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "
             f"optics.f_number and optics.extra_blur_sigma_px; got {s.get('optics', {})}"
         )
-    shape = _psf_shape(optics, s.get("optics", {}))
+    atmosphere = _atmosphere(s, optics)
+    if atmosphere is not None and atmosphere.seeing_fwhm_arcsec is not None:
+        shape = _wrap(f"atmosphere.seeing_fwhm_arcsec={atmosphere.seeing_fwhm_arcsec!r} with optics={s.get('optics', {})}",
+                      atmosphere.psf, optics)
+    else:
+        shape = _psf_shape(optics, s.get("optics", {}))
     field_stars = 0
     sf = dict(s.get("star_field", {}))
-    drift_only = any(k in sf for k in _DRIFT_KEYS) and "n_stars" not in sf and "density_per_deg2" not in sf
+    drift_only = (any(k in sf for k in _DRIFT_KEYS) and "n_stars" not in sf and "density_per_deg2" not in sf
+                  and sf.get("distribution") != "all-sky")
     if sf and not drift_only:
         for key in _DRIFT_KEYS:
             sf.pop(key, None)
         n_stars = sf.get("n_stars")
         # The stars that drift in come from the area the drift sweeps past the sensor.
         swept = (width * height + height * abs(drift[0]) * t_end + width * abs(drift[1]) * t_end) / (width * height)
-        if n_stars is None and "density_per_deg2" in sf:
+        if n_stars is None and ("density_per_deg2" in sf or sf.get("distribution") == "all-sky"):
             px_deg = optics.plate_scale_arcsec_per_px / 3600.0
-            n_stars = sf["density_per_deg2"] * width * height * px_deg * px_deg
+            density = sf.get("density_per_deg2")
+            if density is None:
+                from .sky import stars as sky_stars
+
+                density = _wrap("star_field", sky_stars.density_per_deg2, sf.get("mag_min", 6.0), sf.get("mag_max", 12.0),
+                                sf.get("density_scale", 1.0))
+            n_stars = density * width * height * px_deg * px_deg
         if n_stars is not None and n_stars > 0 and not n_stars * swept <= MAX_STARS:
             which = "star_field.n_stars" if "n_stars" in sf else "star_field.density_per_deg2"
             if n_stars <= MAX_STARS:  # the drift brings in the rest
@@ -614,6 +644,8 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         targets, sources, field_stars = _into_roi(targets, sources, field_stars, roi, shape.half_width_px, t_end)
         hot = None if hot is None else np.ascontiguousarray(hot[y0 : y0 + height, x0 : x0 + width])
     sp = s["sampling"]
+    if atmosphere is not None:
+        targets = _atmosphere_on(atmosphere, s, targets, optics, t_end)
     _check_work(s, width, height, shape, targets, sources)
     _check_intervals(params, float(sp["rate_hz"]))
     return Scene(
@@ -623,8 +655,37 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
         hot_pixel_rates_hz=hot,
         chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
-        readout=readout,
+        readout=readout, atmosphere=atmosphere,
     )
+
+
+def _atmosphere(s: dict[str, Any], optics: Optics, elevation_deg: float | None = None,
+                site_altitude_m: float | None = None) -> Atmosphere | None:
+    """[atmosphere] as an Atmosphere (None without the table). ``elevation_deg`` and
+    ``site_altitude_m``: the hook for a pointing computed from an orbit and a site, used where
+    the table gives no airmass, elevation_deg or site_altitude_m."""
+    table = s.get("atmosphere")
+    if table is None:
+        return None
+    atmosphere: Atmosphere = _wrap("atmosphere", atmosphere_from_table, table, elevation_deg, site_altitude_m)
+    if atmosphere.scintillation is not None:
+        tau = float(atmosphere.scintillation_tau_s(optics))  # type: ignore[arg-type]
+        rate = float(s["sampling"]["rate_hz"])
+        if rate * tau < 2.0:
+            raise ScenarioError(
+                f"atmosphere.scintillation: its correlation time is {tau:.3g} s (the aperture's D_eff / wind_speed_m_s, "
+                f"or scintillation_tau_s) and sampling.rate_hz={s['sampling']['rate_hz']!r} samples it {rate * tau:.3g} "
+                f"times: raise sampling.rate_hz to at least {math.ceil(2.0 / tau)} (2 samples per correlation time)"
+            )
+    return atmosphere
+
+
+def _atmosphere_on(atmosphere: Atmosphere, s: dict[str, Any], targets: list[Target], optics: Optics,
+                   t_end: float) -> list[Target]:
+    """Every target (star field included) seen through the image motion and scintillation
+    over [0, t_end], drawn from the scenario's seed."""
+    out: list[Target] = _wrap(f"atmosphere={s['atmosphere']}", atmosphere.apply, targets, optics, t_end, int(s["seed"]))
+    return out
 
 
 def _roi(value: Any, width: int, height: int) -> tuple[int, int, int, int] | None:
@@ -853,7 +914,10 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.
             raise ScenarioError(f"hot_pixels.file={path!r}: rates must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}] Hz; got "
                                 f"{loaded[y, x]!r} at (x, y)=({x}, {y})")
         rates[:] = loaded
-    for i, entry in enumerate(table.get("pixels", [])):
+    pixels = table.get("pixels", [])
+    if not isinstance(pixels, list):
+        raise ScenarioError(f"hot_pixels.pixels must be an array of [x, y, rate_hz]; got {pixels!r}")
+    for i, entry in enumerate(pixels):
         key = f"hot_pixels.pixels[{i}]"
         ok = isinstance(entry, list) and len(entry) == 3 and all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry)

@@ -532,8 +532,17 @@ def random_star_field(
     seed: int = 0,
     drift_px_s: Sequence[float] = (0.0, 0.0),
     duration_s: float = 0.0,
+    distribution: str = "uniform",
+    density_scale: float = 1.0,
 ) -> list[StaticTarget] | list[LinearTarget]:
-    """Random stars, uniform over the sensor, with power-law magnitude counts.
+    """Random stars, uniform over the sensor, with power-law or the sky's magnitude counts.
+
+    distribution: ``"uniform"`` (default, as before: the power law below, and n_stars or
+    density_per_deg2) or ``"all-sky"``: the sky's star counts (``evstwin.sky.stars``: the
+    all-sky average N(< V) of Tycho-2 + UCAC4, V in [0, 16]) between mag_min and mag_max,
+    times density_scale (galactic latitude is not modelled: scale it yourself). The number
+    of stars then follows from the optics: a Poisson count of that density over the field
+    (give neither n_stars nor density_per_deg2; counts_slope does not apply).
 
     Give exactly one of ``n_stars`` or ``density_per_deg2`` (stars per square degree between
     mag_min and mag_max; the count is then Poisson over the ``width x height`` pixel field at
@@ -565,6 +574,18 @@ def random_star_field(
     seed = _check_int("seed", seed, 0)
     vx, vy = _drift("drift_px_s", drift_px_s)
     duration = _non_negative("duration_s", duration_s)
+    if distribution not in ("uniform", "all-sky"):
+        raise ValueError(f"distribution must be 'uniform' or 'all-sky'; got distribution={distribution!r}")
+    if distribution == "all-sky":
+        from .sky import stars
+
+        if n_stars is not None or density_per_deg2 is not None:
+            raise ValueError("distribution='all-sky' takes its density from the sky's star counts: give neither n_stars "
+                             f"nor density_per_deg2; got n_stars={n_stars!r}, density_per_deg2={density_per_deg2!r}")
+        density_per_deg2 = stars.density_per_deg2(lo, hi, density_scale)
+    elif density_scale != 1.0:
+        raise ValueError(f"density_scale applies to distribution='all-sky'; got density_scale={density_scale!r} with "
+                         f"distribution={distribution!r}")
     if (n_stars is None) == (density_per_deg2 is None):
         raise ValueError(
             f"give exactly one of n_stars and density_per_deg2; got n_stars={n_stars!r}, density_per_deg2={density_per_deg2!r}"
@@ -616,7 +637,11 @@ def random_star_field(
         y = np.concatenate([y, ys, (height - 0.5 if dy > 0 else -0.5) + s * dy])
         u = np.concatenate([u, rng.uniform(0.0, 1.0, n_x + n_y)])
         n = x.size
-    if alpha == 0.0 or hi == lo:
+    if distribution == "all-sky":
+        from .sky import stars
+
+        mag = stars.draw_magnitudes(u, lo, hi)
+    elif alpha == 0.0 or hi == lo:
         mag = lo + (hi - lo) * u
     else:
         # inverse CDF of dN/dm ~ 10^(alpha m) on [lo, hi], relative to lo (no overflow)

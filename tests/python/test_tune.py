@@ -734,3 +734,136 @@ def test_fit_intervals_from_the_distance_curvature_bracket_the_best() -> None:
     b = result.bounds["pixel.theta_on"]
     assert (hi - lo) < 0.5 * (b.high - b.low)
     assert "interval" in result.to_text() and result.to_json_dict()["intervals"]
+
+
+# -- limiting magnitude for a real setup ------------------------------------------------------
+
+SILICON = ("pixel.absorption_per_m=2e5", "pixel.depletion_width_m=2e-6")
+
+
+def test_pointing_modes_move_the_target_and_the_stars_as_they_say() -> None:
+    from evstwin.tune.limits import SIDEREAL_RATE_ARCSEC_S, PointingDetectObjective
+
+    assert SIDEREAL_RATE_ARCSEC_S == pytest.approx(15.041, abs=1e-3)  # 1296000 arcsec / 86164.09 s
+    assert PointingDetectObjective("sidereal").motion(60.0) == (60.0, 0.0)
+    staring = PointingDetectObjective("staring", declination_deg=60.0)
+    target, field = staring.motion(60.0)
+    assert field == pytest.approx(-SIDEREAL_RATE_ARCSEC_S * 0.5) and target == pytest.approx(60.0 + field)
+    assert PointingDetectObjective("staring").motion(SIDEREAL_RATE_ARCSEC_S)[0] == pytest.approx(0.0)  # GEO
+    assert PointingDetectObjective("target").motion(60.0) == (0.0, -60.0)
+    setup = tune.Setup(preset="imx636", focal_length_m=0.2, f_number=2.8, width_px=64, height_px=32)
+    s = setup.scenario()
+    assert s["star_field"]["distribution"] == "all-sky" and s["atmosphere"]["seeing_fwhm_arcsec"] == 2.0
+    s = set_rate(s, 5.0)
+    prepared = staring.prepare(s)  # 5 - 7.52 arcsec/s: the target moves left, starting on the right
+    assert prepared["targets"][0]["wx_arcsec_s"] == pytest.approx(5.0 - SIDEREAL_RATE_ARCSEC_S * 0.5)
+    assert prepared["targets"][0]["x0_px"] == pytest.approx(64 - 1 - 4.0)
+    assert prepared["star_field"]["drift_arcsec_s"] == pytest.approx([-SIDEREAL_RATE_ARCSEC_S * 0.5, 0.0])
+    tracked = PointingDetectObjective("target").prepare(s)
+    assert tracked["targets"][0]["wx_arcsec_s"] == 0.0 and tracked["targets"][0]["x0_px"] == pytest.approx(31.5)
+    assert tracked["star_field"]["drift_arcsec_s"] == [-5.0, 0.0]
+    assert "drift_arcsec_s" not in PointingDetectObjective("sidereal").prepare(s)["star_field"]
+
+
+def set_rate(s: dict, rate: float) -> dict:
+    from evstwin.scenario import set_value
+
+    return set_value(s, "targets.0.wx_arcsec_s", rate)
+
+
+def test_static_detect_metrics_by_hand() -> None:
+    from evstwin.tune.limits import static_detect_metrics
+
+    # A source at (10, 5) on 30 x 12: core = columns 9..11 x rows 4..6 (9 px); 3 of them fire.
+    # Elsewhere: farther than 1 + 3 px: columns <= 5 or >= 15, or rows <= 0 or >= 10 .
+    ev = np.zeros(5, dtype=[("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+    ev[0], ev[1], ev[2] = (100, 9, 4, 1), (200, 10, 5, 0), (300, 11, 6, 1)
+    ev[3], ev[4] = (400, 25, 2, 1), (500, 0, 11, 0)
+    out = static_detect_metrics(ev, 30, 12, 2.0, 10.0, 5.0)
+    far_cols = 6 + 15  # x <= 5: 0..5, x >= 15: 15..29
+    n_noise_px = far_cols * 12 + (30 - far_cols) * 3  # plus rows 0, 10, 11 of columns 6..14
+    assert out["track_px"] == 9 and out["track_fraction"] == pytest.approx(3 / 9)
+    assert out["noise_rate_per_px_hz"] == pytest.approx(2 / (n_noise_px * 2.0))
+    chance = 1 - math.exp(-out["noise_rate_per_px_hz"] * 2.0)
+    assert out["chance_fraction"] == pytest.approx(chance)
+    assert out["excess_fraction"] == pytest.approx((3 / 9 - chance) / (1 - chance))
+    assert out["signal_rate_per_px_hz"] == pytest.approx(3 / (9 * 2.0))
+
+
+def test_limiting_magnitude_for_a_real_setup(tmp_path: Path) -> None:
+    setup = tune.Setup(preset="imx636", focal_length_m=0.2, f_number=2.8, width_px=48, height_px=24, duration_s=1.0,
+                       pointing="sidereal", stars_mag_max=12.0)
+    result = tune.limiting_magnitude(setup=setup, rates_arcsec_s=[30.0, 150.0], magnitudes=[4.0, 8.0, 12.0],
+                                     out_dir=tmp_path, workers=0, sets=SILICON)
+    plate = 4.86e-6 / 0.2 * 180 * 3600 / math.pi
+    assert [r["rate_px_s"] for r in result.table] == pytest.approx([30.0 / plate, 150.0 / plate])
+    assert [r["stars_px_s"] for r in result.table] == [0.0, 0.0]
+    # Mag 4 is bright (4e7 photons/s through a 71 mm pupil), mag 12 far below the sky's noise.
+    for row in result.table:
+        assert row["limiting_magnitude"] in (4.0, 8.0) and row["metric_at_limit"] >= 0.5
+    assert "imx636" in result.setup and "200 mm f/2.8" in result.setup and "sidereal" in result.setup
+    text = result.to_text()
+    assert "criterion: detected: mean excess_fraction >= 0.5" in text and result.setup in text
+    assert tune.draw_limiting_magnitude(result, tmp_path).is_file()
+    header = (tmp_path / "limiting_magnitude.csv").read_text().splitlines()[0]
+    assert header == "rate_arcsec_s,rate_px_s,target_px_s,stars_px_s,limiting_magnitude,metric_at_limit"
+
+
+def test_target_tracking_measures_the_target_at_rest(tmp_path: Path) -> None:
+    # Tracked, the target does not move on the sensor: no seeing motion, no scintillation, no
+    # events beyond noise: nothing is detected at any magnitude, and the metric says why
+    # (the static criterion on its core: the source sits on the corner of four pixels at
+    # (23.5, 11.5), the centre of 48 x 24, so its core within 1 px is 4 x 4 pixels).
+    setup = tune.Setup(preset="imx636", focal_length_m=0.2, f_number=2.8, width_px=48, height_px=24, duration_s=0.5,
+                       pointing="target", stars=False)
+    result = tune.limiting_magnitude(setup=setup, rates_arcsec_s=[60.0], magnitudes=[4.0], workers=0, sets=SILICON)
+    row = result.sweep.summary[0]
+    assert row["mean_track_px"] == 16 and row["mean_track_fraction"] == 0.0
+    assert math.isnan(result.table[0]["limiting_magnitude"])
+    assert result.table[0]["target_px_s"] == 0.0 and result.table[0]["stars_px_s"] < 0
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--preset", "imx636", "--focal-length-mm", "-5", "--f-number", "2"], ["--focal-length-mm", "-5"]),
+    (["--preset", "nosuch", "--focal-length-mm", "50", "--f-number", "2"], ["--preset", "nosuch"]),
+    (["--preset", "imx636", "--focal-length-mm", "50"], ["--f-number or --aperture-mm"]),
+    (["--preset", "imx636"], ["--focal-length-mm"]),
+    (["--f-number", "2"], ["--f-number", "--preset"]),
+    (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--sky-mag", "45"], ["--sky-mag", "45"]),
+    (["--preset", "imx636", "--focal-length-mm", "50", "--aperture-mm", "0"], ["--aperture-mm", "0"]),
+    (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--window", "10x5"], ["--window", "10x5"]),
+    (["--preset", "davis346", "--focal-length-mm", "50", "--f-number", "2", "--window", "400x64"],
+     ["--window 400x64", "346x260"]),
+    (["--preset", "davis346", "--focal-length-mm", "50", "--f-number", "2", "--bias-set", "fast"], ["--bias-set", "fast"]),
+    (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--airmass", "0.5"], ["--airmass", "0.5"]),
+    (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--declination-deg", "95"],
+     ["--declination-deg", "95"]),
+    (["--scenario", "geo-stare", "--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2"],
+     ["--scenario", "not both"]),
+    (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--rates-arcsec-s", "0,5"],
+     ["rates-arcsec-s", "0.0"]),
+    (["--preset", "imx636", "--focal-length-mm", "200", "--f-number", "2.8", "--scintillation"],
+     ["--rate-hz 100", "--rate-hz 540 or more"]),  # tau = D_eff / 20 m/s = 74 mm / 20 m/s = 3.7 ms
+])
+def test_limiting_magnitude_setup_bad_input_one_line(tmp_path: Path, capsys, argv: list[str], words: list[str]) -> None:
+    from evstwin import cli
+
+    out = tmp_path / "lm"
+    code = cli.main(["limiting-magnitude", *argv, "--out", str(out), "--workers", "0", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    for w in words:
+        assert w in err
+    assert not out.exists()
+
+
+def test_announce_uses_a_timed_job_when_given() -> None:
+    from types import SimpleNamespace
+
+    from evstwin.tune.execution import LocalExecutor, announce
+
+    scene = SimpleNamespace(width=128, height=64, rate_hz=100.0, duration_s=4.0)
+    text = announce("sweep (detect)", 5, scene, LocalExecutor(2), job_seconds=3.0)
+    assert "~3.0 s a job, ~9 s in all" in text and "one job timed here" in text  # ceil(5 / 2) rounds of 3 s
+    rough = announce("sweep (detect)", 5, scene, LocalExecutor(2))
+    assert "~0.2 s a job" in rough and "pixel-updates/s" in rough  # 128 x 64 x 100 x 4 / 15e6

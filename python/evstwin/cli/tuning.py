@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ from ..tune import (
     parse_grid,
     sweep,
 )
+from ..tune.limits import Setup
 from ._common import add_force, add_region, add_size, check_output_dir, region_args
 
 
@@ -117,10 +119,40 @@ def register(subparsers: Any) -> None:
     execution(p, "all cores; 2 with --scheduler local")
     p.set_defaults(func=_cmd_sweep)
 
-    p = subparsers.add_parser("limiting-magnitude", help="faintest magnitude detected against angular rate")
-    p.add_argument(
-        "--scenario", help="built-in name or TOML (default: geo-stare without stars, 128x64 px, 4 s)"
+    p = subparsers.add_parser(
+        "limiting-magnitude",
+        help="faintest magnitude detected against angular rate, for a scenario or a real setup (--preset and a lens)",
     )
+    p.add_argument(
+        "--scenario", help="built-in name or TOML (default: geo-stare without stars, 128x64 px, 4 s); or give a "
+                           "real setup with --preset and --focal-length-mm"
+    )
+    setup = p.add_argument_group("a real setup (instead of --scenario)")
+    setup.add_argument("--preset", help="sensor preset (davis346, imx636, ...): the setup's sensor")
+    setup.add_argument("--bias-set", help="bias set of the preset (default: the preset's own)")
+    setup.add_argument("--focal-length-mm", type=float, help="lens focal length [mm]")
+    setup.add_argument("--f-number", type=float, help="lens f-number (or --aperture-mm)")
+    setup.add_argument("--aperture-mm", type=float, help="entrance pupil diameter [mm] (or --f-number)")
+    setup.add_argument("--transmission", type=float, default=0.8, help="optics throughput (default 0.8)")
+    setup.add_argument("--sky-mag", type=float, default=21.0,
+                       help="sky surface brightness [V mag/arcsec^2] (default 21; ~21.9 dark site, ~18 city)")
+    setup.add_argument("--seeing-arcsec", type=float, default=2.0, help="seeing FWHM [arcsec] (default 2; 0: none)")
+    setup.add_argument("--declination-deg", type=float, default=0.0,
+                       help="field declination [deg]: the stars' drift when staring (default 0)")
+    setup.add_argument("--window", default="128x64", help="simulated window of the sensor, WxH px (default 128x64)")
+    setup.add_argument("--rate-hz", type=float, default=100.0, help="sampling floor [Hz] (default 100)")
+    setup.add_argument("--no-stars", action="store_true", help="no star field (default: the sky's star counts)")
+    setup.add_argument("--stars-mag-max", type=float, default=14.0, help="faintest field star [V] (default 14)")
+    setup.add_argument("--jitter-rms-arcsec", type=float, default=0.0,
+                       help="image motion per axis [arcsec rms] (default 0: none)")
+    setup.add_argument("--jitter-tau-s", type=float, default=0.05, help="image motion correlation time [s] (default 0.05)")
+    setup.add_argument("--scintillation", action="store_true", help="scintillation of every point source")
+    setup.add_argument("--site-altitude-m", type=float, default=0.0, help="observatory altitude [m] (scintillation)")
+    setup.add_argument("--airmass", type=float, default=1.0, help="airmass (scintillation; default 1)")
+    p.add_argument("--pointing", default="sidereal", choices=("sidereal", "staring", "target"),
+                   help="sidereal: stars at rest, the target moves at the rate; staring: the stars drift at the "
+                        "sidereal rate, the target at its rate less that; target: the target at rest, the stars "
+                        "drift at the rate (default sidereal). Rates are relative to the stars")
     p.add_argument(
         "--rates-arcsec-s",
         default=",".join(f"{r:g}" for r in DEFAULT_RATES_ARCSEC_S),
@@ -274,6 +306,7 @@ def _cmd_limiting(args: argparse.Namespace) -> int:
         raise ValueError(f"--criterion {args.criterion!r}: the value must be a number") from None
     rates = parse_float_list(args.rates_arcsec_s, "--rates-arcsec-s")
     mags = parse_float_list(args.magnitudes, "--magnitudes")
+    setup = _setup(args)
     if not args.resume:
         check_output_dir(args.out, args.force)
         if args.force:
@@ -292,6 +325,9 @@ def _cmd_limiting(args: argparse.Namespace) -> int:
         sets=args.sets,
         duration_s=args.duration,
         progress=not args.no_progress,
+        setup=setup,
+        pointing=args.pointing,
+        declination_deg=args.declination_deg,
     )
     draw_limiting_magnitude(result, args.out)
     if result.sweep.csv_path is not None:
@@ -299,3 +335,76 @@ def _cmd_limiting(args: argparse.Namespace) -> int:
     print(result.to_text())
     print(f"wrote {result.table_path}, {result.figure_path} and the sweep in {args.out}")
     return 1 if result.sweep.failed else 0
+
+
+def _setup(args: argparse.Namespace) -> Setup | None:
+    """The real setup the limiting-magnitude arguments describe (None: --scenario), each bad
+    value refused in one line naming its option."""
+    lens = {"--preset": args.preset, "--focal-length-mm": args.focal_length_mm}
+    given = [k for k, v in lens.items() if v is not None]
+    if not given:
+        for name in ("bias_set", "f_number", "aperture_mm"):
+            if getattr(args, name) is not None:
+                raise ValueError(f"--{name.replace('_', '-')} describes a real setup: give --preset and --focal-length-mm")
+        return None
+    if args.scenario is not None:
+        raise ValueError(f"give --scenario or a real setup ({', '.join(given)}), not both")
+    missing = [k for k, v in lens.items() if v is None]
+    if missing:
+        raise ValueError(f"a real setup needs {' and '.join(missing)}; got only {', '.join(given)}")
+    if args.f_number is None and args.aperture_mm is None:
+        raise ValueError("a real setup needs --f-number or --aperture-mm (the lens)")
+    for option, value, lo, hi in (("--focal-length-mm", args.focal_length_mm, 0.0, 1e7),
+                                  ("--f-number", args.f_number, 0.0, 1e4), ("--aperture-mm", args.aperture_mm, 0.0, 1e5),
+                                  ("--transmission", args.transmission, 0.0, 1.0),
+                                  ("--seeing-arcsec", args.seeing_arcsec, -1e-300, 3600.0),
+                                  ("--rate-hz", args.rate_hz, 0.0, 1e7), ("--jitter-tau-s", args.jitter_tau_s, 0.0, 3600.0),
+                                  ("--jitter-rms-arcsec", args.jitter_rms_arcsec, -1e-300, 3600.0),
+                                  ("--airmass", args.airmass, 1.0 - 1e-12, 40.0)):
+        if value is not None and not (math.isfinite(value) and lo < value <= hi):
+            raise ValueError(f"{option} must be in ({lo:g}, {hi:g}]; got {option} {value!r}")
+    if not (math.isfinite(args.stars_mag_max) and 4.0 <= args.stars_mag_max <= 16.0):
+        raise ValueError(f"--stars-mag-max must be in [4, 16] (the star-count table); got --stars-mag-max {args.stars_mag_max!r}")
+    if not (math.isfinite(args.sky_mag) and 10.0 <= args.sky_mag <= 30.0):
+        raise ValueError(f"--sky-mag must be in [10, 30] mag/arcsec^2; got --sky-mag {args.sky_mag!r}")
+    if not (math.isfinite(args.declination_deg) and -90.0 < args.declination_deg < 90.0):
+        raise ValueError(f"--declination-deg must be in (-90, 90); got --declination-deg {args.declination_deg!r}")
+    if not (math.isfinite(args.site_altitude_m) and -500.0 <= args.site_altitude_m <= 9000.0):
+        raise ValueError(f"--site-altitude-m must be in [-500, 9000]; got --site-altitude-m {args.site_altitude_m!r}")
+    width, sep, height = args.window.lower().partition("x")
+    if not (sep and width.isdigit() and height.isdigit() and 16 <= int(width) <= 4096 and 16 <= int(height) <= 4096):
+        raise ValueError(f"--window takes WxH pixels, each in [16, 4096] (e.g. 128x64); got --window {args.window!r}")
+    from ..presets import get_preset
+
+    try:
+        preset = get_preset(args.preset)
+    except ValueError as exc:
+        raise ValueError(f"--preset: {exc}") from None
+    if int(width) > preset.width or int(height) > preset.height:
+        raise ValueError(f"--window {args.window} is larger than the {preset.name} sensor ({preset.width}x{preset.height})")
+    if args.bias_set is not None:
+        from ..presets import get_bias_set
+
+        try:
+            get_bias_set(args.bias_set)
+        except ValueError as exc:
+            raise ValueError(f"--bias-set: {exc}") from None
+    if args.scintillation:
+        from ..sky.atmosphere import Scintillation
+
+        d_m = args.aperture_mm * 1e-3 if args.aperture_mm is not None else args.focal_length_mm * 1e-3 / args.f_number
+        tau = Scintillation().correlation_time_s(d_m)
+        if args.rate_hz * tau < 2.0:
+            raise ValueError(f"--scintillation: its correlation time is {tau * 1e3:.3g} ms with this aperture, and "
+                             f"--rate-hz {args.rate_hz:g} samples it {args.rate_hz * tau:.2g} times: give --rate-hz "
+                             f"{math.ceil(2.0 / tau)} or more (2 samples per correlation time)")
+    return Setup(
+        preset=args.preset, bias_set=args.bias_set, focal_length_m=args.focal_length_mm * 1e-3,
+        f_number=args.f_number, aperture_diameter_m=None if args.aperture_mm is None else args.aperture_mm * 1e-3,
+        transmission=args.transmission, sky_mag_per_arcsec2=args.sky_mag,
+        seeing_fwhm_arcsec=args.seeing_arcsec if args.seeing_arcsec > 0 else None, pointing=args.pointing,
+        declination_deg=args.declination_deg, width_px=int(width), height_px=int(height),
+        duration_s=4.0 if args.duration is None else args.duration, rate_hz=args.rate_hz, stars=not args.no_stars,
+        stars_mag_max=args.stars_mag_max, jitter_rms_arcsec=args.jitter_rms_arcsec, jitter_tau_s=args.jitter_tau_s,
+        scintillation=args.scintillation, site_altitude_m=args.site_altitude_m, airmass=args.airmass,
+    )

@@ -16,7 +16,8 @@ Three entry points, each a grid or a search of independent simulations ("jobs"):
   CSV written row by row as jobs finish (an interrupted sweep keeps its finished rows and
   ``resume=True`` skips them), a summary CSV and a figure.
 * :func:`limiting_magnitude` -- the faintest magnitude detected against angular rate, for
-  one bias configuration: a ``detect`` sweep of a linear mover over (rate, magnitude).
+  one bias configuration: a ``detect`` sweep of a linear mover over (rate, magnitude), for a
+  scenario or a real :class:`Setup` (lens, preset and biases, sky, seeing, pointing mode).
 
 Execution. Every job is the top-level function :func:`evaluate` ``(scenario, overrides, seed,
 objective)`` returning a dict of numbers. Jobs run in local worker processes
@@ -56,10 +57,15 @@ from .fit import SAMPLERS, FitResult, TrialRecord, fit
 from .limits import (
     DEFAULT_MAGNITUDES,
     DEFAULT_RATES_ARCSEC_S,
+    POINTINGS,
+    SIDEREAL_RATE_ARCSEC_S,
     LimitingMagnitudeResult,
+    PointingDetectObjective,
+    Setup,
     limiting_magnitude,
     limiting_magnitude_scenario,
     parse_float_list,
+    static_detect_metrics,
 )
 from .objectives import (
     OBJECTIVES,
@@ -83,6 +89,11 @@ __all__ = [
     "JOB_RETRIES",
     "JobFailure",
     "LimitingMagnitudeResult",
+    "POINTINGS",
+    "PointingDetectObjective",
+    "SIDEREAL_RATE_ARCSEC_S",
+    "Setup",
+    "static_detect_metrics",
     "LocalExecutor",
     "MatchObjective",
     "NoiseObjective",

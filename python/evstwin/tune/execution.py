@@ -356,20 +356,22 @@ for the estimate printed before a run: a 3 s ``mcreynolds`` on one thread of the
 development machine did 67.5 M base-rate updates in 4.5 s. A rough figure, said to be one."""
 
 
-def announce(what: str, n_jobs: int, scene: Any, executor: Any) -> str:
-    """One paragraph saying what a run will do and about how long it should take."""
+def announce(what: str, n_jobs: int, scene: Any, executor: Any, job_seconds: float | None = None) -> str:
+    """One paragraph saying what a run will do and about how long it should take: from
+    ``job_seconds`` (one job timed by the caller) if given, else from the pixel-updates."""
     updates = scene.width * scene.height * scene.rate_hz * scene.duration_s
     workers = max(1, getattr(executor, "workers", None) or 1) if executor is not None else 1
     if isinstance(executor, DaskExecutor):
         info = executor.client.scheduler_info() if hasattr(executor.client, "scheduler_info") else {}
         workers = max(1, len(info.get("workers", {})))
-    per_job_s = updates / UPDATES_PER_S_PER_WORKER
+    per_job_s = updates / UPDATES_PER_S_PER_WORKER if job_seconds is None else float(job_seconds)
     total_s = per_job_s * math.ceil(n_jobs / workers)
     where = executor.description if executor is not None else "nothing to run"
+    basis = (f"from {UPDATES_PER_S_PER_WORKER / 1e6:g} M pixel-updates/s per worker; sub-sampled moving targets take "
+             "longer" if job_seconds is None else "from one job timed here; each worker also pays its start-up, imports and PSF tables")
     return (f"{what}: {n_jobs} job(s) of {scene.width}x{scene.height} px for {scene.duration_s:g} s of sensor "
             f"time at {scene.rate_hz:g} Hz on {where}; estimate ~{per_job_s:.1f} s a job, "
-            f"~{_duration_text(total_s)} in all (from {UPDATES_PER_S_PER_WORKER / 1e6:g} M pixel-updates/s "
-            "per worker; sub-sampled moving targets take longer)")
+            f"~{_duration_text(total_s)} in all ({basis})")
 
 
 def _duration_text(seconds: float) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -148,7 +149,7 @@ def plot_limiting_magnitude(result: LimitingMagnitudeResult, path: PathLike) -> 
         i = int(np.searchsorted(mags, float(r["targets.0.magnitude"])))
         j = int(np.flatnonzero(rates == float(r["targets.0.wx_arcsec_s"]))[0])
         grid[i, j] = r[f"mean_{metric}"]
-    fig = Figure(figsize=(7, 4.5))
+    fig = Figure(figsize=(7.5, 5.0))
     ax = fig.add_subplot(1, 1, 1)
     order = np.argsort(rates)
     if rates.size > 1:
@@ -180,11 +181,15 @@ def plot_limiting_magnitude(result: LimitingMagnitudeResult, path: PathLike) -> 
         label=f"limiting magnitude ({metric} >= {threshold:g})",
     )
     ax.set_xscale("log")
-    ax.set_xlabel("angular rate [arcsec/s]")
+    ax.set_xlabel(f"angular rate relative to the stars [arcsec/s] ({result.pointing} pointing)")
     ax.set_ylabel("magnitude (fainter up)")
-    ax.set_title("limiting magnitude against angular rate")
+    title = "limiting magnitude against angular rate"
+    if result.setup:
+        title += "\n" + textwrap.fill(result.setup, 90)
+    ax.set_title(title, fontsize="small")
     ax.legend(loc="lower left", fontsize="small")
-    fig.tight_layout()
+    fig.text(0.01, 0.005, textwrap.fill(result.criterion_text(), 130), fontsize=6, va="bottom")
+    fig.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
     return plots.save(fig, Path(path))
 
 

@@ -212,6 +212,7 @@ def sweep(
     roi: Any = None,
     mask_pixels: Sequence[tuple[int, int]] = (),
     mask_hot: bool = False,
+    job_seconds: float | None = None,
 ) -> SweepResult:
     """Evaluate every combination of ``grid`` over ``runs`` seeds (``seed .. seed+runs-1``).
 
@@ -228,6 +229,8 @@ def sweep(
         sorted at the end), ``sweep_summary.csv`` and ``sweep.png`` go; an existing
         ``sweep.csv`` is an error unless ``resume``, which keeps its rows for this grid and runs
         only the missing (point, seed) jobs. None: nothing written.
+    job_seconds: one job's wall time measured by the caller, for the estimate printed with
+        ``progress`` (None: the rough pixel-update figure).
     """
     t0 = time.perf_counter()
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
@@ -286,7 +289,8 @@ def sweep(
     ctx = _Context(scenario=base, objective=obj)
     executor = make_executor(scheduler, workers) if jobs else None
     if progress and jobs:
-        print(announce(f"sweep ({obj.name})", len(jobs), build(obj.prepare(base)), executor), file=sys.stderr)
+        print(announce(f"sweep ({obj.name})", len(jobs), build(obj.prepare(base)), executor, job_seconds),
+              file=sys.stderr)
     bar = _bar(len(points) * runs, f"sweep ({obj.name})", progress, initial=len(done))
     try:
         with contextlib.ExitStack() as stack:
