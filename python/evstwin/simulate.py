@@ -304,6 +304,10 @@ class _LinearColumns:
         f[:, self.cols] = self.flux
 
 
+SUB_SAMPLED_UNIT_SAMPLES = 50
+"""Fine samples in a unit of the fine-sampling decision (see ``_Runner._engine_chunks``): a
+fixed figure, not ``chunk_samples``, so that the chunking does not change the events."""
+
 _Chunk = tuple[np.ndarray, "np.ndarray | None"]
 """A chunk of events (sorted by t) and their labels (None when the runner keeps none)."""
 
@@ -361,6 +365,10 @@ class _Runner:
         # comes out of the engine: its state carries over, so the chunking changes nothing.
         self.readout = None if scene.readout is None else Readout.from_params(scene.readout)
         self.readout_s = 0.0
+        # Base intervals per unit of the fine-sampling decision: about SUB_SAMPLED_UNIT_SAMPLES
+        # fine samples at the run's fastest, so a pixel is not sampled finely long before or
+        # after a source is near it (it is for the whole unit if a source touches it in it).
+        self.unit = max(1, SUB_SAMPLED_UNIT_SAMPLES // self._n_sub(0.0, self.t_end))
 
     # -- the loop --------------------------------------------------------------------------------
 
@@ -381,25 +389,35 @@ class _Runner:
 
     def _engine_chunks(self, bar: Any = None) -> Iterator[_Chunk]:
         """The engine's events, chunk by chunk in time order (each chunk sorted by t), each
-        with its labels when the runner keeps them."""
+        with its labels when the runner keeps them.
+
+        Which pixels are sampled finely, and how finely, is decided per *unit*: a fixed run of
+        base intervals aligned from t = 0 (``self.unit``, set by the scene's fastest source, not
+        by ``chunk_samples``). Every pixel's time grid, and so its random numbers and events, is
+        then the same whatever the chunking; ``chunk_samples`` only groups the units where
+        nothing moves fast enough to need the fine rate, and the fine samples of a dense one."""
         yield self._dense(np.array([0.0]))
         chunk = self.scene.chunk_samples
         a = 0
         while a < self.n_base:
-            b = min(a + chunk, self.n_base)
-            n_sub = self._n_sub(a * self.dt, b * self.dt)
-            if n_sub > 1 and self.scene.sparse:
-                # A pixel is hot for a whole chunk if a source passes it at any time in it: keep
-                # sub-sampled chunks short (about chunk_samples fine samples), so pixels are not
-                # sub-sampled long before or after the source is near them.
-                b = min(a + max(1, chunk // n_sub), self.n_base)
-                n_sub = self._n_sub(a * self.dt, b * self.dt)
-            k = np.arange(a + 1, b + 1)
-            t_base = k * self.dt
+            u0 = a - a % self.unit
+            b = min(u0 + self.unit, self.n_base)
+            n_sub = self._n_sub(u0 * self.dt, b * self.dt)
             if n_sub == 1:
-                yield self._dense(t_base)
+                # Base-rate units: group them into chunks of up to chunk_samples intervals.
+                stop = min(a + chunk, self.n_base)
+                while b < stop:
+                    nb = min(b + self.unit, self.n_base)
+                    if self._n_sub(b * self.dt, nb * self.dt) > 1:
+                        break
+                    b = nb
+                b = min(b, stop)
+                yield self._dense(np.arange(a + 1, b + 1) * self.dt)
             else:
+                # A sub-sampled unit, whole: a base-rate chunk never ends inside one.
                 self.sub_sampled_chunks += 1
+                k = np.arange(a + 1, b + 1)
+                t_base = k * self.dt
                 i = np.arange(1, n_sub + 1)
                 # Fine times: the base times themselves where i == n_sub, exactly.
                 t_fine = np.where(i[None, :] == n_sub, (k[:, None]) * self.dt,
