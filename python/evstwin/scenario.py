@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 import sys
 from dataclasses import dataclass
@@ -85,6 +86,7 @@ from .targets import (
     CircularTarget,
     LightCurve,
     LinearTarget,
+    MirroredTarget,
     StaticTarget,
     TabulatedTarget,
     Target,
@@ -93,6 +95,7 @@ from .targets import (
     drifting,
     random_star_field,
     shifted,
+    with_psf,
 )
 
 if sys.version_info >= (3, 11):
@@ -123,7 +126,10 @@ _TARGET_KEYS: dict[str, tuple[str, ...]] = {
     "rotating_bar": ("centre_x_px", "centre_y_px", "radii_px", "radii_m", "distance_m", "period_s",
                      "angular_rate_rad_s", "phase_rad"),
     "tabulated": ("t_s", "x_px", "y_px", "outside"),
+    "ghost": ("of", "centre_x_px", "centre_y_px", "magnification", "flux_fraction"),
 }
+_TARGET_PSF_KEYS = ("defocus_radius_px", "defocus_blur_sigma_px")
+"""Keys of any target that give it its own PSF (``psf.defocus_psf``, the optics' pupil)."""
 SCHEMA: dict[str, Any] = {
     "name": str,
     "description": str,
@@ -300,11 +306,23 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
     kind = target.get("kind")
     if not isinstance(kind, str) or kind not in _TARGET_KEYS:
         raise ScenarioError(f"targets[{i}].kind must be one of {', '.join(_TARGET_KEYS)}; got {kind!r}")
-    allowed = ("kind", "label", "frame") + _TARGET_KEYS[kind] + _BRIGHTNESS_KEYS
+    brightness = () if kind == "ghost" else _BRIGHTNESS_KEYS  # a ghost's is its source's
+    allowed = ("kind", "label") + (() if kind == "ghost" else ("frame",)) + _TARGET_KEYS[kind] + brightness \
+        + _TARGET_PSF_KEYS
     for key in target:
         if key not in allowed:
             raise ScenarioError(f"unknown scenario key 'targets[{i}].{key}' for kind {kind!r}; allowed: {', '.join(allowed)}")
         _check_numbers(f"targets[{i}].{key}", target[key])
+    if "defocus_blur_sigma_px" in target and "defocus_radius_px" not in target:
+        raise ScenarioError(f"targets[{i}].defocus_blur_sigma_px needs targets[{i}].defocus_radius_px")
+    if kind == "ghost":
+        for key in ("of", "flux_fraction"):
+            if key not in target:
+                raise ScenarioError(f"targets[{i}] (a ghost) needs {key}: the label of the target it mirrors "
+                                    "and the share of its flux")
+        if not isinstance(target["of"], str):
+            raise ScenarioError(f"targets[{i}].of must be the label of an earlier target; got {target['of']!r}")
+        return
     given = [k for k in _BRIGHTNESS_KEYS if k in target]
     if len(given) != 1:
         raise ScenarioError(
@@ -566,11 +584,17 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         uses_magnitude = "magnitude" in table or (isinstance(table.get("light_curve"), dict)
                                                   and "magnitude" in table["light_curve"])
         label = f"targets[{i}]" + (f" (a magnitude, through optics={s.get('optics', {})})" if uses_magnitude else "")
-        made = _wrap(label, _target, table, optics, width, height)
+        if table["kind"] == "ghost":
+            made = [_wrap(f"targets[{i}]", _ghost, table, targets, width, height)]
+        else:
+            made = _wrap(label, _target, table, optics, width, height)
         source = f"targets[{i}]"
         if table.get("frame") == "field" and moves:
             made = [drifting(t, *drift) for t in made]
             source += f" (frame='field', moved by {drift_key})"
+        if "defocus_radius_px" in table:
+            own = _wrap(f"targets[{i}].defocus_radius_px with optics={s.get('optics', {})}", _defocus, table, optics)
+            made = [with_psf(t, own) for t in made]
         targets.extend(made)
         sources.extend([source] * len(made))
     sigma = float(_wrap(f"optics={s.get('optics', {})}", lambda: optics.psf_sigma_px))
@@ -641,7 +665,8 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     roi = _roi(s["sensor"].get("roi"), width, height)
     if roi is not None:
         x0, y0, width, height = roi
-        targets, sources, field_stars = _into_roi(targets, sources, field_stars, roi, shape.half_width_px, t_end)
+        reach = max([shape.half_width_px] + [t.psf.half_width_px for t in targets if t.psf is not None])
+        targets, sources, field_stars = _into_roi(targets, sources, field_stars, roi, reach, t_end)
         hot = None if hot is None else np.ascontiguousarray(hot[y0 : y0 + height, x0 : x0 + width])
     sp = s["sampling"]
     if atmosphere is not None:
@@ -998,6 +1023,31 @@ def _target(table: dict[str, Any], optics: Optics, width: int, height: int) -> l
         return [dataclasses.replace(t, label=f"{label}[{j}]") for j, t in enumerate(bar)]
     return [TabulatedTarget(np.asarray(table["t_s"], float), np.asarray(table["x_px"], float),
                             np.asarray(table["y_px"], float), b, outside=table.get("outside", "raise"), label=label)]
+
+
+def _ghost(table: dict[str, Any], earlier: list[Target], width: int, height: int) -> Target:
+    of = table["of"]
+    match = [t for t in earlier if t.label == of]
+    if len(match) != 1:
+        labels = sorted({t.label for t in earlier})
+        raise ValueError(f"of={of!r} must name exactly one earlier target; "
+                         f"{'found ' + str(len(match)) if match else 'none has that label'} (labels: {labels})")
+    return MirroredTarget(match[0], float(table.get("centre_x_px", (width - 1) / 2)),
+                          float(table.get("centre_y_px", (height - 1) / 2)), float(table.get("magnification", 1.0)),
+                          float(table["flux_fraction"]), label=str(table.get("label", "ghost")))
+
+
+def _defocus(table: dict[str, Any], optics: Optics) -> psf.PSFShape:
+    blur = table.get("defocus_blur_sigma_px", optics.extra_blur_sigma_px)
+    return _defocus_shape(float(table["defocus_radius_px"]), float(optics.obstruction_ratio), int(optics.spider_vanes),
+                          float(optics.spider_width_ratio), float(optics.spider_angle_deg), float(blur))
+
+
+@functools.lru_cache(maxsize=8)
+def _defocus_shape(radius: float, obstruction: float, vanes: int, vane_width: float, vane_angle: float,
+                   blur: float) -> psf.PSFShape:
+    """``psf.defocus_psf`` cached (1-2 s to tabulate a 70 px ring; a fit builds the scene per trial)."""
+    return psf.defocus_psf(radius, obstruction, vanes, vane_width, vane_angle, blur)
 
 
 def to_toml(scenario: dict[str, Any]) -> str:

@@ -244,6 +244,21 @@ def _stats(runner: _Runner, meta: dict[str, Any], wall0: float, n_events: int, n
     }
 
 
+def _psf_groups(targets: Sequence[Target], scene_psf: psf.PSFShape) -> list[tuple[psf.PSFShape, np.ndarray]]:
+    """The targets' column indices grouped by the PSF they are rendered with: the scene's
+    first (possibly empty), then each distinct own PSF (``Target.psf``) in order of appearance."""
+    own: dict[int, tuple[psf.PSFShape, list[int]]] = {}
+    plain: list[int] = []
+    for j, t in enumerate(targets):
+        if t.psf is None or t.psf is scene_psf:
+            plain.append(j)
+        else:
+            own.setdefault(id(t.psf), (t.psf, []))[1].append(j)
+    groups = [(scene_psf, np.array(plain, np.int64))]
+    groups += [(shape, np.array(cols, np.int64)) for shape, cols in own.values()]
+    return groups
+
+
 def track_names(scene: Scene) -> list[str]:
     """The names under which a scene's moving targets' ground truth is written (their labels,
     ``target<j>`` for unlabelled ones, ``#<j>`` appended to a repeated label). The stars of a
@@ -334,12 +349,16 @@ class _Runner:
         n_tracked = len(self.moving)
         self.moving += [t for t in scene.targets[len(tracked):] if not _is_static(t, self.t_end)]
         self._linear = _LinearColumns(self.moving)
+        # The moving targets by PSF: the scene's first (all of them, most often), then each
+        # target's own (a defocused ghost).
+        self._groups = _psf_groups(self.moving, self.psf)
         self.static_map = np.full((scene.height, scene.width), scene.background_ph_s, np.float64)
         if static:
             x = np.array([float(t.position_px(0.0)[0]) for t in static])
             y = np.array([float(t.position_px(0.0)[1]) for t in static])
             f = np.array([float(t.flux_ph_s(0.0)) for t in static])
-            psf.render_points(scene.width, scene.height, x, y, f, self.psf, out=self.static_map)
+            for shape, cols in _psf_groups(static, self.psf):
+                psf.render_points(scene.width, scene.height, x[cols], y[cols], f[cols], shape, out=self.static_map)
         self.scene_s = time.perf_counter() - t0
         self.engine_s = 0.0
         self.pixel_updates = 0
@@ -461,7 +480,12 @@ class _Runner:
         sc = self.scene
         if self.moving:
             x, y, f = self._sources(t)
-            frames = psf.render_frames(sc.width, sc.height, x, y, f, self.psf, background_ph_s=self.static_map)
+            shape, cols = self._groups[0]
+            frames = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
+                                       background_ph_s=self.static_map)
+            if len(self._groups) > 1:
+                idx, val = self._contributions(x, y, f, self._groups[1:])
+                np.add.at(frames.reshape(-1), idx, val)
         else:
             frames = np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
         s1 = time.perf_counter()
@@ -473,21 +497,29 @@ class _Runner:
         self.pixel_updates += t.size * sc.width * sc.height
         return events, codes
 
+    def _contributions(self, x: np.ndarray, y: np.ndarray, f: np.ndarray,
+                       groups: Sequence[tuple[psf.PSFShape, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+        """Flat (sample * pixels + pixel) indices and photon rates of the (T, S) sources' windows,
+        each group of columns through its PSF."""
+        sc = self.scene
+        npix = sc.width * sc.height
+        parts: list[tuple[np.ndarray, np.ndarray]] = []
+        for shape, cols in groups:
+            n_t, n_s = x.shape[0], cols.size
+            sample = np.repeat(np.arange(n_t, dtype=np.int64), n_s)
+            parts += psf.contributions(sc.width, sc.height, x[:, cols].reshape(-1), y[:, cols].reshape(-1),
+                                       f[:, cols].reshape(-1), shape, offset=sample * npix)
+        if not parts:
+            return np.zeros(0, np.int64), np.zeros(0)
+        return np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts])
+
     def _sparse(self, t_fine: np.ndarray, t_base: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
         sc = self.scene
         npix = sc.width * sc.height
         x, y, f = self._sources(t_fine)
-        n_t, n_s = x.shape
-        sample = np.repeat(np.arange(n_t, dtype=np.int64), n_s)
-        contributions = psf.contributions(
-            sc.width, sc.height, x.reshape(-1), y.reshape(-1), f.reshape(-1), self.psf, offset=sample * npix,
-        )
-        if contributions:
-            idx = np.concatenate([c[0] for c in contributions])
-            val = np.concatenate([c[1] for c in contributions])
-        else:
-            idx, val = np.zeros(0, np.int64), np.zeros(0)
+        n_t = x.shape[0]
+        idx, val = self._contributions(x, y, f, self._groups)
         sample_of = idx // npix
         pixel = idx - sample_of * npix
         # Hot: lit by a moving window in this chunk, or still settling from an earlier one.

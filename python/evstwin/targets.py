@@ -29,12 +29,15 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from .optics import Optics, _array, _finite, _non_negative, _positive
+
+if TYPE_CHECKING:
+    from .psf import PSFShape
 
 Outside = Literal["raise", "hold"]
 
@@ -142,6 +145,9 @@ class Target(abc.ABC):
 
     brightness: Brightness
     label: str
+    psf: PSFShape | None = None
+    """Its own PSF (a defocused ghost, an out-of-focus source), or None: the scene's. Set with
+    :func:`with_psf`; the wrappers here (drifting, shifted, mirrored) keep it."""
 
     @abc.abstractmethod
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -433,6 +439,7 @@ class DriftingTarget(Target):
             _finite(name, getattr(self, name))
         object.__setattr__(self, "brightness", self.target.brightness)
         object.__setattr__(self, "label", self.target.label)
+        object.__setattr__(self, "psf", self.target.psf)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         t = _times(t_s)
@@ -475,11 +482,12 @@ def drifting(target: Target, vx_px_s: float, vy_px_s: float) -> Target:
     if vx == 0.0 and vy == 0.0:
         return target
     if isinstance(target, StaticTarget):
-        return LinearTarget(target.x_px, target.y_px, vx, vy, target.brightness, 0.0, target.label)
+        return with_psf(LinearTarget(target.x_px, target.y_px, vx, vy, target.brightness, 0.0, target.label), target.psf)
     if isinstance(target, LinearTarget):
         # x0 + v (t - t0) + d t = (x0 + d t0) + (v + d)(t - t0)
-        return LinearTarget(target.x0_px + vx * target.t0_s, target.y0_px + vy * target.t0_s,
-                            target.vx_px_s + vx, target.vy_px_s + vy, target.brightness, target.t0_s, target.label)
+        return with_psf(LinearTarget(target.x0_px + vx * target.t0_s, target.y0_px + vy * target.t0_s,
+                                     target.vx_px_s + vx, target.vy_px_s + vy, target.brightness, target.t0_s,
+                                     target.label), target.psf)
     return DriftingTarget(target, vx, vy)
 
 
@@ -491,17 +499,76 @@ def shifted(target: Target, dx_px: float, dy_px: float) -> Target:
     dx, dy = _finite("dx_px", dx_px), _finite("dy_px", dy_px)
     if dx == 0.0 and dy == 0.0:
         return target
+    out: Target
     if isinstance(target, StaticTarget):
-        return dataclasses.replace(target, x_px=target.x_px + dx, y_px=target.y_px + dy)
-    if isinstance(target, LinearTarget):
-        return dataclasses.replace(target, x0_px=target.x0_px + dx, y0_px=target.y0_px + dy)
-    if isinstance(target, CircularTarget):
-        return dataclasses.replace(target, centre_x_px=target.centre_x_px + dx, centre_y_px=target.centre_y_px + dy)
-    if isinstance(target, TabulatedTarget):
-        return dataclasses.replace(target, x_px=target.x_px + dx, y_px=target.y_px + dy)
-    if isinstance(target, DriftingTarget):
-        return dataclasses.replace(target, dx_px=target.dx_px + dx, dy_px=target.dy_px + dy)
-    return DriftingTarget(target, 0.0, 0.0, dx, dy)
+        out = dataclasses.replace(target, x_px=target.x_px + dx, y_px=target.y_px + dy)
+    elif isinstance(target, LinearTarget):
+        out = dataclasses.replace(target, x0_px=target.x0_px + dx, y0_px=target.y0_px + dy)
+    elif isinstance(target, CircularTarget):
+        out = dataclasses.replace(target, centre_x_px=target.centre_x_px + dx, centre_y_px=target.centre_y_px + dy)
+    elif isinstance(target, TabulatedTarget):
+        out = dataclasses.replace(target, x_px=target.x_px + dx, y_px=target.y_px + dy)
+    elif isinstance(target, DriftingTarget):
+        out = dataclasses.replace(target, dx_px=target.dx_px + dx, dy_px=target.dy_px + dy)
+    else:
+        out = DriftingTarget(target, 0.0, 0.0, dx, dy)
+    return with_psf(out, target.psf)
+
+
+def with_psf(target: Target, psf: PSFShape | None) -> Target:
+    """``target`` rendered with its own PSF (None: the scene's). Returns a copy; the target
+    classes are frozen, and the PSF is not part of their constructor."""
+    if psf is target.psf:
+        return target
+    out = dataclasses.replace(target) if dataclasses.is_dataclass(target) else target  # type: ignore[type-var]
+    object.__setattr__(out, "psf", psf)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class MirroredTarget(Target):
+    """A ghost of ``source``: its image reflected through (centre_x_px, centre_y_px) and
+    scaled, ``position = c - magnification (source - c)``, with ``flux_fraction`` of its flux
+    at every time (a light curve included). A reflection between lens surfaces or the sensor
+    window forms an image of a bright star on the far side of the optical axis, moving the
+    opposite way, usually defocused (give it its own PSF with :func:`with_psf`).
+    """
+
+    source: Target
+    centre_x_px: float
+    centre_y_px: float
+    magnification: float = 1.0
+    flux_fraction: float = 1.0
+    label: str = "ghost"
+    brightness: Brightness = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.source, Target):
+            raise TypeError(f"source must be a Target; got {self.source!r}")
+        _finite("centre_x_px", self.centre_x_px)
+        _finite("centre_y_px", self.centre_y_px)
+        m = _finite("magnification", self.magnification)
+        if not m > 0.0:
+            raise ValueError(f"magnification must be > 0; got magnification={self.magnification!r}")
+        f = _finite("flux_fraction", self.flux_fraction)
+        if not 0.0 < f <= 1.0:
+            raise ValueError(f"flux_fraction must be in (0, 1]; got flux_fraction={self.flux_fraction!r}")
+        object.__setattr__(self, "brightness", self.source.brightness)
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        x, y = self.source.position_px(t_s)
+        m = self.magnification
+        return self.centre_x_px - m * (x - self.centre_x_px), self.centre_y_px - m * (y - self.centre_y_px)
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        vx, vy = self.source.velocity_px_s(t_s)
+        return -self.magnification * vx, -self.magnification * vy
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        return self.magnification * self.source.max_speed_px_s(t0_s, t1_s)
+
+    def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
+        return self.flux_fraction * self.source.flux_ph_s(t_s)
 
 
 def drift_px_s_from_arcsec(wx_arcsec_s: float, wy_arcsec_s: float, optics: Optics) -> tuple[float, float]:

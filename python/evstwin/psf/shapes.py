@@ -348,6 +348,72 @@ def moffat_psf(
     return KernelPSF(mass, k, m, h, "moffat", params)
 
 
+# -- defocus --------------------------------------------------------------------------------------
+
+
+def defocus_psf(
+    radius_px: float,
+    obstruction_ratio: float = 0.0,
+    spider_vanes: int = 0,
+    spider_width_ratio: float = 0.01,
+    spider_angle_deg: float = 0.0,
+    extra_blur_sigma_px: float = 0.0,
+    subpixel: int = 2,
+    half_width_px: int | None = None,
+) -> KernelPSF:
+    """A source far out of focus: the geometric image of the pupil, a uniform disc of radius
+    ``radius_px`` less the central obstruction's shadow (``obstruction_ratio`` of the radius)
+    and the spider vanes' (``spider_width_ratio`` of the diameter wide, as ``pupil``), blurred
+    by a Gaussian of ``extra_blur_sigma_px`` (seeing, the rest of the optics). Diffraction is
+    left out: it matters only within lambda N of the edge. Lens ghosts (a reflection focused
+    far from the sensor) and deliberately defocused photometry look like this.
+
+    radius_px in [0.5, 120]; the default window's taper starts past radius + 5 sigma of the
+    blur, h in [2, 128] px. ``subpixel`` defaults to 2: a disc pixels wide needs no finer
+    phases (its pixel values change by ~(1/k)^2/8 of their curvature, only at the edge).
+    """
+    r = _finite("defocus_radius_px", radius_px)
+    if not 0.5 <= r <= 120.0:
+        raise ValueError(f"defocus_radius_px must be in [0.5, 120]; got defocus_radius_px={radius_px!r}")
+    eps = _finite("obstruction_ratio", obstruction_ratio)
+    if not 0.0 <= eps < 1.0:
+        raise ValueError(f"obstruction_ratio must be in [0, 1); got obstruction_ratio={obstruction_ratio!r}")
+    if isinstance(spider_vanes, bool) or not isinstance(spider_vanes, (int, np.integer)) or not 0 <= spider_vanes <= 16:
+        raise ValueError(f"spider_vanes must be an integer in [0, 16]; got spider_vanes={spider_vanes!r}")
+    width = _finite("spider_width_ratio", spider_width_ratio)
+    if not 0.0 <= width < 0.5:
+        raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={spider_width_ratio!r}")
+    angle = math.radians(_finite("spider_angle_deg", spider_angle_deg))
+    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    k = _subpixel(subpixel)
+    h = _half_from("defocus", half_width_px, _default_half(r, blur))
+    # Cells at least 8 across the smaller of the radius and the vanes' shadow (2 r width wide).
+    finest = min(r, max(2.0 * r * width, 0.25) if spider_vanes else r)
+    m = max(1, math.ceil(8.0 / (k * finest)))
+    m = max(1, min(m, _MAX_GRID_SIDE // (2 * k * (h + 1))))
+    n = _grid("defocus", h, k, m)
+    cell = 1.0 / (k * m)
+    c = _cell_centres(n, cell)
+    ux, uy = c[None, :], c[:, None]
+    rr = np.hypot(ux, uy)
+    open_ = (rr <= r) & (rr >= eps * r)
+    for v in range(int(spider_vanes)):
+        th = angle + 2.0 * math.pi * v / spider_vanes
+        along = ux * math.cos(th) + uy * math.sin(th)
+        across = uy * math.cos(th) - ux * math.sin(th)
+        open_ &= ~((along >= 0.0) & (np.abs(across) <= width * r))
+    mass = open_.astype(np.float64)
+    total = mass.sum()
+    if not total > 0.0:
+        raise ValueError(f"defocus PSF: nothing of the pupil is open (obstruction_ratio={obstruction_ratio!r}, "
+                         f"spider_vanes={spider_vanes!r}, spider_width_ratio={spider_width_ratio!r})")
+    mass /= total
+    mass = _blur(mass, blur, cell)
+    params = {"radius_px": r, "obstruction_ratio": eps, "spider_vanes": int(spider_vanes),
+              "spider_width_ratio": width, "extra_blur_sigma_px": blur}
+    return KernelPSF(mass, k, m, h, "defocus", params)
+
+
 # -- measured -----------------------------------------------------------------------------------
 
 

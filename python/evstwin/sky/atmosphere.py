@@ -403,6 +403,7 @@ class AtmosphericTarget(Target):
         if not isinstance(self.target, Target):
             raise TypeError(f"target must be a Target; got {self.target!r}")
         object.__setattr__(self, "label", self.target.label)
+        object.__setattr__(self, "psf", self.target.psf)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         x, y = self.target.position_px(t_s)
