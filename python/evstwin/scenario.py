@@ -84,6 +84,7 @@ from .sky.atmosphere import ATMOSPHERE_KEYS, Atmosphere, atmosphere_from_table
 from .targets import (
     MAX_STARS,
     CircularTarget,
+    FieldPath,
     LightCurve,
     LinearTarget,
     MirroredTarget,
@@ -91,6 +92,7 @@ from .targets import (
     TabulatedTarget,
     Target,
     aligned_rotating_targets,
+    along_path,
     drift_px_s_from_arcsec,
     drifting,
     random_star_field,
@@ -128,8 +130,9 @@ _TARGET_KEYS: dict[str, tuple[str, ...]] = {
     "tabulated": ("t_s", "x_px", "y_px", "outside"),
     "ghost": ("of", "centre_x_px", "centre_y_px", "magnification", "flux_fraction"),
 }
-_TARGET_PSF_KEYS = ("defocus_radius_px", "defocus_blur_sigma_px")
-"""Keys of any target that give it its own PSF (``psf.defocus_psf``, the optics' pupil)."""
+_TARGET_PSF_KEYS = ("defocus_radius_px", "defocus_blur_sigma_px", "defocus_obstruction_ratio", "defocus_spider_vanes")
+"""Keys of any target that give it its own PSF (``psf.defocus_psf``): the radius, and the blur,
+obstruction and vanes where they are not the optics' (a ghost formed behind the obstruction)."""
 SCHEMA: dict[str, Any] = {
     "name": str,
     "description": str,
@@ -146,7 +149,7 @@ SCHEMA: dict[str, Any] = {
     "targets": list,
     "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
                    "counts_slope": float, "seed": int, "drift_px_s": Any, "drift_arcsec_s": Any,
-                   "distribution": str, "density_scale": float},
+                   "distribution": str, "density_scale": float, "path": dict},
     "atmosphere": {k: Any for k in ATMOSPHERE_KEYS},
     "readout": {"enabled": bool, "max_rate_hz": float, "fifo_depth": int, "tick_s": float},
 }
@@ -313,8 +316,9 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
         if key not in allowed:
             raise ScenarioError(f"unknown scenario key 'targets[{i}].{key}' for kind {kind!r}; allowed: {', '.join(allowed)}")
         _check_numbers(f"targets[{i}].{key}", target[key])
-    if "defocus_blur_sigma_px" in target and "defocus_radius_px" not in target:
-        raise ScenarioError(f"targets[{i}].defocus_blur_sigma_px needs targets[{i}].defocus_radius_px")
+    for key in _TARGET_PSF_KEYS[1:]:
+        if key in target and "defocus_radius_px" not in target:
+            raise ScenarioError(f"targets[{i}].{key} needs targets[{i}].defocus_radius_px")
     if kind == "ghost":
         for key in ("of", "flux_fraction"):
             if key not in target:
@@ -577,6 +581,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     t_end = max(1, math.ceil(float(s["duration_s"]) * float(s["sampling"]["rate_hz"]) - 1e-9)) / float(
         s["sampling"]["rate_hz"])
     drift, drift_key = _field_drift(s, optics)
+    path = _field_path(s)
     moves = drift != (0.0, 0.0)
     targets: list[Target] = []
     sources: list[str] = []  # the key each target comes from, for errors
@@ -592,6 +597,9 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         if table.get("frame") == "field" and moves:
             made = [drifting(t, *drift) for t in made]
             source += f" (frame='field', moved by {drift_key})"
+        if table.get("frame") == "field" and path is not None:
+            made = [along_path(t, path) for t in made]
+            source += " (frame='field', along star_field.path)"
         if "defocus_radius_px" in table:
             own = _wrap(f"targets[{i}].defocus_radius_px with optics={s.get('optics', {})}", _defocus, table, optics)
             made = [with_psf(t, own) for t in made]
@@ -611,6 +619,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         shape = _psf_shape(optics, s.get("optics", {}))
     field_stars = 0
     sf = dict(s.get("star_field", {}))
+    sf.pop("path", None)
     drift_only = (any(k in sf for k in _DRIFT_KEYS) and "n_stars" not in sf and "density_per_deg2" not in sf
                   and sf.get("distribution") != "all-sky")
     if sf and not drift_only:
@@ -641,6 +650,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             raise ScenarioError(f"star_field.counts_slope must be in [-5, 5] (dex per magnitude; ~0.4 for stars); "
                                 f"got {slope!r}")
         stars = _wrap("star_field", random_star_field, width, height, optics, **sf, drift_px_s=drift, duration_s=t_end)
+        stars = [along_path(t, path) for t in stars]
         targets.extend(stars)
         sources.extend([f"star_field (moved by {drift_key})" if moves else "star_field"] * len(stars))
         field_stars = len(stars)
@@ -767,6 +777,19 @@ def _field_drift(s: dict[str, Any], optics: Optics) -> tuple[tuple[float, float]
         vx, vy = _wrap(f"{key} through optics={s.get('optics', {})}", drift_px_s_from_arcsec, w[0], w[1], optics)
         return (vx, vy), f"{key} ({vx:.4g}, {vy:.4g} px/s at {optics.plate_scale_arcsec_per_px:.4g} arcsec/px)"
     return (0.0, 0.0), "no drift"
+
+
+def _field_path(s: dict[str, Any]) -> FieldPath | None:
+    """star_field.path: the field's offset against time on top of its drift (a slew), or None."""
+    table = s.get("star_field", {}).get("path")
+    if table is None:
+        return None
+    allowed = ("t_s", "dx_px", "dy_px")
+    if set(table) != set(allowed):
+        raise ScenarioError(f"star_field.path takes exactly {', '.join(allowed)} (arrays of one length); got keys "
+                            f"{sorted(table)}")
+    return _wrap("star_field.path", lambda: FieldPath(np.asarray(table["t_s"], float), np.asarray(table["dx_px"], float),
+                                                      np.asarray(table["dy_px"], float)))
 
 
 def _readout(s: dict[str, Any], preset: SensorPreset) -> ReadoutParams | None:
@@ -1039,7 +1062,11 @@ def _ghost(table: dict[str, Any], earlier: list[Target], width: int, height: int
 
 def _defocus(table: dict[str, Any], optics: Optics) -> psf.PSFShape:
     blur = table.get("defocus_blur_sigma_px", optics.extra_blur_sigma_px)
-    return _defocus_shape(float(table["defocus_radius_px"]), float(optics.obstruction_ratio), int(optics.spider_vanes),
+    obstruction = table.get("defocus_obstruction_ratio", optics.obstruction_ratio)
+    vanes = table.get("defocus_spider_vanes", optics.spider_vanes)
+    if isinstance(vanes, bool) or not isinstance(vanes, int):
+        raise ValueError(f"defocus_spider_vanes must be an integer in [0, 16]; got defocus_spider_vanes={vanes!r}")
+    return _defocus_shape(float(table["defocus_radius_px"]), float(obstruction), vanes,
                           float(optics.spider_width_ratio), float(optics.spider_angle_deg), float(blur))
 
 

@@ -553,7 +553,11 @@ class MirroredTarget(Target):
         f = _finite("flux_fraction", self.flux_fraction)
         if not 0.0 < f <= 1.0:
             raise ValueError(f"flux_fraction must be in (0, 1]; got flux_fraction={self.flux_fraction!r}")
-        object.__setattr__(self, "brightness", self.source.brightness)
+        # Its own brightness, the source's scaled (not a flux_ph_s override): wrappers that
+        # take a target's brightness (drifting, shifted, the atmosphere) then keep the share.
+        b = self.source.brightness
+        scaled = (dataclasses.replace(b, flux_ph_s=f * b.flux_ph_s) if isinstance(b, LightCurve) else f * float(b))
+        object.__setattr__(self, "brightness", scaled)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         x, y = self.source.position_px(t_s)
@@ -567,8 +571,88 @@ class MirroredTarget(Target):
     def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
         return self.magnification * self.source.max_speed_px_s(t0_s, t1_s)
 
-    def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
-        return self.flux_fraction * self.source.flux_ph_s(t_s)
+
+@dataclass(frozen=True, eq=False)
+class FieldPath:
+    """An offset of the whole field on the sensor against time, on top of any steady drift: a
+    mount's slew, a wind shake, a tabulated pointing error. ``(dx_px, dy_px)`` at ``t_s``
+    (strictly increasing, at least 2 points), linear in between, held at the end values
+    outside the table."""
+
+    t_s: np.ndarray
+    dx_px: np.ndarray
+    dy_px: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = _table_times("path.t_s", self.t_s)
+        if t.size < 2:
+            raise ValueError(f"path.t_s needs at least 2 points; got {t.size}")
+        object.__setattr__(self, "t_s", t)
+        for name in ("dx_px", "dy_px"):
+            v = np.array(_table(f"path.{name}", "path.t_s", t, getattr(self, name)))
+            v.setflags(write=False)
+            object.__setattr__(self, name, v)
+
+    def offset_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        t = _times(t_s)
+        return np.interp(t, self.t_s, self.dx_px), np.interp(t, self.t_s, self.dy_px)
+
+    def _slopes(self) -> tuple[np.ndarray, np.ndarray]:
+        dt = np.diff(self.t_s)
+        return np.diff(self.dx_px) / dt, np.diff(self.dy_px) / dt
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The segment's slope (the later segment at a table point), 0 outside the table."""
+        t = _times(t_s)
+        vx, vy = self._slopes()
+        k = np.searchsorted(self.t_s, t, side="right") - 1
+        inside = (k >= 0) & (k < vx.size)
+        kk = np.clip(k, 0, vx.size - 1)
+        return np.where(inside, vx[kk], 0.0), np.where(inside, vy[kk], 0.0)
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        t0, t1 = _interval(t0_s, t1_s)
+        vx, vy = self._slopes()
+        touch = (self.t_s[1:] >= t0) & (self.t_s[:-1] <= t1)
+        return float(np.hypot(vx[touch], vy[touch]).max(initial=0.0))
+
+
+@dataclass(frozen=True, eq=False)
+class PathTarget(Target):
+    """``target`` carried by a field that moves along ``path`` (its position plus the path's
+    offset; brightness, label and PSF the target's). Use :func:`along_path`."""
+
+    target: Target
+    path: FieldPath
+    brightness: Brightness = dataclasses.field(init=False)
+    label: str = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.target, Target):
+            raise TypeError(f"target must be a Target; got {self.target!r}")
+        object.__setattr__(self, "brightness", self.target.brightness)
+        object.__setattr__(self, "label", self.target.label)
+        object.__setattr__(self, "psf", self.target.psf)
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        t = _times(t_s)
+        x, y = self.target.position_px(t)
+        dx, dy = self.path.offset_px(t)
+        return x + dx, y + dy
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        vx, vy = self.target.velocity_px_s(t_s)
+        wx, wy = self.path.velocity_px_s(t_s)
+        return vx + wx, vy + wy
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        """A bound: the target's own largest speed plus the path's (only ever samples more finely)."""
+        return self.target.max_speed_px_s(t0_s, t1_s) + self.path.max_speed_px_s(t0_s, t1_s)
+
+
+def along_path(target: Target, path: FieldPath | None) -> Target:
+    """``target`` moved with the field along ``path`` (None: unchanged)."""
+    return target if path is None else PathTarget(target, path)
 
 
 def drift_px_s_from_arcsec(wx_arcsec_s: float, wy_arcsec_s: float, optics: Optics) -> tuple[float, float]:

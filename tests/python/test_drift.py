@@ -265,3 +265,50 @@ def test_a_fast_drifting_field_sub_samples_sparsely_with_the_dense_events() -> N
     assert sparse.sub_sampled_chunks > 0 and sparse.n_events > 1000
     assert sparse.pixel_updates < dense.pixel_updates
     np.testing.assert_array_equal(sparse.events, dense.events)
+
+
+# -- a field path (a slew) on top of the drift ---------------------------------------------------
+
+
+def test_a_field_path_moves_field_targets_and_stars_by_its_offset() -> None:
+    from evstwin.targets import FieldPath, PathTarget, StaticTarget, along_path
+
+    path = FieldPath(np.array([1.0, 1.1, 1.2]), np.array([0.0, 0.0, 4.0]), np.array([0.0, -19.0, -20.0]))
+    star = along_path(StaticTarget(50.0, 40.0, 1e8, label="s"), path)
+    assert isinstance(star, PathTarget) and along_path(star, None) is star
+    x, y = star.position_px(np.array([0.5, 1.0, 1.05, 1.15, 2.0]))
+    np.testing.assert_allclose(x, [50.0, 50.0, 50.0, 52.0, 54.0])
+    np.testing.assert_allclose(y, [40.0, 40.0, 30.5, 20.5, 20.0])
+    vx, vy = star.velocity_px_s(np.array([0.5, 1.05, 1.15, 2.0]))
+    np.testing.assert_allclose(vx, [0.0, 0.0, 40.0, 0.0])
+    np.testing.assert_allclose(vy, [0.0, -190.0, -10.0, 0.0])
+    assert star.max_speed_px_s(0.0, 0.9) == 0.0
+    assert star.max_speed_px_s(0.0, 1.05) == pytest.approx(190.0)
+    with pytest.raises(ValueError, match="path.t_s must be strictly increasing"):
+        FieldPath(np.array([0.0, 0.0]), np.zeros(2), np.zeros(2))
+
+
+def test_a_scenario_field_path_carries_frame_field_targets_and_the_random_stars() -> None:
+    s = {"name": "slew", "duration_s": 0.3, "seed": 1, "sensor": {"preset": "davis346", "width": 64, "height": 48},
+         "background": {"photon_rate_ph_s": 3.5e7}, "sampling": {"rate_hz": 200.0},
+         "star_field": {"n_stars": 5, "mag_min": 6.0, "mag_max": 8.0, "seed": 3, "drift_px_s": [2.0, 0.0],
+                        "path": {"t_s": [0.1, 0.15], "dx_px": [0.0, 0.0], "dy_px": [0.0, 10.0]}},
+         "targets": [{"kind": "static", "label": "a", "frame": "field", "x_px": 30.0, "y_px": 10.0, "flux_ph_s": 1e9},
+                     {"kind": "static", "label": "b", "x_px": 5.0, "y_px": 5.0, "flux_ph_s": 1e9}]}
+    scene = build(s)
+    a, b = scene.targets[0], scene.targets[1]
+    x, y = a.position_px(np.array([0.0, 0.2]))
+    np.testing.assert_allclose(x, [30.0, 30.4])
+    np.testing.assert_allclose(y, [10.0, 20.0])
+    np.testing.assert_allclose(b.position_px(np.array([0.2]))[1], [5.0])  # sensor frame: not moved
+    for star in scene.targets[2:]:
+        y0, y1 = star.position_px(np.array([0.0, 0.2]))[1]
+        assert y1 - y0 == pytest.approx(10.0)
+    result = simulate(s)
+    assert result.sub_sampled_chunks > 0  # 200 px/s during the move
+    s["star_field"]["path"] = {"t_s": [0.1], "dx_px": [0.0], "dy_px": [0.0]}
+    with pytest.raises(ScenarioError, match="path.t_s needs at least 2 points"):
+        build(s)
+    s["star_field"]["path"] = {"t_s": [0.1, 0.2], "dx_px": [0.0, 1.0]}
+    with pytest.raises(ScenarioError, match="star_field.path takes exactly t_s, dx_px, dy_px"):
+        build(s)

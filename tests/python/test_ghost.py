@@ -138,3 +138,12 @@ def test_a_ghost_needs_its_source_and_share() -> None:
     s["targets"][0]["defocus_blur_sigma_px"] = 1.0
     with pytest.raises(ScenarioError, match="defocus_blur_sigma_px needs targets\\[0\\].defocus_radius_px"):
         build(s)
+
+
+def test_a_ghost_keeps_its_share_of_a_light_curve_through_the_wrappers() -> None:
+    from evstwin.targets import LightCurve
+
+    star = StaticTarget(10.0, 10.0, LightCurve(np.array([0.0, 1.0]), np.array([1e6, 3e6])), label="star")
+    ghost = MirroredTarget(star, 50.0, 50.0, flux_fraction=0.1)
+    for t in (ghost, shifted(ghost, -5.0, 7.0), drifting(ghost, 1.0, 1.0)):
+        np.testing.assert_allclose(t.flux_ph_s([0.0, 0.5, 1.0]), [1e5, 2e5, 3e5])

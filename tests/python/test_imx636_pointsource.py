@@ -24,7 +24,7 @@ def test_listed_and_built() -> None:
     assert NAME in builtin_names()
     scene = build(NAME)
     assert (scene.width, scene.height, scene.preset.name) == (1280, 720, "imx636")
-    assert [t.label for t in scene.targets] == ["star", "companion1", "companion2"]
+    assert [t.label for t in scene.targets] == ["star", "companion1", "companion2", "ghost"]
     assert scene.duration_s == pytest.approx(10.77)
     # the recording's hot pixel, as an explicit map (the preset's draw is replaced)
     assert scene.hot_pixel_rates_hz is not None
@@ -46,6 +46,23 @@ def test_star_and_companions_drift_at_the_measured_rate(t: float) -> None:
         cx, cy = target.position_px(np.array([t]))
         assert float(cx[0] - x[0]) == pytest.approx(dx, abs=0.01)
         assert float(cy[0] - y[0]) == pytest.approx(dy, abs=0.01)
+
+
+@pytest.mark.parametrize("t", [0.0, 5.0, 10.0])
+def test_the_ghost_mirrors_the_star_through_the_measured_centre(t: float) -> None:
+    # Measured on the recording (bench/make_imx636_pointsource.py, measure_ghost): its event
+    # centroid per second runs from (772, 469) at a velocity of (2.30, -2.91) px/s, which is
+    # the star's (-2.954, 3.428) times -0.819; a disc of 88 px with no obstruction shadow.
+    scene = build(NAME)
+    star, ghost = scene.targets[0], scene.targets[3]
+    sx, sy = star.position_px(np.array([t]))
+    gx, gy = ghost.position_px(np.array([t]))
+    assert float(gx[0]) == pytest.approx(642.08 - 0.819 * (float(sx[0]) - 642.08), abs=1e-9)
+    assert float(gy[0]) == pytest.approx(387.03 - 0.819 * (float(sy[0]) - 387.03), abs=1e-9)
+    assert float(gx[0]) == pytest.approx(772.3 + 2.298 * t, abs=1.5)  # the measured line itself
+    assert float(gy[0]) == pytest.approx(468.9 - 2.912 * t, abs=1.5)
+    np.testing.assert_allclose(ghost.flux_ph_s(np.array([t])), 0.0055 * star.flux_ph_s(np.array([t])))
+    assert ghost.psf is not None and ghost.psf.params["radius_px"] == 88.0
 
 
 def test_short_window_simulates_and_its_star_drifts() -> None:
