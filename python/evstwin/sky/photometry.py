@@ -44,7 +44,7 @@ def diffuse_sphere_magnitude(
             + 5 log10(sun distance / 1 AU).
 
     (Hejduk 2011, eq. 3; McCue et al. 1971.) At zero phase (p = 0) the sun is behind the
-    observer; at p = pi the sphere shows its dark side (infinite magnitude: returned as inf).
+    observer; at p = pi the sphere shows its dark side (no light; rounding leaves > 40 mag).
     """
     a_m = 0.5 * np.asarray(diameter_m, np.float64)
     rho = np.asarray(albedo, np.float64)
@@ -60,7 +60,7 @@ def airmass_kasten_young(elevation_deg: npt.ArrayLike) -> np.ndarray:
 
         X = 1 / [cos z + 0.50572 (96.07995 deg - z)^-1.6364],  z = 90 deg - elevation
 
-    (z in degrees inside the bracket). 1 at the zenith, 38.09 at the horizon, within 0.1 % of
+    (z in degrees inside the bracket). 1 at the zenith, 37.9 at the horizon, within 0.1 % of
     the refraction-integrated airmass above 5 deg elevation; defined for elevation >= 0 only
     (ValueError below the horizon)."""
     el = np.asarray(elevation_deg, np.float64)
