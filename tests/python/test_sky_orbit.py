@@ -250,5 +250,6 @@ def test_bad_sky_input_gets_one_clear_line(change: dict, match: str) -> None:
 
 def test_a_sky_scenario_without_its_pointing_is_refused() -> None:
     s = small()
-    with pytest.raises(ScenarioError, match=r"need \[pointing\]"):
+    with pytest.raises(ScenarioError, match=r"^start_utc='2014-01-23T01:23:30Z', site=.*targets\[0\] \(kind 'tle'\) place "
+                       r"objects on the sky, which needs \[pointing\]"):
         scenario.build(s)

@@ -78,6 +78,13 @@ def uses_sky(s: dict[str, Any]) -> bool:
         t.get("kind") == "tle" for t in s.get("targets", []))
 
 
+def _placed_by(s: dict[str, Any]) -> str:
+    """What in a scenario puts objects on the sky, for the messages about what that needs."""
+    parts = [f"{k}={s[k]!r}" for k in ("start_utc", "site", "pointing") if k in s]
+    parts += [f"targets[{i}] (kind 'tle')" for i, t in enumerate(s.get("targets", [])) if t.get("kind") == "tle"]
+    return ", ".join(parts)
+
+
 @dataclass
 class SkyTargets:
     """What :func:`build_sky` makes: the tle targets (in the order of their tables), the
@@ -95,7 +102,8 @@ class _Context:
         self.site_table = dict(s.get("site", {}))
         for key in ("lat_deg", "lon_deg"):
             if key not in self.site_table:
-                raise ValueError(f"site.{key} is needed to place objects on the sky; got site={self.site_table}")
+                raise ValueError(f"{_placed_by(s)} place objects on the sky, which needs site.lat_deg and "
+                                 f"site.lon_deg (the observer); got site={self.site_table}")
         try:
             self.site = earth.Site(float(self.site_table["lat_deg"]), float(self.site_table["lon_deg"]),
                                    float(self.site_table.get("alt_m", 0.0)))
@@ -109,8 +117,8 @@ class _Context:
         if not 0.0 <= self.k_ext <= 5.0:
             raise ValueError(f"site.extinction_mag_per_airmass must be in [0, 5]; got {self.k_ext!r}")
         if "start_utc" not in s:
-            raise ValueError("start_utc (the UTC time of t = 0, e.g. '2014-01-23T11:18:07Z') is needed to place "
-                             "objects on the sky")
+            raise ValueError(f"{_placed_by(s)} place objects on the sky, which needs start_utc (the UTC time of "
+                             "t = 0, e.g. '2014-01-23T11:18:07Z')")
         try:
             self.start: datetime = earth.parse_utc(s["start_utc"])
         except ValueError as exc:
@@ -445,10 +453,11 @@ def build_sky(s: dict[str, Any], optics: Optics, width: int, height: int, t_end:
     """The satellites and stars of a resolved scenario ``s`` (see the module doc) on a
     width x height sensor over [0, t_end] s; positions more than margin_px outside the sensor
     are clamped. ValueError naming the key on bad input."""
+    if "pointing" not in s:
+        raise ValueError(f"{_placed_by(s)} place objects on the sky, which needs [pointing] (mode = staring | "
+                         "sidereal | target | table)")
     ctx = _Context(s, optics, width, height, t_end, margin_px)
     sats = _satellites(s)
-    if "pointing" not in s:
-        raise ValueError("objects on the sky need [pointing] (mode = staring | sidereal | target | table)")
     p = dict(s["pointing"])
     step0 = float(p.get("step_s", min(1.0, t_end / 16.0) if t_end > 0 else 1.0))
     if not step0 > 0.0:
