@@ -425,10 +425,10 @@ def stars_to_targets(ctx: _Context, grid: np.ndarray, attitude: Attitude, direct
         lo, hi = max(int(k[0]) - 1, 0), min(int(k[-1]) + 2, grid.size)
         visible = on[lo:hi] & (el_j[lo:hi] > 0.0)
         mag = np.where(visible, mag_v[j] + photometry.extinction_mag(np.maximum(el_j[lo:hi], 0.0), ctx.k_ext), 0.0)
-        flux = np.where(visible, np.asarray(ctx.optics.flux_from_magnitude(mag), np.float64), 0.0)
-        if not np.any(flux > 0.0):
+        fluxes = np.where(visible, np.asarray(ctx.optics.flux_from_magnitude(mag), np.float64), 0.0)
+        if not np.any(fluxes > 0.0):
             continue
-        out.append(TabulatedTarget(grid[lo:hi], xs[lo:hi], ys[lo:hi], LightCurve(grid[lo:hi], flux),
+        out.append(TabulatedTarget(grid[lo:hi], xs[lo:hi], ys[lo:hi], LightCurve(grid[lo:hi], fluxes),
                                    outside="hold", label=label))
     return out
 
