@@ -253,3 +253,20 @@ def test_a_sky_scenario_without_its_pointing_is_refused() -> None:
     with pytest.raises(ScenarioError, match=r"^start_utc='2014-01-23T01:23:30Z', site=.*targets\[0\] \(kind 'tle'\) place "
                        r"objects on the sky, which needs \[pointing\]"):
         scenario.build(s)
+
+
+def test_a_constant_table_pointing_is_the_staring_one() -> None:
+    table = scenario.build(small(pointing={"mode": "table", "t_s": [0.0, 2.0, 4.0], "az_deg": [180.0] * 3,
+                                           "el_deg": [50.0] * 3}))
+    stare = scenario.build(small(pointing={"mode": "staring", "az_deg": 180.0, "el_deg": 50.0}))
+    t = np.linspace(0.0, 4.0, 5)
+    assert np.allclose(table.targets[0].position_px(t), stare.targets[0].position_px(t), atol=1e-3)
+    # the same stars where the same (a star grazing the PSF margin may be kept by one table step and not the
+    # other: the position tables' steps differ)
+    by_label = {b.label: b for b in stare.targets[1:]}
+    common = [a for a in table.targets[1:] if a.label in by_label]
+    assert len(common) > 5 and len(common) >= 0.95 * max(len(table.targets), len(stare.targets)) - 1
+    for a in common:
+        assert np.allclose(a.position_px(t), by_label[a.label].position_px(t), atol=1e-3)
+    with pytest.raises(ScenarioError, match=r"^pointing.t_s must cover the run \[0, 4\] s; got \[0, 2\]"):
+        scenario.build(small(pointing={"mode": "table", "t_s": [0.0, 2.0], "az_deg": [1.0, 2.0], "el_deg": [50.0, 50.0]}))

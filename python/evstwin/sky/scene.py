@@ -6,7 +6,9 @@ The scenario keys (``evstwin.scenario`` reads them and calls :func:`build_sky`):
 ``start_utc``  the UTC time of t = 0 ("2014-01-23T11:18:07Z").
 ``[site]``     ``lat_deg``, ``lon_deg``, ``alt_m`` (WGS-84), ``ut1_utc_s`` (default 0),
                ``extinction_mag_per_airmass`` (V-band k, default ``DEFAULT_EXTINCTION``).
-``[pointing]`` ``mode`` = staring | sidereal | target | table (``evstwin.sky.pointing``), with:
+``[pointing]`` ``mode`` = staring | sidereal | target | table (``evstwin.sky.pointing``; right
+               ascensions and declinations are of date, TEME's equator and mean equinox, not
+               J2000: 0.36 deg of precession apart in 2026), with:
                staring: ``az_deg``/``el_deg``, or ``target`` (an index into targets; default
                the first ``tle`` one) and ``at_s`` (aim where it is at that time; default 0);
                sidereal: ``ra_deg``/``dec_deg``, or ``az_deg``/``el_deg`` (at t = 0), or
@@ -344,10 +346,16 @@ def draw_sky_stars(ctx: _Context, attitude: Attitude, density_per_deg2: float, m
     whose centre is nearest (so the union is uniform, without duplicates). Magnitudes follow
     dN/dm ~ 10^(counts_slope m) on [mag_min, mag_max] (``evstwin.targets.random_star_field``'s law)."""
     rng = np.random.default_rng(seed)
-    centres = attitude.b
     lo_x, hi_x, lo_y, hi_y = ctx.box
     half_diag = math.atan(ctx.k * math.hypot(max(hi_x - ctx.centre[0], ctx.centre[0] - lo_x),
                                              max(hi_y - ctx.centre[1], ctx.centre[1] - lo_y)))
+    # Caps a quarter of the footprint apart (the first and the last boresight always): the draw
+    # then depends on where the sensor looks, not on how finely the attitude was sampled.
+    kept = [0]
+    for j in range(1, attitude.b.shape[0]):
+        if float(attitude.b[j] @ attitude.b[kept[-1]]) < math.cos(0.25 * half_diag) or j == attitude.b.shape[0] - 1:
+            kept.append(j)
+    centres = attitude.b[kept]
     steps = np.arccos(np.clip(np.sum(centres[1:] * centres[:-1], axis=-1), -1, 1)) if len(centres) > 1 else [0.0]
     radius = min(half_diag + float(np.max(steps)) + 1e-6, math.radians(80.0))
     cap_sr = 2.0 * math.pi * (1.0 - math.cos(radius))
@@ -403,7 +411,7 @@ def stars_to_targets(ctx: _Context, grid: np.ndarray, attitude: Attitude, direct
     out: list[Target] = []
     t_mid = grid.size // 2
     for col, j in enumerate(np.flatnonzero(seen)):
-        label = f"star {len(out)} mag={mag_v[j]:.3f}"
+        label = f"star {j} mag={mag_v[j]:.3f}"  # j: its place among the drawn stars, whatever is kept
         xs, ys, on = xc[:, j], yc[:, j], inside[:, j]
         el_j = el[:, col]
         if np.all(front[:, j]) and el_j[t_mid] > 0.0:
