@@ -87,19 +87,6 @@ class Attitude:
             e_x, e_y = c * e_x + s * e_y, -s * e_x + c * e_y
         return cls(t, b, e_x, e_y)
 
-    def at(self, t_s: npt.ArrayLike) -> Attitude:
-        """The attitude at other times, interpolated linearly between table rows and
-        re-orthonormalised (held at the ends)."""
-        t = np.atleast_1d(np.asarray(t_s, np.float64))
-        if self.t_s.size == 1:
-            rep = lambda v: np.broadcast_to(v[0], t.shape + (3,))  # noqa: E731
-            return Attitude(t, rep(self.b), rep(self.e_x), rep(self.e_y))
-        interp = lambda v: np.stack([np.interp(t, self.t_s, v[:, i]) for i in range(3)], axis=-1)  # noqa: E731
-        b = _unit(interp(self.b))
-        e_y = interp(self.e_y)
-        e_y = _unit(e_y - np.sum(e_y * b, axis=-1, keepdims=True) * b)
-        return Attitude(t, b, np.cross(e_y, b), e_y)
-
 
 def project(attitude: Attitude, directions: np.ndarray, plate_scale_rad_per_px: float,
             centre_px: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -217,7 +217,7 @@ def _magnitude_above_atmosphere(sat: _Satellite, obs: orbit.Observation) -> np.n
 # -- pointing ---------------------------------------------------------------------------------
 
 
-def _pointing_target(p: dict[str, Any], s: dict[str, Any], sats: list[_Satellite]) -> _Satellite:
+def _pointing_target(p: dict[str, Any], sats: list[_Satellite]) -> _Satellite:
     if "target" in p:
         idx = p["target"]
         match = [sat for sat in sats if sat.index == idx]
@@ -231,8 +231,7 @@ def _pointing_target(p: dict[str, Any], s: dict[str, Any], sats: list[_Satellite
     return sats[0]
 
 
-def _attitude(ctx: _Context, p: dict[str, Any], s: dict[str, Any], sats: list[_Satellite],
-              t: np.ndarray) -> Attitude:
+def _attitude(ctx: _Context, p: dict[str, Any], sats: list[_Satellite], t: np.ndarray) -> Attitude:
     mode = p.get("mode")
     if mode not in MODES:
         raise ValueError(f"pointing.mode must be one of {', '.join(MODES)}; got {mode!r}")
@@ -246,7 +245,7 @@ def _attitude(ctx: _Context, p: dict[str, Any], s: dict[str, Any], sats: list[_S
         return orbit.sky_direction_from_az_el(ctx.site, ctx.start, times, 0.0, 90.0, ctx.ut1_utc_s)
 
     def aimed(times: np.ndarray) -> np.ndarray:
-        sat = _pointing_target(p, s, sats)
+        sat = _pointing_target(p, sats)
         at = float(p.get("at_s", 0.0))
         if mode != "target" and not 0.0 <= at <= ctx.t_end:
             raise ValueError(f"pointing.at_s must be in [0, {ctx.t_end:g}] s (the run); got {at!r}")
@@ -277,7 +276,7 @@ def _attitude(ctx: _Context, p: dict[str, Any], s: dict[str, Any], sats: list[_S
                                                          ctx.ut1_utc_s)
             az, el = float(az_a[0]), float(el_a[0])
             if el <= 0.0:
-                raise ValueError(f"pointing aims at targets[{_pointing_target(p, s, sats).index}] at pointing.at_s="
+                raise ValueError(f"pointing aims at targets[{_pointing_target(p, sats).index}] at pointing.at_s="
                                  f"{p.get('at_s', 0.0)!r} s, when it is below the horizon (elevation {el:.2f} deg)")
         b = orbit.sky_direction_from_az_el(ctx.site, ctx.start, t, az, el, ctx.ut1_utc_s)
     elif mode == "sidereal":
@@ -481,7 +480,7 @@ def build_sky(s: dict[str, Any], optics: Optics, width: int, height: int, t_end:
                 f"targets[{sat.index}] ({sat.label}) is below the horizon for the whole run: highest elevation "
                 f"{el:.2f} deg at t={when:g} s from start_utc={s['start_utc']!r} at site lat_deg="
                 f"{ctx.site.lat_deg:g}, lon_deg={ctx.site.lon_deg:g}")
-    coarse_att = _attitude(ctx, p, s, sats, coarse)
+    coarse_att = _attitude(ctx, p, sats, coarse)
 
     sf = dict(s.get("star_field", {}))
     directions, mag_v = np.zeros((0, 3)), np.zeros(0)
@@ -511,7 +510,7 @@ def build_sky(s: dict[str, Any], optics: Optics, width: int, height: int, t_end:
     while True:
         grid = _grid(t_end, n)
         both = np.sort(np.concatenate([grid, 0.5 * (grid[1:] + grid[:-1])]))
-        att = _attitude(ctx, p, s, sats, both)
+        att = _attitude(ctx, p, sats, both)
         observations = [orbit.observe(sat.elements, ctx.site, ctx.start, both, ctx.ut1_utc_s) for sat in sats]
         xs = [project(att, obs.direction, ctx.k, ctx.centre)[:2] for obs in observations]
         sx, sy, _ = project(att, probe, ctx.k, ctx.centre)
