@@ -569,7 +569,59 @@ IMX636 = SensorPreset(
 """Sony IMX636 / Prophesee EVK4: geometry sourced; refractory period and background (rates per polarity,
 their spread, hot pixels) measured on a real recording; thresholds and photodiode assumed."""
 
-PRESETS: dict[str, SensorPreset] = {p.name: p for p in (DAVIS346, IMX636)}
+GEN3_VGA_THETA = math.log(1.25)
+"""The Gen3 VGA preset's ON and OFF thresholds [ln units]: a 25 % contrast step, as assumed for
+the IMX636 (Prophesee's biases are DAC settings, not currents)."""
+
+PROPHESEE_GEN3_VGA = SensorPreset(
+    name="prophesee_gen3_vga",
+    description="Prophesee Gen3 VGA (PPS3MVCD, 3rd generation), as in the Gen3 EVK and the SSA studies of 2019-2020",
+    width=640,
+    height=480,
+    pixel_pitch_m=15e-6,
+    fill_factor=0.25,
+    back_illuminated=False,
+    mean_wavelength_m=DAVIS346_MEAN_WAVELENGTH_M,
+    pixel=_DAVIS346_BASE.replace(
+        fill_factor=0.25,
+        theta_on=GEN3_VGA_THETA,
+        theta_off=GEN3_VGA_THETA,
+        refractory_s=1e-3,
+        cutoff_hz=10.0,
+        pr_pole=True,
+    ),
+    biases=None,
+    qe_notes=(
+        "Front-illuminated 0.18 um CMOS pixel (Gen3 predates the stacked BSI Gen4 of Finateu et al. 2020), "
+        "fill factor 25 % (assumed, see assumptions); photodiode constants of eq. 2 copied from the DAVIS346 "
+        "preset: set absorption_per_m / depletion_width_m / transmission from a measured QE."
+    ),
+    sources=(
+        "Prophesee, Gen3 VGA CD sensor (PPS3MVCD) and its evaluation kit: 640 x 480 pixels, 15 um pitch "
+        "(as quoted by Prophesee's product pages and in the Metavision docs' list of sensor generations: Gen3 "
+        "sensors use EVT 2.0). Not reachable from the machine this was written on: the figures are as quoted "
+        "by secondary sources; check them against your datasheet",
+        "Afshar, Nicholson, van Schaik & Cohen (2020), 'Event-based object detection and tracking for space "
+        "situational awareness', IEEE Sensors J. 20(24), 15117; Cohen, Afshar, Morreale, Bessell, Wabnitz, "
+        "Rutten & van Schaik (2019), 'Event-based sensing for space situational awareness', J. Astronaut. "
+        "Sci. 66, 125: the Prophesee VGA-class sensor in the field's published SSA observations, beside "
+        "the DAVIS240/346 and, later, the IMX636",
+    ),
+    assumptions=(
+        "fill factor 0.25: the order of the figure quoted for Gen3 pixels (secondary sources; not verified)",
+        "thresholds ln(1.25) = 0.223 both ways, a 25 % contrast step, as for the IMX636 preset",
+        "refractory 1 ms and the 10 Hz source follower of the DAVIS346 preset; the photoreceptor pole on",
+        "dark rate 18000 e-/s and the background copied from the DAVIS346 preset (a 2.95e-3 Hz leak, "
+        "sigma 1.51, no eq. 12 rate; no Gen3 background figures at hand: measure them with `evstwin "
+        "calibrate-noise` on a Gen3 recording)",
+        "mean wavelength 0.7 um as for the DAVIS346",
+        "no readout figures (an ideal readout): give [readout] max_rate_hz and fifo_depth for your camera",
+    ),
+    readout=None,
+)
+"""Prophesee Gen3 VGA: geometry as published (640 x 480, 15 um); every pixel figure assumed."""
+
+PRESETS: dict[str, SensorPreset] = {p.name: p for p in (DAVIS346, IMX636, PROPHESEE_GEN3_VGA)}
 """Built-in sensor presets by name."""
 
 

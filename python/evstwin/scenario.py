@@ -30,7 +30,8 @@ The tables mirror the Python objects:
                   (height, width) array of rates [Hz], 0 = not hot); see
                   ``PixelParams.hot_pixel_rate_hz`` for what a rate means.
 ``[[targets]]``   ``kind`` = ``static`` | ``linear`` | ``circular`` | ``rotating_bar`` |
-                  ``tabulated``, its geometry, and one brightness: ``flux_ph_s``,
+                  ``tabulated`` | ``tle`` (two-line elements, placed by the pointing: see
+                  below), its geometry, and one brightness: ``flux_ph_s``,
                   ``magnitude`` or ``light_curve = {t_s = [...], flux_ph_s|magnitude = [...]}``;
                   ``frame = "field"`` gives it in field coordinates (it moves with the star
                   field's drift as well; default ``"sensor"``).
@@ -51,6 +52,12 @@ The tables mirror the Python objects:
 ``[readout]``     the sensor's readout (``evstwin.readout``): ``enabled`` (default: true when
                   the preset has readout figures, as the DAVIS346 and IMX636 do), and
                   ``max_rate_hz``, ``fifo_depth``, ``tick_s`` overriding the preset's.
+
+The sky (``evstwin.sky.scene``): ``start_utc`` (top level), ``[site]`` (``lat_deg``,
+``lon_deg``, ``alt_m``, ``ut1_utc_s``, ``extinction_mag_per_airmass``) and ``[pointing]``
+(``mode`` = ``staring`` | ``sidereal`` | ``target`` | ``table`` and its keys) place ``tle``
+targets (``line1``, ``line2``, ``diameter_m`` + ``albedo`` or ``magnitude`` or a magnitude
+``light_curve``) and the ``[star_field]``'s stars on the sky and project them on the sensor.
 
 Top level: ``name``, ``description``, ``duration_s``, ``seed``, and ``base`` (a built-in
 scenario this one starts from; its tables are merged key by key).
@@ -81,6 +88,7 @@ from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
 from .readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S, ReadoutParams
 from .sensor import MAX_MAX_EVENTS
 from .sky.atmosphere import ATMOSPHERE_KEYS, Atmosphere, atmosphere_from_table
+from .sky import scene as sky_scene
 from .targets import (
     MAX_STARS,
     CircularTarget,
@@ -129,6 +137,7 @@ _TARGET_KEYS: dict[str, tuple[str, ...]] = {
                      "angular_rate_rad_s", "phase_rad"),
     "tabulated": ("t_s", "x_px", "y_px", "outside"),
     "ghost": ("of", "centre_x_px", "centre_y_px", "magnification", "flux_fraction"),
+    "tle": sky_scene.TLE_KEYS,
 }
 _TARGET_PSF_KEYS = ("defocus_radius_px", "defocus_blur_sigma_px", "defocus_obstruction_ratio", "defocus_spider_vanes")
 """Keys of any target that give it its own PSF (``psf.defocus_psf``): the radius, and the blur,
@@ -152,6 +161,10 @@ SCHEMA: dict[str, Any] = {
                    "distribution": str, "density_scale": float, "path": dict},
     "atmosphere": {k: Any for k in ATMOSPHERE_KEYS},
     "readout": {"enabled": bool, "max_rate_hz": float, "fifo_depth": int, "tick_s": float},
+    # The sky (evstwin.sky.scene): when t = 0 is, where the observer stands, where the camera looks.
+    "start_utc": str,
+    "site": {k: float for k in sky_scene.SITE_KEYS},
+    "pointing": {k: Any for k in sky_scene.POINTING_KEYS},
 }
 DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50}
 
@@ -309,9 +322,12 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
     kind = target.get("kind")
     if not isinstance(kind, str) or kind not in _TARGET_KEYS:
         raise ScenarioError(f"targets[{i}].kind must be one of {', '.join(_TARGET_KEYS)}; got {kind!r}")
-    brightness = () if kind == "ghost" else _BRIGHTNESS_KEYS  # a ghost's is its source's
-    allowed = ("kind", "label") + (() if kind == "ghost" else ("frame",)) + _TARGET_KEYS[kind] + brightness \
-        + _TARGET_PSF_KEYS
+    if kind == "tle":  # placed on the sky by the pointing; its brightness is checked by evstwin.sky.scene
+        allowed = ("kind", "label") + _TARGET_KEYS[kind] + ("magnitude", "light_curve")
+    else:
+        brightness = () if kind == "ghost" else _BRIGHTNESS_KEYS  # a ghost's is its source's
+        allowed = ("kind", "label") + (() if kind == "ghost" else ("frame",)) + _TARGET_KEYS[kind] + brightness \
+            + _TARGET_PSF_KEYS
     for key in target:
         if key not in allowed:
             raise ScenarioError(f"unknown scenario key 'targets[{i}].{key}' for kind {kind!r}; allowed: {', '.join(allowed)}")
@@ -328,7 +344,7 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
             raise ScenarioError(f"targets[{i}].of must be the label of an earlier target; got {target['of']!r}")
         return
     given = [k for k in _BRIGHTNESS_KEYS if k in target]
-    if len(given) != 1:
+    if len(given) != 1 and kind != "tle":
         raise ScenarioError(
             f"targets[{i}] needs exactly one of {', '.join(_BRIGHTNESS_KEYS)}; got {', '.join(given) or 'none'}"
         )
@@ -580,12 +596,38 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     # The run's end: whole base samples, as simulate runs them (the drift sweeps until then).
     t_end = max(1, math.ceil(float(s["duration_s"]) * float(s["sampling"]["rate_hz"]) - 1e-9)) / float(
         s["sampling"]["rate_hz"])
+    sigma = float(_wrap(f"optics={s.get('optics', {})}", lambda: optics.psf_sigma_px))
+    if not sigma <= MAX_PSF_SIGMA_PX:
+        raise ScenarioError(
+            f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "
+            f"optics.f_number and optics.extra_blur_sigma_px; got {s.get('optics', {})}"
+        )
+    atmosphere = _atmosphere(s, optics)
+    if atmosphere is not None and atmosphere.seeing_fwhm_arcsec is not None:
+        shape = _wrap(f"atmosphere.seeing_fwhm_arcsec={atmosphere.seeing_fwhm_arcsec!r} with optics={s.get('optics', {})}",
+                      atmosphere.psf, optics)
+    else:
+        shape = _psf_shape(optics, s.get("optics", {}))
     drift, drift_key = _field_drift(s, optics)
     path = _field_path(s)
     moves = drift != (0.0, 0.0)
+    # Satellites from elements and stars on the sky, through the pointing (evstwin.sky.scene).
+    sky = None
+    if sky_scene.uses_sky(s):
+        try:
+            sky = sky_scene.build_sky(s, optics, width, height, t_end, shape.half_width_px + 2.0)
+        except (ValueError, TypeError) as exc:  # the message names the key
+            raise ScenarioError(str(exc)) from None
+        satellites = iter(sky.satellites)
     targets: list[Target] = []
     sources: list[str] = []  # the key each target comes from, for errors
     for i, table in enumerate(s["targets"]):
+        if table["kind"] == "tle":
+            if sky is None:  # pragma: no cover - uses_sky is true whenever a tle target exists
+                raise ScenarioError(f"targets[{i}] (kind 'tle') needs start_utc, [site] and [pointing]")
+            targets.append(next(satellites))
+            sources.append(f"targets[{i}] (tle, through pointing={s.get('pointing')})")
+            continue
         uses_magnitude = "magnitude" in table or (isinstance(table.get("light_curve"), dict)
                                                   and "magnitude" in table["light_curve"])
         label = f"targets[{i}]" + (f" (a magnitude, through optics={s.get('optics', {})})" if uses_magnitude else "")
@@ -605,24 +647,16 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             made = [with_psf(t, own) for t in made]
         targets.extend(made)
         sources.extend([source] * len(made))
-    sigma = float(_wrap(f"optics={s.get('optics', {})}", lambda: optics.psf_sigma_px))
-    if not sigma <= MAX_PSF_SIGMA_PX:
-        raise ScenarioError(
-            f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "
-            f"optics.f_number and optics.extra_blur_sigma_px; got {s.get('optics', {})}"
-        )
-    atmosphere = _atmosphere(s, optics)
-    if atmosphere is not None and atmosphere.seeing_fwhm_arcsec is not None:
-        shape = _wrap(f"atmosphere.seeing_fwhm_arcsec={atmosphere.seeing_fwhm_arcsec!r} with optics={s.get('optics', {})}",
-                      atmosphere.psf, optics)
-    else:
-        shape = _psf_shape(optics, s.get("optics", {}))
     field_stars = 0
     sf = dict(s.get("star_field", {}))
     sf.pop("path", None)
     drift_only = (any(k in sf for k in _DRIFT_KEYS) and "n_stars" not in sf and "density_per_deg2" not in sf
                   and sf.get("distribution") != "all-sky")
-    if sf and not drift_only:
+    if sky is not None and sky.stars:
+        targets.extend(sky.stars)
+        sources.extend([f"star_field (on the sky, through pointing={s.get('pointing')})"] * len(sky.stars))
+        field_stars = len(sky.stars)
+    elif sky is None and sf and not drift_only:
         for key in _DRIFT_KEYS:
             sf.pop(key, None)
         n_stars = sf.get("n_stars")

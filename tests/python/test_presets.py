@@ -190,11 +190,11 @@ def test_imx636_preset() -> None:
     assert any("assumption" in a or "25 %" in a for a in p.assumptions)
     assert sum("imx636_pointsource_evt3.raw" in src for src in p.sources) == 3  # measured on the recording
     assert p.pixel.refractory_s == pytest.approx(1.3e-4) and p.pixel.hot_pixel_fraction > 0
-    assert set(PRESETS) == {"davis346", "imx636"}
+    assert set(PRESETS) == {"davis346", "imx636", "prophesee_gen3_vga"}
 
 
 def test_unknown_preset_lists_the_names() -> None:
-    with pytest.raises(ValueError, match=r"known: \['davis346', 'imx636'\]"):
+    with pytest.raises(ValueError, match=r"known: \['davis346', 'imx636', 'prophesee_gen3_vga'\]"):
         get_preset("davis240")
 
 
@@ -273,3 +273,42 @@ def test_davis346_preset_reproduces_the_real_static_background():
         off += int(np.count_nonzero(events["p"] == 0))
     assert off == 0
     assert on / 2 == pytest.approx(289, rel=0.2)
+
+
+def test_prophesee_gen3_vga_preset() -> None:
+    from evstwin.presets import PROPHESEE_GEN3_VGA
+
+    p = get_preset("Prophesee_Gen3_VGA")
+    assert p is PROPHESEE_GEN3_VGA
+    assert (p.width, p.height, p.pixel_pitch_m, p.back_illuminated) == (640, 480, 15e-6, False)
+    assert p.fill_factor == p.pixel.fill_factor == 0.25
+    assert p.biases is None and p.readout is None
+    # geometry sourced, the pixel assumed: both said
+    assert any("640 x 480" in src and "15 um" in src for src in p.sources)
+    assert any("Afshar" in src for src in p.sources)
+    assert any("fill factor" in a for a in p.assumptions) and any("ln(1.25)" in a for a in p.assumptions)
+    assert p.pixel.theta_on == pytest.approx(math.log(1.25)) == p.pixel.theta_off
+    # 15 um behind a 100 mm lens: 15e-6 / 0.1 rad = 30.94 arcsec per pixel, by hand
+    o = p.optics(0.1, 2.0)
+    assert (o.width_px, o.height_px) == (640, 480)
+    assert o.plate_scale_arcsec_per_px == pytest.approx(15e-6 / 0.1 * 180 / math.pi * 3600)
+    s = p.sensor(seed=1)
+    assert (s.width, s.height) == (640, 480)
+
+
+def test_prophesee_gen3_vga_runs_in_a_scenario() -> None:
+    import numpy as np
+
+    from evstwin import simulate
+
+    scenario = {"name": "gen3", "duration_s": 0.05, "sensor": {"preset": "prophesee_gen3_vga", "width": 32, "height": 24},
+                "sampling": {"rate_hz": 1000.0},
+                "targets": [{"kind": "static", "x_px": 16.0, "y_px": 12.0,
+                             "light_curve": {"t_s": [0.0, 0.02, 0.021, 0.05], "flux_ph_s": [1e8, 1e8, 1e10, 1e10]}}]}
+    r = simulate(scenario, num_threads=1)
+    e = r.events
+    at = (e["x"] == 16) & (e["y"] == 12) & (e["p"] == 1)
+    before = int(np.sum(at & (e["t"] >= 5_000) & (e["t"] < 20_000)))
+    after = int(np.sum(at & (e["t"] >= 20_000)))
+    # a 100x step: ln(100) / ln(1.25) = 20 thresholds, so many ON events after it, none in the steady light
+    assert before == 0 and after >= 5

@@ -84,7 +84,7 @@ def test_set_overrides_one_value_and_names_bad_keys() -> None:
         ({"targets": [{"kind": "comet", "flux_ph_s": 1.0}]}, r"targets\[0\].kind must be one of static, linear"),
         ({"targets": [{"kind": "static", "x_px": 1, "y_px": 1}]}, r"targets\[0\] needs exactly one of flux_ph_s"),
         ({"sampling": {"rate_hz": 0}}, r"sampling.rate_hz must be > 0"),
-        ({"sensor": {"preset": "davis240"}}, r"sensor.preset must be one of davis346, imx636; got 'davis240'"),
+        ({"sensor": {"preset": "davis240"}}, r"sensor.preset must be one of davis346, imx636, prophesee_gen3_vga; got 'davis240'"),
         ({"sensor": {"width": 400}}, r"sensor.width must be in \[1, 346\] for preset 'davis346'; got 400"),
         ({"duration_s": -1}, r"duration_s must be > 0"),
         ({"biases": {"i_on_a": 1e-9, "i_off_a": 2e-9, "i_diff_a": 5e-9}}, r"biases"),
