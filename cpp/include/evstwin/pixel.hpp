@@ -1159,7 +1159,9 @@ struct PixelModel {
                         const bool on = u < p_on;
                         const double u0 = on ? th_on - d_start : th_off + d_start;
                         const double u1 = on ? th_on - d_end : th_off + d_end;
-                        const double tc = t_start + bridge_first_passage(u0, u1, sigma2, span, more.uniform());
+                        const double g_time = normal_ziggurat(more.word(), [&more] { return more.word(); });
+                        const double tc = t_start + bridge_first_passage_sample(u0, u1, sigma2, span, g_time,
+                                                                                more.uniform());
                         if (tc > c.t0 && tc < c.t1) {
                             // Split the interval at the crossing: a virtual sample there, just
                             // past the level, so the comparator fires at tc; then on to y.
