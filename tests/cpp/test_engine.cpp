@@ -150,6 +150,42 @@ TEST(bridge_first_passage_sample_has_the_law_bridge_first_passage_inverts) {
     }
 }
 
+TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
+    // 1000 counters (odd length: the vector loops' remainders too), words through both paths.
+    const std::size_t n = 1001;
+    std::vector<std::uint32_t> c0(n), c1(n), c2(n), r0(n), r1(n), r2(n), r3(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        c0[i] = static_cast<std::uint32_t>(i * 2654435761u);
+        c1[i] = static_cast<std::uint32_t>(i >> 3);
+        c2[i] = static_cast<std::uint32_t>(1000003u * i + 7u);
+    }
+    std::vector<double> g(n);
+    std::vector<std::uint8_t> slow(n);
+    const SimdLevel before = simd_level();
+    int levels = 0;
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        ++levels;
+        set_simd_level(l);
+        philox4x32_batch(c0.data(), c1.data(), c2.data(), PURPOSE_SAMPLE, {9u, 10u}, n, r0.data(), r1.data(), r2.data(),
+                         r3.data());
+        ziggurat_batch(r0.data(), n, g.data(), slow.data());
+        std::size_t n_slow = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            const Philox4x32Counter w = philox4x32({c0[i], c1[i], c2[i], PURPOSE_SAMPLE}, {9u, 10u});
+            CHECK(r0[i] == w[0] && r1[i] == w[1] && r2[i] == w[2] && r3[i] == w[3]);
+            // The scalar ziggurat's common case: the magnitude below its layer's k (no more() call).
+            const bool scalar_slow = (w[0] >> 8) >= ZIGGURAT.k[w[0] & 127u];
+            CHECK(static_cast<bool>(slow[i]) == scalar_slow);
+            if (!scalar_slow) CHECK(g[i] == normal_ziggurat(w[0], [] { return 0u; }));
+            n_slow += slow[i];
+        }
+        CHECK(n_slow < n / 20);  // ~1 % of words leave the common path
+    }
+    CHECK(levels >= 1);
+    set_simd_level(before);
+}
+
 TEST(step_gives_floor_ln_r_over_theta_events) {
     for (double R : {1.5, 3.0, 10.0, 0.1}) {
         Sensor s(1, 1, ideal());
