@@ -37,7 +37,13 @@ import numpy_reference  # noqa: E402
 from evstwin import PixelParams, Sensor  # noqa: E402
 from evstwin._core import has_openmp  # noqa: E402
 from evstwin.presets import IMX636  # noqa: E402
-from evstwin.sensor import simd_level  # noqa: E402
+
+try:
+    from evstwin.sensor import simd_level
+except ImportError:  # an engine from before issue 15 (for before/after figures): scalar only
+
+    def simd_level() -> str:
+        return "none (before issue 15)"
 
 RATE_HZ = 1000.0
 SIZES = {"reference": (346, 260), "event-heavy": (346, 260), "imx636": (1280, 720)}
