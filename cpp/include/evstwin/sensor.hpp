@@ -39,8 +39,9 @@ public:
     /// Most engine threads accepted: far above any machine's cores, far below the counts
     /// (5000, 2^31 - 1) at which the OpenMP runtime exits or crashes.
     static constexpr int MAX_THREADS = 1024;
-    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 5 GB at the
-    /// peak (24-byte working records with their vectors' growth slack, and the 16-byte output),
+    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 4 GB at the
+    /// peak (16-byte working records with their vectors' growth slack, the 13-byte output and
+    /// its labels),
     /// far above any real chunk (a long simulation is cut into short calls) and below a
     /// machine's memory. Exceeding it throws std::length_error while the events are produced:
     /// they are counted every EVENT_COUNT_STEP events of a block, so a call stops within
