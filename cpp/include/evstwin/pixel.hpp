@@ -704,15 +704,22 @@ struct PixelModel {
     /// sample_normals() for every active pixel of a block: the ziggurat's common path as one
     /// batch for each word (simd.hpp), then the few normals in a wedge or the tail finished as
     /// sample_normals() would (both sharing the pixel's further words, the first one first).
+    /// Without `second` only g1 is made (g2 is left as it was): with one low-pass the noise is
+    /// a 1-D process that uses g1 alone (continuous_levels), and skipping g2 cannot change g1,
+    /// which takes the further words first.
     template <bool AllActive>
     EVSTWIN_ALWAYS_INLINE static void block_sample_normals(const BlockView& v, Philox4x32Key key, BlockScratch& scratch,
                                                            const std::uint32_t* w0, const std::uint32_t* w1, double* g1,
-                                                           double* g2) {
+                                                           double* g2, bool second) {
         const std::size_t n = v.n_active;
         const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
         std::uint8_t *slow1 = scratch.slow1.data(), *slow2 = scratch.slow2.data();
         ziggurat_batch(w0, n, g1, slow1);
-        ziggurat_batch(w1, n, g2, slow2);
+        if (second) {
+            ziggurat_batch(w1, n, g2, slow2);
+        } else {
+            for (std::size_t j = 0; j < n; ++j) slow2[j] = 0;
+        }
         for (std::size_t j = 0; j < n; ++j) {
             if (!(slow1[j] | slow2[j])) continue;
             CounterStream extra(key, v.ids[at(j)], v.state[at(j)].n, PURPOSE_NORMAL);
@@ -785,7 +792,9 @@ struct PixelModel {
         double* g2s = scratch.count.data();
         const bool noisy = p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
         if (noisy) {
-            block_sample_normals<AllActive>(v, key, scratch, w0, w1, g1s, g2s);
+            // The second normal only drives the two-pole system (continuous_levels).
+            const bool two_poles = !SfOnly && p.pr_pole && has_filter;
+            block_sample_normals<AllActive>(v, key, scratch, w0, w1, g1s, g2s, two_poles);
         } else {
             for (std::size_t j = 0; j < n; ++j) g1s[j] = g2s[j] = 0.0;
         }
