@@ -1,13 +1,23 @@
-"""Engine throughput on the DAVIS346 reference load (issue 2).
+"""Engine throughput (issues 2 and 15) on three loads.
 
-346 x 260 pixels, 1 kHz samples, 10 s, five point sources on circles, every noise source
-on (photon shot noise, Poisson dark current, leak, statistical shot noise, threshold
-mismatch, the 10 Hz low-pass, 1 ms refractory). Prints pixel-updates/s and events/s of the
-C++ engine with 1 and 2 threads, and of the vectorised NumPy implementation of the same
-model (bench/numpy_reference.py) run in the same process on a shorter stretch, and the
-ratio. Only the engine's run() calls are timed; the input is rendered beforehand per chunk.
+reference (default): DAVIS346, 346 x 260 pixels, 1 kHz samples, 10 s, five point sources on
+circles, every noise source on (photon shot noise, Poisson dark current, leak, statistical
+shot noise, threshold mismatch, the 10 Hz low-pass, 1 ms refractory).
+event-heavy: the same scene with a 200 Hz source follower, so the 18,000 e-/s dark current's
+shot noise crosses the thresholds hundreds of times a pixel a second (as bright star fields,
+fast slews, flicker and hot-pixel-rich sensors do); the cost of each event.
+imx636: the IMX636 preset's pixel (1280 x 720) at 1 kHz, the sources spread over the frame;
+pixel-updates/s and seconds of wall time per second of sensor time. Its scene is rendered
+for --period seconds and replayed (the full frame's 2 s would need 7 GB of rates).
 
-    python bench/bench_engine.py [--duration 10] [--numpy-duration 0.5] [--threads 1,2]
+Prints pixel-updates/s, events/s, events per pixel per second and CPU time per event
+(process CPU time, all threads) of the C++ engine for each thread count, and, for the
+reference load, of the vectorised NumPy implementation of the same model
+(bench/numpy_reference.py) run in the same process on a shorter stretch, and the ratio.
+Only the engine's run() calls are timed; the input is rendered beforehand per chunk.
+
+    python bench/bench_engine.py [--load reference|event-heavy|imx636] [--duration 10]
+                                 [--numpy-duration 0.5] [--threads 1,2]
 """
 
 from __future__ import annotations
@@ -26,15 +36,26 @@ import numpy_reference  # noqa: E402
 
 from evstwin import PixelParams, Sensor  # noqa: E402
 from evstwin._core import has_openmp  # noqa: E402
+from evstwin.presets import IMX636  # noqa: E402
 
-WIDTH, HEIGHT, RATE_HZ = 346, 260, 1000.0
+try:
+    from evstwin.sensor import simd_level
+except ImportError:  # an engine from before issue 15 (for before/after figures): scalar only
+
+    def simd_level() -> str:
+        return "none (before issue 15)"
+
+RATE_HZ = 1000.0
+SIZES = {"reference": (346, 260), "event-heavy": (346, 260), "imx636": (1280, 720)}
+WIDTH, HEIGHT = SIZES["reference"]
 
 
-def render_chunk(t: np.ndarray) -> np.ndarray:
+def render_chunk(t: np.ndarray, width: int = WIDTH, height: int = HEIGHT) -> np.ndarray:
     """Five Gaussian spots (sigma 1.2 px) turning on circles over a dim uniform background."""
-    out = np.full((len(t), HEIGHT, WIDTH), 2e6, dtype=np.float32)
-    cx, cy = WIDTH / 2, HEIGHT / 2
-    for j, radius in enumerate([20, 45, 70, 95, 120]):
+    out = np.full((len(t), height, width), 2e6, dtype=np.float32)
+    cx, cy = width / 2, height / 2
+    scale = min(width, height) / HEIGHT
+    for j, radius in enumerate(np.array([20, 45, 70, 95, 120]) * scale):
         phase = 2 * math.pi * t / 2.0 + j  # one turn in 2 s
         xs, ys = cx + radius * np.cos(phase), cy + radius * np.sin(phase)
         for k in range(len(t)):
@@ -44,46 +65,69 @@ def render_chunk(t: np.ndarray) -> np.ndarray:
     return out
 
 
-def bench_engine(params: PixelParams, threads: int, chunks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, int]:
-    sensor = Sensor(WIDTH, HEIGHT, params, seed=1, num_threads=threads)
-    elapsed, n_events = 0.0, 0
+def bench_engine(params: PixelParams, threads: int, chunks: list[tuple[np.ndarray, np.ndarray]],
+                 width: int = WIDTH, height: int = HEIGHT) -> tuple[float, float, int]:
+    """Wall seconds, CPU seconds (the process's, all threads) and events of the run() calls."""
+    sensor = Sensor(width, height, params, seed=1, num_threads=threads)
+    elapsed, cpu, n_events = 0.0, 0.0, 0
     for rate, t in chunks:
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         n_events += len(sensor.run(rate, t))
         elapsed += time.perf_counter() - start
-    return elapsed, n_events
+        cpu += time.process_time() - start_cpu
+    return elapsed, cpu, n_events
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--duration", type=float, default=10.0, help="sensor time for the C++ engine [s]")
-    ap.add_argument("--numpy-duration", type=float, default=0.5, help="sensor time for NumPy [s]")
+    ap.add_argument("--load", choices=sorted(SIZES), default="reference")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="sensor time for the C++ engine [s] (default 10; imx636: 1)")
+    ap.add_argument("--numpy-duration", type=float, default=0.5, help="sensor time for NumPy [s] (reference load)")
     ap.add_argument("--threads", default="1,2")
-    ap.add_argument("--chunk", type=int, default=250, help="samples per run() call")
+    ap.add_argument("--chunk", type=int, default=250, help="samples per run() call (imx636: 50)")
+    ap.add_argument("--period", type=float, default=None,
+                    help="seconds of scene rendered and replayed (default 2: one turn; imx636: 0.1)")
     ap.add_argument("--noise-model", choices=["continuous", "sampled"], default="continuous",
                     help="the engine's shot-noise model (the NumPy reference implements 'sampled')")
     args = ap.parse_args()
-    params = PixelParams(threshold_sigma=0.03, noise_model=args.noise_model)
+    imx = args.load == "imx636"
+    duration = args.duration if args.duration is not None else (1.0 if imx else 10.0)
+    chunk = 50 if imx and args.chunk == 250 else args.chunk
+    width, height = SIZES[args.load]
+    if imx:
+        params = IMX636.pixel_params().replace(noise_model=args.noise_model)
+    else:
+        params = PixelParams(threshold_sigma=0.03, noise_model=args.noise_model,
+                             cutoff_hz=200.0 if args.load == "event-heavy" else 10.0)
 
-    n = int(round(args.duration * RATE_HZ))
+    n = int(round(duration * RATE_HZ))
     t_all = np.arange(n) / RATE_HZ
     # One period of the motion is 2 s: render it once and replay it (the sensor sees the same
     # scene as rendering all 10 s, and the benchmark does not wait on the renderer).
-    period = min(n, int(2 * RATE_HZ))
-    frames = np.concatenate([render_chunk(t_all[a : a + args.chunk]) for a in range(0, period, args.chunk)])
-    chunks = [(frames[a % period : a % period + min(args.chunk, n - a)], t_all[a : a + args.chunk])
-              for a in range(0, n, args.chunk)]
-    updates = n * WIDTH * HEIGHT
+    period_s = args.period if args.period is not None else (0.1 if imx else 2.0)
+    period = min(n, int(round(period_s * RATE_HZ)))
+    frames = np.concatenate([render_chunk(t_all[a : min(a + chunk, period)], width, height)
+                             for a in range(0, period, chunk)])
+    chunks = [(frames[a % period : a % period + min(chunk, n - a)], t_all[a : a + chunk])
+              for a in range(0, n, chunk)]
+    updates = n * width * height
     print(f"machine: {platform.processor() or platform.machine()}, {len(__import__('os').sched_getaffinity(0))} cores; "
-          f"OpenMP: {has_openmp()}")
-    print(f"load: DAVIS346 {WIDTH}x{HEIGHT}, {RATE_HZ:.0f} Hz, {args.duration:g} s, 5 sources, all noise on, "
-          f"noise_model={args.noise_model}")
+          f"OpenMP: {has_openmp()}; SIMD: {simd_level()}; load average {__import__('os').getloadavg()[0]:.1f}")
+    print(f"load: {args.load}, {width}x{height}, {RATE_HZ:.0f} Hz, {duration:g} s, 5 sources, all noise on, "
+          f"cutoff {params.cutoff_hz:g} Hz, noise_model={args.noise_model}")
     results = {}
     for threads in [int(x) for x in args.threads.split(",")]:
-        elapsed, n_ev = bench_engine(params, threads, chunks)
+        elapsed, cpu, n_ev = bench_engine(params, threads, chunks, width, height)
         results[threads] = updates / elapsed
         print(f"C++ engine, {threads} thread(s): {elapsed:7.2f} s  {updates / elapsed / 1e6:8.1f} M pixel-updates/s  "
-              f"{n_ev / elapsed / 1e6:6.2f} M events/s  ({n_ev} events)")
+              f"{n_ev / elapsed / 1e6:6.2f} M events/s  ({n_ev} events, "
+              f"{n_ev / (width * height * duration):.3g} per pixel per s; "
+              f"CPU {cpu:.2f} s = {cpu / updates * 1e9:.2f} ns per update, "
+              f"{cpu / max(n_ev, 1) * 1e9:.0f} ns per event; "
+              f"{elapsed / duration:.3g} s per sensor-second)")
+    if args.load != "reference" or args.numpy_duration <= 0:
+        return
 
     m = int(round(args.numpy_duration * RATE_HZ))
     ref = numpy_reference.NumpySensor(WIDTH, HEIGHT, params.replace(noise_model="sampled"), seed=1)

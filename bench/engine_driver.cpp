@@ -1,10 +1,14 @@
-// The C++ engine alone, for instruction counts (valgrind --tool=callgrind) and wall time: a
-// 346-pixel-wide DAVIS346 window, 2e6 photons/s on every pixel, every noise source on, 400
-// samples at 1 kHz in 4 calls.
+// The C++ engine alone, for instruction counts (valgrind --tool=callgrind), perf profiles and
+// wall time: a 346-pixel-wide DAVIS346 window, 2e6 photons/s on every pixel, every noise
+// source on, 400 samples at 1 kHz in 4 calls. CUTOFF_HZ (default 10, the reference load)
+// sets the source follower's cutoff: 200 Hz makes the event-heavy load (the 18,000 e-/s dark
+// current's shot noise then crosses the thresholds ~180 times a pixel a second). THREADS
+// (default 1) is the engine's thread count.
 //
-//   g++ -std=c++17 -O3 -DNDEBUG -Icpp/include bench/engine_driver.cpp -o /tmp/engine_driver
-//   valgrind --tool=callgrind /tmp/engine_driver continuous 64     # or: sampled 64
-//   time /tmp/engine_driver continuous 260
+//   g++ -std=c++17 -O3 -DNDEBUG -fopenmp -Icpp/include bench/engine_driver.cpp -o /tmp/engine_driver
+//   valgrind --tool=callgrind /tmp/engine_driver continuous 64          # or: sampled 64
+//   valgrind --tool=callgrind /tmp/engine_driver continuous 64 200      # event-heavy
+//   time /tmp/engine_driver continuous 260 [CUTOFF_HZ [THREADS]]
 #include <evstwin/evstwin.hpp>
 
 #include <cstdio>
@@ -13,8 +17,8 @@
 #include <vector>
 
 int main(int argc, char** argv) {
-    if (argc != 3 || (std::strcmp(argv[1], "continuous") != 0 && std::strcmp(argv[1], "sampled") != 0)) {
-        std::fprintf(stderr, "usage: %s continuous|sampled HEIGHT\n", argv[0]);
+    if (argc < 3 || argc > 5 || (std::strcmp(argv[1], "continuous") != 0 && std::strcmp(argv[1], "sampled") != 0)) {
+        std::fprintf(stderr, "usage: %s continuous|sampled HEIGHT [CUTOFF_HZ [THREADS]]\n", argv[0]);
         return 2;
     }
     evstwin::PixelParams p;
@@ -25,7 +29,9 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "HEIGHT must be in [1, 260]; got %s\n", argv[2]);
         return 2;
     }
-    evstwin::Sensor sensor(width, height, p, 1, 1);
+    if (argc >= 4) p.cutoff_hz = std::atof(argv[3]);
+    const int threads = argc >= 5 ? std::atoi(argv[4]) : 1;
+    evstwin::Sensor sensor(width, height, p, 1, threads);
     std::vector<float> rate(static_cast<std::size_t>(width) * height, 2e6f);
     std::vector<double> t(samples);
     std::size_t n = 0;

@@ -38,6 +38,24 @@ MAX_MAX_EVENTS = 2**32 - 1
 """Largest ``max_events`` (the engine sorts one call's events with 32-bit indices)."""
 
 
+def simd_levels() -> list[str]:
+    """The SIMD levels of the engine's batched loops (Philox, the ziggurat) that this processor
+    and build can run, lowest first: 'baseline' (what the build targets: SSE2 on x86-64), then
+    'avx2' and 'avx512' where supported. Every level gives the same events, bit for bit."""
+    return list(_core.simd_levels())
+
+
+def simd_level() -> str:
+    """The SIMD level the engine uses now: the best of ``simd_levels()`` unless set."""
+    return str(_core.simd_level())
+
+
+def set_simd_level(level: str) -> None:
+    """Force the engine's SIMD level, process-wide (for tests and benchmarks; the events do not
+    change). Raises ValueError for a level not in ``simd_levels()``."""
+    _core.set_simd_level(level)
+
+
 class Sensor:
     """An event sensor of ``width`` x ``height`` identical pixels (mismatch aside).
 

@@ -156,6 +156,67 @@ TEST(brownian_bridge_crossing_probability_and_time_against_simulated_paths) {
     }
 }
 
+TEST(bridge_first_passage_sample_has_the_law_bridge_first_passage_inverts) {
+    // The engine draws a crossing's time by the inverse-Gaussian construction; the bisection of
+    // the closed-form CDF (checked against simulated paths above) is the independent reference:
+    // a share q of the draws must lie below its q-quantile, for near and far levels, equal and
+    // unequal ends, and an end almost on the level (u1 -> 0, the Levy limit).
+    struct Case { double u0, u1, sigma2, T; };
+    for (const Case& k : {Case{1.0, 1.0, 1.0, 1.0}, Case{0.3, 2.0, 4.0, 1e-3}, Case{2.0, 0.1, 1.0, 0.5},
+                          Case{0.05, 1e-12, 0.01, 2.0}}) {
+        const int n = 20000;
+        std::vector<double> draws(n);
+        for (int i = 0; i < n; ++i) {
+            CounterStream more({5u, 6u}, static_cast<std::uint32_t>(i), 0, 21u);
+            const double g = normal_ziggurat(more.word(), [&more] { return more.word(); });
+            draws[i] = bridge_first_passage_sample(k.u0, k.u1, k.sigma2, k.T, g, more.uniform());
+            CHECK(draws[i] >= 0.0 && draws[i] <= k.T);
+        }
+        for (double q : {0.05, 0.25, 0.5, 0.75, 0.95}) {
+            const double tq = bridge_first_passage(k.u0, k.u1, k.sigma2, k.T, q);
+            std::size_t below = 0;
+            for (double t : draws) below += t <= tq;
+            CHECK_NEAR(double(below) / n, q, 5.0 * std::sqrt(q * (1 - q) / n));
+        }
+    }
+}
+
+TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
+    // 1000 counters (odd length: the vector loops' remainders too), words through both paths.
+    const std::size_t n = 1001;
+    std::vector<std::uint32_t> c0(n), c1(n), c2(n), r0(n), r1(n), r2(n), r3(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        c0[i] = static_cast<std::uint32_t>(i * 2654435761u);
+        c1[i] = static_cast<std::uint32_t>(i >> 3);
+        c2[i] = static_cast<std::uint32_t>(1000003u * i + 7u);
+    }
+    std::vector<double> g(n);
+    std::vector<std::uint8_t> slow(n);
+    const SimdLevel before = simd_level();
+    int levels = 0;
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        ++levels;
+        set_simd_level(l);
+        philox4x32_batch(c0.data(), c1.data(), c2.data(), PURPOSE_SAMPLE, {9u, 10u}, n, r0.data(), r1.data(), r2.data(),
+                         r3.data());
+        ziggurat_batch(r0.data(), n, g.data(), slow.data());
+        std::size_t n_slow = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            const Philox4x32Counter w = philox4x32({c0[i], c1[i], c2[i], PURPOSE_SAMPLE}, {9u, 10u});
+            CHECK(r0[i] == w[0] && r1[i] == w[1] && r2[i] == w[2] && r3[i] == w[3]);
+            // The scalar ziggurat's common case: the magnitude below its layer's k (no more() call).
+            const bool scalar_slow = (w[0] >> 8) >= ZIGGURAT.k[w[0] & 127u];
+            CHECK(static_cast<bool>(slow[i]) == scalar_slow);
+            if (!scalar_slow) CHECK(g[i] == normal_ziggurat(w[0], [] { return 0u; }));
+            n_slow += slow[i];
+        }
+        CHECK(n_slow < n / 20);  // ~1 % of words leave the common path
+    }
+    CHECK(levels >= 1);
+    set_simd_level(before);
+}
+
 TEST(step_gives_floor_ln_r_over_theta_events) {
     for (double R : {1.5, 3.0, 10.0, 0.1}) {
         Sensor s(1, 1, ideal());

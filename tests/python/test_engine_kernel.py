@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from evstwin import PixelParams, Sensor
+from evstwin.sensor import set_simd_level, simd_level, simd_levels
 
 W, H = 23, 17  # 391 pixels: a full block and a partial one
 
@@ -99,3 +100,27 @@ def test_block_kernel_with_sparse_calls_threads_and_chunks(name: str) -> None:
     plain = run_calls(params, "spot", per_pixel=False, threads=1, chunks=[160], sparse=False)
     for threads, chunks in [(2, [160]), (1, [1, 40, 119]), (2, [80, 80])]:
         assert same(run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=False), plain)
+
+
+@pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "fast", "sampled"])
+def test_every_simd_level_gives_the_scalar_events(name: str) -> None:
+    """The batched Philox and ziggurat (simd.hpp) at every level this processor runs, against
+    the per-pixel path's scalar ones: the same events and labels, byte for byte."""
+    params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
+    levels = simd_levels()
+    assert levels[0] == "baseline" and simd_level() in levels
+    scalar = run_calls(params, "spot", per_pixel=True, threads=1, chunks=[50, 3, 107], sparse=True)
+    before = simd_level()
+    try:
+        for level in levels:
+            set_simd_level(level)
+            assert simd_level() == level
+            got = run_calls(params, "spot", per_pixel=False, threads=2, chunks=[50, 3, 107], sparse=True)
+            assert same(got, scalar), f"{name}: SIMD level {level} changed the events"
+    finally:
+        set_simd_level(before)
+
+
+def test_set_simd_level_refuses_an_unknown_level() -> None:
+    with pytest.raises(ValueError, match="got level='avx1024'"):
+        set_simd_level("avx1024")

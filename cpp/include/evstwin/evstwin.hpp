@@ -8,4 +8,5 @@
 #include "readout.hpp"
 #include "rng.hpp"
 #include "sensor.hpp"
+#include "simd.hpp"
 #include "version.hpp"

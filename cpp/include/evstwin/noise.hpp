@@ -213,4 +213,24 @@ inline double bridge_first_passage(double u0, double u1, double sigma2, double T
     return 0.5 * (lo + hi);
 }
 
+/// A draw from the law bridge_first_passage inverts, from a standard normal g and a uniform u
+/// in (0, 1): no search, a square root and a few divisions (the event path's cost).
+/// Exact: given that it touches the level, the bridge from u0 to u1 touches it first at the
+/// time the bridge from u0 to -u1 does (reflect the path after the touch: same density). The
+/// time change r = s T / (T - s) turns that bridge into a Brownian motion of variance rate
+/// sigma2 with drift -u1 / T started at u0, whose first touch of 0 is inverse Gaussian with
+/// mean mu = u0 T / u1 and shape lambda = u0^2 / sigma2; it is drawn by Michael, Schucany and
+/// Haas's method ("Generating random variates using transformations with multiple roots",
+/// Am. Stat. 30, 1976) and mapped back by s = r T / (T + r).
+inline double bridge_first_passage_sample(double u0, double u1, double sigma2, double T, double g, double u) {
+    const double m = u1 / (u0 * T);                     // 1 / mu (0 when u1 = 0: a Levy law)
+    const double c = g * g * sigma2 / (2.0 * u0 * u0);  // g^2 / (2 lambda)
+    // MSH's smaller root mu (1 + w - sqrt(w (2 + w))), w = mu g^2 / (2 lambda), written as
+    // 1 / (1/mu + c + sqrt(c (2/mu + c))): no cancellation, and finite as mu -> infinity.
+    const double x = 1.0 / (m + c + std::sqrt(c * (2.0 * m + c)));
+    // The root x with probability mu / (mu + x), else the other one, mu^2 / x.
+    const double r = u * (1.0 + x * m) <= 1.0 ? x : 1.0 / (m * m * x);
+    return T / (1.0 + T / r);  // r T / (T + r), and T when r is infinite
+}
+
 }  // namespace evstwin

@@ -26,6 +26,7 @@
 #include "event.hpp"
 #include "noise.hpp"
 #include "rng.hpp"
+#include "simd.hpp"
 
 namespace evstwin {
 
@@ -640,6 +641,10 @@ struct PixelModel {
         // The continuous model's: the sample's second word, the noise, the bridge's variance.
         std::vector<std::uint32_t> word1, busy_at;
         std::vector<double> nz, ny, bridge_var, noise_d;
+        // block_sample_words' Philox batch: counters, the pixels that need a call, the words;
+        // and the ziggurat batch's flags of the normals left to the slow path.
+        std::vector<std::uint32_t> ctr0, ctr1, ctr2, need_at, r0, r1, r2, r3;
+        std::vector<std::uint8_t> slow1, slow2;
         double cached_rate = -1.0, cached_x = 0.0;
         // The photoreceptor pole's decay and ramp depend on the current only through the
         // electron count of the interval: kept per count for the current dt.
@@ -653,6 +658,8 @@ struct PixelModel {
                 z.resize(n); count.resize(n);
                 word1.resize(n); busy_at.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
                 noise_d.resize(n);
+                ctr0.resize(n); ctr1.resize(n); ctr2.resize(n); need_at.resize(n);
+                r0.resize(n); r1.resize(n); r2.resize(n); r3.resize(n); slow1.resize(n); slow2.resize(n);
             }
         }
     };
@@ -665,6 +672,75 @@ struct PixelModel {
         const std::uint32_t* active; ///< local indices to advance, in increasing order; nullptr: all
         std::size_t n_active;
     };
+
+    /// sample_words() for every active pixel of a block: the pixels whose words are not kept
+    /// from the previous sample are listed, their Philox calls made in one batch (simd.hpp:
+    /// vectorised, the same bits at every instruction set), and the words handed out and kept
+    /// as sample_words() does.
+    template <bool AllActive>
+    EVSTWIN_ALWAYS_INLINE static void block_sample_words(const BlockView& v, Philox4x32Key key, BlockScratch& scratch,
+                                                         std::uint32_t* w0, std::uint32_t* w1) {
+        const std::size_t n = v.n_active;
+        PixelState* st = v.state;
+        const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
+        std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
+        std::uint32_t* need = scratch.need_at.data();
+        std::size_t m = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            const PixelState& s = st[at(j)];
+            if ((s.n & 1u) && s.spare_sample == s.n) {
+                w0[j] = static_cast<std::uint32_t>(s.spare_words);
+                w1[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
+            } else {
+                const std::uint64_t pair = s.n >> 1;
+                c0[m] = static_cast<std::uint32_t>(pair);
+                c1[m] = static_cast<std::uint32_t>(pair >> 32);
+                c2[m] = v.ids[at(j)];
+                need[m] = static_cast<std::uint32_t>(j);
+                ++m;
+            }
+        }
+        if (m == 0) return;
+        std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
+        philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, m, r0, r1, r2, r3);
+        for (std::size_t q = 0; q < m; ++q) {
+            const std::size_t j = need[q];
+            PixelState& s = st[at(j)];
+            const bool odd = (s.n & 1u) != 0;
+            w0[j] = odd ? r2[q] : r0[q];
+            w1[j] = odd ? r3[q] : r1[q];
+            s.spare_words = static_cast<std::uint64_t>(r2[q]) | (static_cast<std::uint64_t>(r3[q]) << 32);
+            s.spare_sample = s.n | 1u;
+        }
+    }
+
+    /// sample_normals() for every active pixel of a block: the ziggurat's common path as one
+    /// batch for each word (simd.hpp), then the few normals in a wedge or the tail finished as
+    /// sample_normals() would (both sharing the pixel's further words, the first one first).
+    /// Without `second` only g1 is made (g2 is left as it was): with one low-pass the noise is
+    /// a 1-D process that uses g1 alone (continuous_levels), and skipping g2 cannot change g1,
+    /// which takes the further words first.
+    template <bool AllActive>
+    EVSTWIN_ALWAYS_INLINE static void block_sample_normals(const BlockView& v, Philox4x32Key key, BlockScratch& scratch,
+                                                           const std::uint32_t* w0, const std::uint32_t* w1, double* g1,
+                                                           double* g2, bool second) {
+        const std::size_t n = v.n_active;
+        const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
+        std::uint8_t *slow1 = scratch.slow1.data(), *slow2 = scratch.slow2.data();
+        ziggurat_batch(w0, n, g1, slow1);
+        if (second) {
+            ziggurat_batch(w1, n, g2, slow2);
+        } else {
+            for (std::size_t j = 0; j < n; ++j) slow2[j] = 0;
+        }
+        for (std::size_t j = 0; j < n; ++j) {
+            if (!(slow1[j] | slow2[j])) continue;
+            CounterStream extra(key, v.ids[at(j)], v.state[at(j)].n, PURPOSE_NORMAL);
+            auto more = [&extra] { return extra.word(); };
+            if (slow1[j]) g1[j] = normal_ziggurat_slow(w0[j], more);
+            if (slow2[j]) g2[j] = normal_ziggurat_slow(w1[j], more);
+        }
+    }
 
     /// advance() for pixels that all stand at c.t0 with n > 0, as separate passes (random
     /// words; currents; filter, noise and the quiet test; the comparator for the few busy
@@ -720,12 +796,7 @@ struct PixelModel {
         double* noise_d = scratch.noise_d.data();
         PixelState* st = v.state;
         const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
-        for (std::size_t j = 0; j < n; ++j) {
-            std::uint32_t w[2];
-            sample_words(st[at(j)], key, v.ids[at(j)], w);
-            w0[j] = w[0];
-            w1[j] = w[1];
-        }
+        block_sample_words<AllActive>(v, key, scratch, w0, w1);
         // The normals in a pass of their own (their rare slow path is a call, which would make
         // the main pass save and restore its registers around it). Not needed without shot
         // noise (the per-pixel path draws them only where the noise intensity is > 0, and so
@@ -733,9 +804,12 @@ struct PixelModel {
         double* g1s = scratch.u_noise.data();
         double* g2s = scratch.count.data();
         const bool noisy = p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
-        for (std::size_t j = 0; j < n; ++j) {
-            g1s[j] = g2s[j] = 0.0;
-            if (noisy) sample_normals(w0[j], w1[j], key, v.ids[at(j)], st[at(j)].n, g1s[j], g2s[j]);
+        if (noisy) {
+            // The second normal only drives the two-pole system (continuous_levels).
+            const bool two_poles = !SfOnly && p.pr_pole && has_filter;
+            block_sample_normals<AllActive>(v, key, scratch, w0, w1, g1s, g2s, two_poles);
+        } else {
+            for (std::size_t j = 0; j < n; ++j) g1s[j] = g2s[j] = 0.0;
         }
         const bool background = has_background();
         NoiseCache& cache = scratch.noise;
@@ -811,12 +885,9 @@ struct PixelModel {
         const bool shot = has_background();
         if (p.photon_shot_noise) {
             std::uint32_t* count_word = scratch.count_word.data();
-            for (std::size_t j = 0; j < n; ++j) {
-                std::uint32_t w[2];
-                sample_words(st[at(j)], key, v.ids[at(j)], w);
-                u_noise[j] = uniform_open(w[1]);
-                count_word[j] = w[0];
-            }
+            std::uint32_t* w1 = scratch.word1.data();
+            block_sample_words<AllActive>(v, key, scratch, count_word, w1);
+            for (std::size_t j = 0; j < n; ++j) u_noise[j] = uniform_open(w1[j]);
             for (std::size_t j = 0; j < n; ++j) {
                 const std::uint32_t px = v.ids[at(j)];
                 const std::uint64_t sample = st[at(j)].n;
@@ -828,12 +899,13 @@ struct PixelModel {
                 scratch.count[j] = k;
             }
         } else {
+            if (shot) {
+                std::uint32_t* w0 = scratch.count_word.data();
+                std::uint32_t* w1 = scratch.word1.data();
+                block_sample_words<AllActive>(v, key, scratch, w0, w1);
+                for (std::size_t j = 0; j < n; ++j) u_noise[j] = uniform_open(w1[j]);
+            }
             for (std::size_t j = 0; j < n; ++j) {
-                if (shot) {
-                    std::uint32_t w[2];
-                    sample_words(st[at(j)], key, v.ids[at(j)], w);
-                    u_noise[j] = uniform_open(w[1]);
-                }
                 const double r = static_cast<double>(rate[at(j)]);
                 cur[j] = ELEMENTARY_CHARGE_C * (e_per_photon * r);
                 if (r != scratch.cached_rate) {  // most pixels share the background's rate
@@ -1172,7 +1244,9 @@ struct PixelModel {
                         const bool on = u < p_on;
                         const double u0 = on ? th_on - d_start : th_off + d_start;
                         const double u1 = on ? th_on - d_end : th_off + d_end;
-                        const double tc = t_start + bridge_first_passage(u0, u1, sigma2, span, more.uniform());
+                        const double g_time = normal_ziggurat(more.word(), [&more] { return more.word(); });
+                        const double tc = t_start + bridge_first_passage_sample(u0, u1, sigma2, span, g_time,
+                                                                                more.uniform());
                         if (tc > c.t0 && tc < c.t1) {
                             // Split the interval at the crossing: a virtual sample there, just
                             // past the level, so the comparator fires at tc; then on to y.

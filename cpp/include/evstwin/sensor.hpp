@@ -2,9 +2,10 @@
 // with their sample times and it returns the events of that chunk, sorted by time.
 //
 // Parallel over pixels with OpenMP when compiled with it. The pixels are cut into fixed
-// blocks (independent of the thread count); each block keeps its own event list, and the
-// lists are joined in block order and sorted by (t, pixel) with a stable sort, so the
-// output is the same bit for bit whatever the thread count or chunking.
+// blocks (independent of the thread count); each block keeps its own event list, written
+// sample by sample, and collect() orders each sample's events of all blocks by (t, pixel)
+// with a stable counting sort on the integer timestamps, so the output is the same bit for
+// bit whatever the thread count or chunking.
 #pragma once
 
 #include <algorithm>
@@ -38,8 +39,9 @@ public:
     /// Most engine threads accepted: far above any machine's cores, far below the counts
     /// (5000, 2^31 - 1) at which the OpenMP runtime exits or crashes.
     static constexpr int MAX_THREADS = 1024;
-    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 5 GB at the
-    /// peak (24-byte working records with their vectors' growth slack, and the 16-byte output),
+    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 4 GB at the
+    /// peak (16-byte working records with their vectors' growth slack, the 13-byte output and
+    /// its labels),
     /// far above any real chunk (a long simulation is cut into short calls) and below a
     /// machine's memory. Exceeding it throws std::length_error while the events are produced:
     /// they are counted every EVENT_COUNT_STEP events of a block, so a call stops within
@@ -193,9 +195,7 @@ public:
         }
 
         const std::size_t nblocks = (npix + BLOCK - 1) / BLOCK;
-        block_events_.resize(nblocks);
-        for (auto& b : block_events_) b.clear();
-        events_in_call_.store(0, std::memory_order_relaxed);
+        start_call(nblocks, n_samples);
 
         guarded_for_each_block(nblocks, npix * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
@@ -204,7 +204,7 @@ public:
 
         samples_ += n_samples;
         last_t_ = t_s[n_samples - 1];
-        return collect();
+        return collect(true);
     }
 
     /// Advance only the listed pixels through their own sample times: the sparse second
@@ -267,13 +267,13 @@ public:
         std::vector<SampleConstants> consts(n_samples);
         for (std::size_t k = 1; k < n_samples; ++k) consts[k] = model_.constants(t_s[k - 1], t_s[k]);
         const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
-        block_events_.resize(std::max(block_events_.size(), nblocks));
-        for (auto& b : block_events_) b.clear();
-        events_in_call_.store(0, std::memory_order_relaxed);
+        start_call(nblocks, n_samples);
         guarded_for_each_block(nblocks, n_pixels * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
             run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
         });
-        return collect();
+        // The listed pixels need not be in increasing order: each sample's events are sorted
+        // by (t, pixel), not only by t.
+        return collect(false);
     }
 
 private:
@@ -293,9 +293,7 @@ private:
             for_each_block(nblocks, updates, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
                 if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
                 fn(b, poisson, scratch);
-                std::vector<RawEvent>& out = block_events_[b];
-                note_events(out.size() % EVENT_COUNT_STEP);  // the rest of this block's count
-                std::stable_sort(out.begin(), out.end(), before);  // in parallel; collect() merges
+                note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
             });
         } catch (...) {
             stopped_ = true;
@@ -339,21 +337,34 @@ private:
 
     struct RawEvent {
         std::int64_t t_us;  ///< the event time in the output's microseconds
-        double t1;          ///< end of the sample interval that produced it (the sort's second key)
         std::uint32_t pixel;
         std::uint8_t p;
         std::uint8_t label;  ///< EventLabel: why it fired
     };
 
-    /// The output order. Within one microsecond, events of an earlier sample interval come
-    /// first, then by pixel: a microsecond can straddle two run() calls, and this is the order
-    /// that concatenating their outputs gives. Ties (one pixel's events in one microsecond of
-    /// one interval) keep the order they were made in: each block is sorted stably, and the
-    /// merge takes the lower block first, as a stable sort of the blocks joined in order would.
-    static bool before(const RawEvent& a, const RawEvent& b) {
-        if (a.t_us != b.t_us) return a.t_us < b.t_us;
-        if (a.t1 != b.t1) return a.t1 < b.t1;
-        return a.pixel < b.pixel;
+    /// The event's time in integer microseconds, rounded half away from zero as std::llround
+    /// (without its library call): the truncation is exact, and so is the remainder x - i for
+    /// any |x| < 2^63 (at and above 2^52, x is an integer and the remainder 0).
+    static std::int64_t round_us(double t_s) {
+        const double x = t_s * 1e6;
+        const std::int64_t i = static_cast<std::int64_t>(x);
+        const double frac = x - static_cast<double>(i);
+        return i + static_cast<std::int64_t>(frac >= 0.5) - static_cast<std::int64_t>(frac <= -0.5);
+    }
+
+    /// Clear the blocks' event lists (keeping their memory) and size their per-sample marks.
+    void start_call(std::size_t nblocks, std::size_t n_samples) {
+        blocks_in_call_ = nblocks;
+        samples_in_call_ = n_samples;
+        if (block_events_.size() < nblocks) {
+            block_events_.resize(nblocks);
+            block_sample_ends_.resize(nblocks);
+        }
+        for (std::size_t b = 0; b < nblocks; ++b) {
+            block_events_[b].clear();
+            block_sample_ends_[b].assign(n_samples, 0);
+        }
+        events_in_call_.store(0, std::memory_order_relaxed);
     }
 
     void check_times(const double* t_s, std::size_t n) const {
@@ -465,9 +476,9 @@ private:
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
-        double t1 = 0.0;
-        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol, std::uint8_t label) {
-            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol), label});
+        std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
+        auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
+            out.push_back({round_us(t), pixel, static_cast<std::uint8_t>(pol), label});
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
@@ -477,7 +488,6 @@ private:
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
-            t1 = c.t1;
             std::size_t n_active = hi - lo;
             bool eligible = kernel && synced;
             if (kernel && !synced) {
@@ -510,6 +520,7 @@ private:
                     model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, scratch.noise, emit, tr);
                 }
             }
+            ends[k] = static_cast<std::uint32_t>(out.size());
         }
     }
 
@@ -522,9 +533,9 @@ private:
         const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
         std::vector<RawEvent>& out = block_events_[b];
         std::uint32_t pixel = 0;
-        double t1 = 0.0;
-        auto emit = [this, &out, &pixel, &t1](double t, Polarity pol, std::uint8_t label) {
-            out.push_back({std::llround(t * 1e6), t1, pixel, static_cast<std::uint8_t>(pol), label});
+        std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
+        auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
+            out.push_back({round_us(t), pixel, static_cast<std::uint8_t>(pol), label});
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
@@ -535,7 +546,6 @@ private:
         std::vector<PixelState> local(m);
         for (std::size_t j = 0; j < m; ++j) local[j] = state_[pixels[lo + j]];
         const bool kernel = model_.has_block_kernel();
-        t1 = t_s[0];
         // Usually every listed pixel stands at the same time (the previous base sample).
         bool same_start = kernel;
         for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
@@ -550,9 +560,9 @@ private:
                                scratch.noise, emit);
             }
         }
+        ends[0] = static_cast<std::uint32_t>(out.size());
         for (std::size_t k = 1; k < n_samples; ++k) {
             const Real* row = rate + k * n_pixels + lo;
-            t1 = t_s[k];
             if (kernel) {
                 model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
                                   scratch, emit, pixel);
@@ -562,6 +572,7 @@ private:
                     model_.advance(local[j], static_cast<double>(row[j]), consts[k], key_, pixel, poisson, scratch.noise, emit);
                 }
             }
+            ends[k] = static_cast<std::uint32_t>(out.size());
         }
         for (std::size_t j = 0; j < m; ++j) state_[pixels[lo + j]] = local[j];
     }
@@ -581,47 +592,85 @@ private:
                                 "max_events if memory allows");
     }
 
-    std::vector<Event> collect() {
+    /// The call's events in output order: by time in microseconds; within one microsecond,
+    /// events of an earlier sample interval first (a microsecond can straddle two run() calls,
+    /// and this is the order that concatenating their outputs gives), then by pixel; ties (one
+    /// pixel's events in one microsecond of one interval) in the order they were made.
+    ///
+    /// Every event of sample k lies in [t0, t1] of its interval, so after rounding to
+    /// microseconds none comes after an event of sample k + 1: the order is sample by sample,
+    /// and within a sample by (t_us, pixel). The blocks write each sample's events in pixel
+    /// order when `pixel_ordered` (run(): each block's pixels in increasing order, every
+    /// pixel's events together), so a stable counting sort on t_us over the blocks taken in
+    /// order gives that order in two passes, without comparisons; otherwise (run_pixels' list
+    /// in any order), or where a sample's microseconds span far more slots than it has events,
+    /// a stable sort by (t_us, pixel) of that sample's events does.
+    std::vector<Event> collect(bool pixel_ordered) {
+        const std::size_t nblocks = blocks_in_call_, n_samples = samples_in_call_;
         std::size_t total = 0;
-        for (const auto& b : block_events_) total += b.size();
+        for (std::size_t b = 0; b < nblocks; ++b) total += block_events_[b].size();
         if (total > max_events_) {
             stopped_ = true;
             throw_max_events();
         }
-        // A k-way merge of the blocks, each sorted already: no joined copy, so the peak is the
-        // blocks' events (24 bytes each, with their growth slack) and the output (16 bytes).
         std::vector<Event> events(total);
         labels_.resize(total);
         const std::uint32_t w = static_cast<std::uint32_t>(width_);
-        auto emit = [&](std::size_t j, const RawEvent& e) {
+        auto put = [&](std::size_t j, const RawEvent& e) {
             events[j] = Event{e.t_us, static_cast<std::uint16_t>(e.pixel % w), static_cast<std::uint16_t>(e.pixel / w), e.p};
             labels_[j] = e.label;
         };
-        std::vector<std::uint32_t> heap;  // blocks with events left; the top holds the next event
-        for (std::size_t b = 0; b < block_events_.size(); ++b)
-            if (!block_events_[b].empty()) heap.push_back(static_cast<std::uint32_t>(b));
-        std::vector<std::size_t> next(block_events_.size(), 0);
-        if (heap.size() == 1) {
-            const auto& only = block_events_[heap[0]];
-            for (std::size_t j = 0; j < total; ++j) emit(j, only[j]);
-        } else {
-            auto later = [&](std::uint32_t a, std::uint32_t b) {  // a max-heap of "later" is a min-heap
-                const RawEvent& x = block_events_[a][next[a]];
-                const RawEvent& y = block_events_[b][next[b]];
-                if (before(x, y)) return false;
-                if (before(y, x)) return true;
-                return a > b;
-            };
-            std::make_heap(heap.begin(), heap.end(), later);
-            for (std::size_t j = 0; j < total; ++j) {
-                std::pop_heap(heap.begin(), heap.end(), later);
-                const std::uint32_t b = heap.back();
-                emit(j, block_events_[b][next[b]++]);
-                if (next[b] < block_events_[b].size())
-                    std::push_heap(heap.begin(), heap.end(), later);
-                else
-                    heap.pop_back();
+        // The blocks that made events, and each one's start of the current sample's events.
+        std::vector<std::uint32_t> busy;
+        for (std::size_t b = 0; b < nblocks; ++b)
+            if (!block_events_[b].empty()) busy.push_back(static_cast<std::uint32_t>(b));
+        std::vector<std::uint32_t> start(busy.size(), 0);
+        std::vector<std::uint32_t> slots;
+        std::vector<RawEvent> sample_events;
+        std::size_t base = 0;
+        for (std::size_t k = 0; k < n_samples && base < total; ++k) {
+            std::size_t n_k = 0;
+            std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
+            for (std::size_t i = 0; i < busy.size(); ++i) {
+                const std::vector<RawEvent>& out = block_events_[busy[i]];
+                const std::uint32_t end = block_sample_ends_[busy[i]][k];
+                for (std::uint32_t e = start[i]; e < end; ++e) {
+                    lo = std::min(lo, out[e].t_us);
+                    hi = std::max(hi, out[e].t_us);
+                }
+                n_k += end - start[i];
             }
+            if (n_k == 0) continue;
+            const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
+            if (pixel_ordered && span <= 4 * n_k + 4096) {
+                // Counting sort: slots[d] = where the events of microsecond lo + d start.
+                slots.assign(span + 2, 0);
+                for (std::size_t i = 0; i < busy.size(); ++i) {
+                    const std::vector<RawEvent>& out = block_events_[busy[i]];
+                    const std::uint32_t end = block_sample_ends_[busy[i]][k];
+                    for (std::uint32_t e = start[i]; e < end; ++e) ++slots[static_cast<std::size_t>(out[e].t_us - lo) + 1];
+                }
+                for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
+                for (std::size_t i = 0; i < busy.size(); ++i) {
+                    const std::vector<RawEvent>& out = block_events_[busy[i]];
+                    const std::uint32_t end = block_sample_ends_[busy[i]][k];
+                    for (std::uint32_t e = start[i]; e < end; ++e)
+                        put(base + slots[static_cast<std::size_t>(out[e].t_us - lo)]++, out[e]);
+                }
+            } else {
+                sample_events.clear();
+                for (std::size_t i = 0; i < busy.size(); ++i) {
+                    const std::vector<RawEvent>& out = block_events_[busy[i]];
+                    sample_events.insert(sample_events.end(), out.begin() + start[i],
+                                         out.begin() + block_sample_ends_[busy[i]][k]);
+                }
+                std::stable_sort(sample_events.begin(), sample_events.end(), [](const RawEvent& a, const RawEvent& b) {
+                    return a.t_us != b.t_us ? a.t_us < b.t_us : a.pixel < b.pixel;
+                });
+                for (std::size_t e = 0; e < n_k; ++e) put(base + e, sample_events[e]);
+            }
+            for (std::size_t i = 0; i < busy.size(); ++i) start[i] = block_sample_ends_[busy[i]][k];
+            base += n_k;
         }
         // Keep the blocks' memory for the next call, unless a flood made it large.
         for (auto& b : block_events_)
@@ -638,6 +687,8 @@ private:
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
     std::vector<std::vector<RawEvent>> block_events_;
+    std::vector<std::vector<std::uint32_t>> block_sample_ends_;  ///< each block's event count after each sample
+    std::size_t blocks_in_call_ = 0, samples_in_call_ = 0;
     std::vector<std::uint8_t> labels_;
     std::vector<double> hot_map_;
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;

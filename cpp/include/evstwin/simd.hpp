@@ -1,0 +1,199 @@
+// Batched random numbers over the pixels of a block, compiled for several instruction sets
+// and chosen at run time, so a portable build (SSE2 on x86-64) still uses AVX2 or AVX-512
+// where the processor has them, without -march=native.
+//
+// What is batched: Philox4x32-10 for a list of counters (integer arithmetic: every
+// instruction set gives the same bits) and the ziggurat's common path (a table look-up, a
+// conversion of a 24-bit integer and one multiplication: exact or correctly rounded the same
+// way on every instruction set, and nothing a compiler could contract into a fused
+// multiply-add). The rare rest (a ziggurat wedge or tail) is flagged and finished by the
+// scalar code. So the random numbers, and the events, are the same bit for bit at every level;
+// set_simd_level() forces a level so tests can check that.
+//
+// Dispatch: GCC and Clang on x86-64 compile the batch loops three times (baseline, AVX2,
+// AVX-512: target attributes, so the rest of the program keeps the baseline) and pick one by
+// __builtin_cpu_supports; other compilers and processors get the baseline loop, which the
+// compiler vectorises for whatever the build targets.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+
+#include "config.hpp"
+#include "rng.hpp"
+
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__)) && \
+    !defined(EVSTWIN_NO_MULTIVERSION)
+#define EVSTWIN_MULTIVERSION 1
+#define EVSTWIN_TARGET_AVX2 __attribute__((target("avx2")))
+#define EVSTWIN_TARGET_AVX512 __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq")))
+#else
+#define EVSTWIN_MULTIVERSION 0
+#endif
+
+namespace evstwin {
+
+/// The instruction sets the batched loops are compiled for. Baseline: whatever the build
+/// targets (SSE2 on a default x86-64 build).
+enum class SimdLevel : int { Baseline = 0, AVX2 = 1, AVX512 = 2 };
+
+inline const char* simd_level_name(SimdLevel l) {
+    switch (l) {
+        case SimdLevel::AVX2: return "avx2";
+        case SimdLevel::AVX512: return "avx512";
+        default: return "baseline";
+    }
+}
+
+/// Whether this processor (and this build) can run the loops compiled for `l`.
+inline bool simd_level_supported(SimdLevel l) {
+    if (l == SimdLevel::Baseline) return true;
+#if EVSTWIN_MULTIVERSION
+    __builtin_cpu_init();
+    if (l == SimdLevel::AVX2) return __builtin_cpu_supports("avx2");
+    return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+           __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
+#else
+    return false;
+#endif
+}
+
+/// The best level this processor supports.
+inline SimdLevel best_simd_level() {
+    if (simd_level_supported(SimdLevel::AVX512)) return SimdLevel::AVX512;
+    if (simd_level_supported(SimdLevel::AVX2)) return SimdLevel::AVX2;
+    return SimdLevel::Baseline;
+}
+
+namespace detail {
+inline std::atomic<int>& simd_level_slot() {
+    static std::atomic<int> level{static_cast<int>(best_simd_level())};
+    return level;
+}
+}  // namespace detail
+
+/// The level the batched loops use now (process-wide; the best supported one by default).
+inline SimdLevel simd_level() { return static_cast<SimdLevel>(detail::simd_level_slot().load(std::memory_order_relaxed)); }
+
+/// Force a level (for tests and benchmarks: the results are the same at every level). Throws
+/// std::invalid_argument for a level this processor or build cannot run.
+inline void set_simd_level(SimdLevel l) {
+    if (static_cast<int>(l) < 0 || static_cast<int>(l) > 2)
+        throw std::invalid_argument("simd level must be baseline, avx2 or avx512; got " + std::to_string(static_cast<int>(l)));
+    if (!simd_level_supported(l))
+        throw std::invalid_argument(std::string("simd level ") + simd_level_name(l) +
+                                    " is not supported by this processor or build");
+    detail::simd_level_slot().store(static_cast<int>(l), std::memory_order_relaxed);
+}
+
+namespace detail {
+
+/// Philox4x32-10 (rng.hpp's philox4x32) of the counters (c0[i], c1[i], c2[i], c3) for
+/// i < n, into r0..r3. Scalar locals rather than std::array, so the loop vectorises.
+EVSTWIN_ALWAYS_INLINE void philox_batch_body(const std::uint32_t* __restrict c0, const std::uint32_t* __restrict c1,
+                                             const std::uint32_t* __restrict c2, std::uint32_t c3, Philox4x32Key key,
+                                             std::size_t n, std::uint32_t* __restrict r0, std::uint32_t* __restrict r1,
+                                             std::uint32_t* __restrict r2, std::uint32_t* __restrict r3) {
+    constexpr std::uint32_t M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
+    constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
+    for (std::size_t i = 0; i < n; ++i) {
+        std::uint32_t x0 = c0[i], x1 = c1[i], x2 = c2[i], x3 = c3;
+        std::uint32_t k0 = key[0], k1 = key[1];
+#if defined(__GNUC__)
+#pragma GCC unroll 10
+#endif
+        for (int round = 0; round < 10; ++round) {
+            const std::uint64_t p0 = static_cast<std::uint64_t>(M0) * x0;
+            const std::uint64_t p1 = static_cast<std::uint64_t>(M1) * x2;
+            const std::uint32_t hi0 = static_cast<std::uint32_t>(p0 >> 32), lo0 = static_cast<std::uint32_t>(p0);
+            const std::uint32_t hi1 = static_cast<std::uint32_t>(p1 >> 32), lo1 = static_cast<std::uint32_t>(p1);
+            x0 = hi1 ^ x1 ^ k0;
+            x1 = lo1;
+            x2 = hi0 ^ x3 ^ k1;
+            x3 = lo0;
+            k0 += W0;
+            k1 += W1;
+        }
+        r0[i] = x0;
+        r1[i] = x1;
+        r2[i] = x2;
+        r3[i] = x3;
+    }
+}
+
+/// normal_ziggurat's common path for words w[i]: g[i] the normal, slow[i] = 1 where the word
+/// falls in a wedge or the tail (then g[i] is meaningless and the caller finishes it).
+EVSTWIN_ALWAYS_INLINE void ziggurat_batch_body(const std::uint32_t* __restrict w, std::size_t n, double* __restrict g,
+                                               std::uint8_t* __restrict slow) {
+    const double* __restrict tw = ZIGGURAT.w;
+    const std::uint32_t* __restrict tk = ZIGGURAT.k;
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::uint32_t wi = w[i], layer = wi & 127u, j = wi >> 8;
+        const double x = static_cast<double>(static_cast<std::int32_t>(j)) * tw[layer];  // j < 2^24: exact either way
+        g[i] = x * (1.0 - 2.0 * static_cast<double>(static_cast<std::int32_t>((wi >> 7) & 1u)));
+        slow[i] = static_cast<std::uint8_t>(j >= tk[layer]);
+    }
+}
+
+inline void philox_batch_baseline(const std::uint32_t* c0, const std::uint32_t* c1, const std::uint32_t* c2,
+                                  std::uint32_t c3, Philox4x32Key key, std::size_t n, std::uint32_t* r0,
+                                  std::uint32_t* r1, std::uint32_t* r2, std::uint32_t* r3) {
+    philox_batch_body(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+}
+inline void ziggurat_batch_baseline(const std::uint32_t* w, std::size_t n, double* g, std::uint8_t* slow) {
+    ziggurat_batch_body(w, n, g, slow);
+}
+#if EVSTWIN_MULTIVERSION
+EVSTWIN_TARGET_AVX2 inline void philox_batch_avx2(const std::uint32_t* c0, const std::uint32_t* c1,
+                                                  const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key,
+                                                  std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
+                                                  std::uint32_t* r2, std::uint32_t* r3) {
+    philox_batch_body(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+}
+EVSTWIN_TARGET_AVX512 inline void philox_batch_avx512(const std::uint32_t* c0, const std::uint32_t* c1,
+                                                      const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key,
+                                                      std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
+                                                      std::uint32_t* r2, std::uint32_t* r3) {
+    philox_batch_body(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+}
+EVSTWIN_TARGET_AVX2 inline void ziggurat_batch_avx2(const std::uint32_t* w, std::size_t n, double* g,
+                                                    std::uint8_t* slow) {
+    ziggurat_batch_body(w, n, g, slow);
+}
+EVSTWIN_TARGET_AVX512 inline void ziggurat_batch_avx512(const std::uint32_t* w, std::size_t n, double* g,
+                                                        std::uint8_t* slow) {
+    ziggurat_batch_body(w, n, g, slow);
+}
+#endif
+}  // namespace detail
+
+/// Philox4x32-10 of n counters (c0[i], c1[i], c2[i], c3) under `key`, at the current level.
+inline void philox4x32_batch(const std::uint32_t* c0, const std::uint32_t* c1, const std::uint32_t* c2,
+                             std::uint32_t c3, Philox4x32Key key, std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
+                             std::uint32_t* r2, std::uint32_t* r3) {
+#if EVSTWIN_MULTIVERSION
+    switch (simd_level()) {
+        case SimdLevel::AVX512: return detail::philox_batch_avx512(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+        case SimdLevel::AVX2: return detail::philox_batch_avx2(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+        default: break;
+    }
+#endif
+    detail::philox_batch_baseline(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+}
+
+/// normal_ziggurat's common path for n words, at the current level (see ziggurat_batch_body).
+inline void ziggurat_batch(const std::uint32_t* w, std::size_t n, double* g, std::uint8_t* slow) {
+#if EVSTWIN_MULTIVERSION
+    switch (simd_level()) {
+        case SimdLevel::AVX512: return detail::ziggurat_batch_avx512(w, n, g, slow);
+        case SimdLevel::AVX2: return detail::ziggurat_batch_avx2(w, n, g, slow);
+        default: break;
+    }
+#endif
+    detail::ziggurat_batch_baseline(w, n, g, slow);
+}
+
+}  // namespace evstwin
