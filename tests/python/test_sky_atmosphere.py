@@ -209,7 +209,8 @@ def test_atmosphere_table_in_a_scenario() -> None:
     scene = build(s)
     assert scene.psf.kind == "seeing"
     assert scene.psf.params["fwhm_px"] == pytest.approx(4.0 / (18.5e-6 / 2.0 * ARCSEC_PER_RAD))
-    assert scene.atmosphere.scintillation.airmass == pytest.approx(2.0)  # 1 / sin 30 deg
+    # Kasten & Young (1989) at z = 60 deg, by hand: 1 / (cos 60 + 0.50572 (96.07995 - 60)^-1.6364)
+    assert scene.atmosphere.scintillation.airmass == pytest.approx(1.99429285, rel=1e-7)
     flux = scene.targets[0].flux_ph_s(np.linspace(0, 0.2, 50))
     assert np.std(flux) > 0  # it twinkles
 

@@ -479,15 +479,15 @@ class Atmosphere:
 
 
 def airmass_from_elevation_deg(elevation_deg: float) -> float:
-    """Plane-parallel airmass sec(z) = 1 / sin(elevation) (within 1 % of Kasten & Young's 1989
-    formula above 20 deg elevation); elevation in (0, 90] deg, at least 1.44 deg (X <= 40)."""
+    """The airmass at an elevation in (0, 90] deg: Kasten & Young (1989), the one formula the
+    sky uses for extinction too (``evstwin.sky.photometry.airmass_kasten_young``; 1 at the
+    zenith, 37.9 at the horizon)."""
+    from .photometry import airmass_kasten_young
+
     el = _finite("elevation_deg", elevation_deg)
     if not 0.0 < el <= 90.0:
         raise ValueError(f"elevation_deg must be in (0, 90] (above the horizon); got elevation_deg={elevation_deg!r}")
-    x = 1.0 / math.sin(math.radians(el))
-    if x > 40.0:
-        raise ValueError(f"elevation_deg={elevation_deg!r} gives airmass {x:.3g} (> 40): too close to the horizon")
-    return x
+    return float(airmass_kasten_young(el))
 
 
 ATMOSPHERE_KEYS = ("seeing_fwhm_arcsec", "moffat_beta", "jitter_rms_arcsec", "jitter_tau_s", "scintillation",
