@@ -87,8 +87,8 @@ from .pixel import PixelParams
 from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
 from .readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S, ReadoutParams
 from .sensor import MAX_MAX_EVENTS
-from .sky.atmosphere import ATMOSPHERE_KEYS, Atmosphere, atmosphere_from_table
 from .sky import scene as sky_scene
+from .sky.atmosphere import ATMOSPHERE_KEYS, Atmosphere, atmosphere_from_table
 from .targets import (
     MAX_STARS,
     CircularTarget,
