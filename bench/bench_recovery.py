@@ -94,6 +94,7 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=0.5, help="recording length [s] (default 0.5)")
     ap.add_argument("--runs-per-trial", type=int, default=2, help="seeds per trial (default 2)")
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: cores)")
+    ap.add_argument("--batch-size", type=int, default=4, help="Optuna samplers' trials per round (default 4)")
     ap.add_argument("--seed", type=int, default=0, help="generator seed of the hidden settings")
     ap.add_argument("--csv", default=None, help="also write the rows to this CSV file")
     args = ap.parse_args()
@@ -114,9 +115,10 @@ def main() -> None:
               + f"; {real.events.size} events", flush=True)
         for sampler in samplers:
             t0 = time.perf_counter()
+            name, _, distance = sampler.partition(":")
             res = tune.fit(real.events, real.meta, base, params=PARAMS, budget=args.budget,
-                           runs_per_trial=args.runs_per_trial, seed=0, sampler=sampler, start=start,
-                           workers=args.workers)
+                           runs_per_trial=args.runs_per_trial, seed=0, sampler=name, start=start,
+                           workers=args.workers, distance=distance or None, batch_size=args.batch_size)
             elapsed = time.perf_counter() - t0
             found = res.best_params
             ok = success(hidden, found)
@@ -127,7 +129,7 @@ def main() -> None:
                             f"{SHORT[k]}_found": found[k]})
             rows.append(row)
             ratios = " ".join(f"{SHORT[k]} {found[k] / hidden[k]:.3f}" for k in PARAMS)
-            print(f"  {sampler:7s} {'ok  ' if ok else 'FAIL'} d={res.best_distance:.4f} {elapsed:5.1f} s  "
+            print(f"  {sampler:11s} {'ok  ' if ok else 'FAIL'} d={res.best_distance:.4f} {elapsed:5.1f} s  "
                   f"found/hidden: {ratios}", flush=True)
     if args.csv:
         with open(args.csv, "w", newline="", encoding="utf-8") as fh:

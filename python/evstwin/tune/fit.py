@@ -28,6 +28,7 @@ from .bounds import (
     canonical_key,
     parse_bound,
 )
+from .counts import CountsObjective
 from .execution import JobFailure, _bar, _Context, _Job, announce, make_executor
 from .objectives import MatchObjective
 from .sweep import _atomic_write_text, _fmt_value, _jsonable
@@ -44,7 +45,7 @@ class TrialRecord:
     run_distances: list[float]
     error: str = ""
     phase: str = ""
-    """Which search proposed the trial: tpe, random, cmaes or nm."""
+    """Which search proposed the trial: tpe, random, cmaes, nm or ls."""
 
 
 @dataclass
@@ -75,6 +76,9 @@ class FitResult:
     """The compared rectangle (x0, y0, w, h) of the sensor; None: the whole sensor."""
     mask: np.ndarray | None = field(default=None, repr=False)
     """The (h, w) pixels of the compared region left out (listed and hot); None: none."""
+    distance: str = "compare"
+    """The distance minimised: 'compare' (:func:`evstwin.validation.compare`'s, mean over the
+    seeds) or 'chi2' (:mod:`evstwin.tune.counts`, from the mean of the seeds' statistics)."""
     intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Each parameter's interval from the distance's curvature at the best (``intervals=True``):
     the values that raise the mean distance by its own seed-to-seed standard error (see
@@ -111,6 +115,7 @@ class FitResult:
 
     def to_json_dict(self) -> dict[str, Any]:
         from ..validation import DISTANCE_FORMULA
+        from .counts import CHI2_FORMULA
 
         return _jsonable(
             {
@@ -134,7 +139,8 @@ class FitResult:
                 "real": str(self.real_meta.get("path", "")),
                 "executor": self.executor,
                 "elapsed_s": self.elapsed_s,
-                "distance_formula": DISTANCE_FORMULA,
+                "distance": self.distance,
+                "distance_formula": CHI2_FORMULA if self.distance == "chi2" else DISTANCE_FORMULA,
                 "roi": list(self.roi) if self.roi is not None else None,
                 "masked_pixels": (
                     [] if self.mask is None
@@ -231,7 +237,8 @@ def _resolve_bounds(
     return keys, out
 
 
-SAMPLERS = ("nm", "tpe+nm", "tpe", "cmaes", "random")
+SAMPLERS = ("nm", "ls", "tpe+nm", "tpe", "cmaes", "random")
+DISTANCES = ("compare", "chi2")
 
 
 """Search strategies of :func:`fit`:
@@ -245,7 +252,16 @@ SAMPLERS = ("nm", "tpe+nm", "tpe", "cmaes", "random")
 * ``tpe``: Optuna's multivariate TPE (seeded), global, trials batched to the workers with
   ask/tell. ``random``: Optuna's seeded random sampler, the same way.
 * ``tpe+nm``: TPE for half the budget, then Nelder-Mead from the best point found.
-* ``cmaes``: Optuna's CMA-ES from the starting point (needs the ``cmaes`` package).
+* ``cmaes``: Optuna's CMA-ES from the starting point (needs the ``cmaes`` package), trials
+  batched like TPE's.
+* ``ls``: SciPy's trust-region least squares (``least_squares``, method 'trf', bounded) on
+  the chi-square distance's residuals (:mod:`evstwin.tune.counts`; ``distance='chi2'``), in
+  the same [0, 1] coordinates. Its Jacobian is a batch of forward differences (one trial a
+  parameter, :data:`LS_STEP` of the bound width, run in parallel with the seeds of each);
+  restarted from the best point with half the step when SciPy's run converges, until the
+  budget is spent. Deterministic. The distance is a sum of squared standardised
+  differences, so Gauss-Newton steps use its structure where Nelder-Mead and CMA-ES see
+  one number a trial.
 
 Why Nelder-Mead by default: on the recovery problem of the tests (thresholds and dark rate of
 a 48 x 36 px scene) the distance has a long curved valley (higher thresholds with a lower
@@ -328,6 +344,8 @@ def fit(
     mask_pixels: Sequence[tuple[int, int]] = (),
     mask_hot: bool = False,
     intervals: bool = False,
+    distance: str | None = None,
+    ls_step: float | None = None,
 ) -> FitResult:
     """Fit twin parameters to a real recording by minimising the comparison distance.
 
@@ -358,7 +376,14 @@ def fit(
         standard error over its seeds: an uncertainty from the curvature of the distance,
         in the sense "changes the simulator cannot tell from its own noise". Needs
         runs_per_trial >= 2 (the noise is measured, not assumed). A flat or concave profile
-        gives the whole bound.
+        gives the whole bound. With ``distance='chi2'`` the rise is 1 / S (S statistics: the
+        un-normalised chi-square rises by 1, the Poisson model's 68 % profile interval).
+    distance: 'compare' (compare's distance of each seed, averaged over the seeds; the
+        default of every sampler but 'ls') or 'chi2' (:mod:`evstwin.tune.counts`: per-pixel
+        count histograms of pixel groups set by the scenario's source light, the seeds'
+        statistics averaged, a Pearson chi-square; the default, and the only one, of 'ls').
+        ls_step: the Jacobian's forward-difference step of 'ls', as a share of each bound's
+        (log) width (default :data:`LS_STEP`).
     """
     optuna = require("optuna")
 
@@ -378,10 +403,26 @@ def fit(
                          f"seeds); got runs_per_trial={runs_per_trial}")
     if not (isinstance(nm_step, (int, float)) and 0 < nm_step <= 0.5):
         raise ValueError(f"nm_step must be in (0, 0.5]; got {nm_step!r}")
-    objective = MatchObjective(
-        real_events, real_meta, bin_width=bin_width, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot
-    )
+    step_ls = LS_STEP if ls_step is None else ls_step
+    if isinstance(step_ls, bool) or not (isinstance(step_ls, (int, float)) and 0 < step_ls <= 0.25):
+        raise ValueError(f"ls_step must be in (0, 0.25]; got {ls_step!r}")
+    if distance is None:
+        distance = "chi2" if sampler == "ls" else "compare"
+    if distance not in DISTANCES:
+        raise ValueError(f"distance must be one of {', '.join(DISTANCES)}; got {distance!r}")
+    if sampler == "ls" and distance != "chi2":
+        raise ValueError("sampler 'ls' fits the chi-square's residuals: it needs distance='chi2'; "
+                         f"got distance={distance!r}")
     base = load(scenario)
+    objective: MatchObjective
+    counts: CountsObjective | None = None
+    if distance == "chi2":
+        counts = objective = CountsObjective(real_events, real_meta, base, roi=roi, mask_pixels=mask_pixels,
+                                             mask_hot=mask_hot)
+    else:
+        objective = MatchObjective(
+            real_events, real_meta, bin_width=bin_width, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot
+        )
     sensor = build(base)
     if (sensor.width, sensor.height) != (objective.sensor_width, objective.sensor_height):
         raise ValueError(
@@ -428,11 +469,13 @@ def fit(
                        build(objective.prepare(base)), executor), file=sys.stderr)
     bar = _bar(budget, f"fit ({sampler})", progress, unit="trial")
     best = [math.inf]
+    residuals: dict[int, np.ndarray] = {}  # trial number -> chi-square residuals ('ls' reads them)
 
     def run_trials(points: list[dict[str, float]], phase: str) -> list[TrialRecord]:
         first = len(history)
         jobs = [_Job((first + n, s), p, s) for n, p in enumerate(points) for s in sim_seeds]
         values: dict[tuple[int, int], float] = {}
+        stats: dict[tuple[int, int], np.ndarray] = {}
         errors: dict[int, str] = {}
         for job, out in executor.run(ctx, jobs):
             number, s = cast("tuple[int, int]", job.key)
@@ -441,11 +484,19 @@ def fit(
                 errors[number] = out.error
             else:
                 values[(number, s)] = out["distance"]
+                if counts is not None:
+                    stats[(number, s)] = np.asarray(out["stats"])
         records = []
         for n, p in enumerate(points):  # in trial order: deterministic whatever finished first
             number = first + n
             runs = [values[(number, s)] for s in sim_seeds if (number, s) in values]
             mean = float(np.mean(runs)) if len(runs) == len(sim_seeds) else math.nan
+            if counts is not None and math.isfinite(mean):
+                # The seeds' statistics averaged first: a chi-square of the mean, not a mean
+                # of chi-squares (each seed's alone carries its full noise).
+                vectors = [stats[(number, s)] for s in sim_seeds]
+                residuals[number] = counts.residuals(vectors)
+                mean = counts.trial_distance(vectors)
             error = errors.get(number, "")
             if not math.isfinite(mean):
                 error, mean = error or "non-finite distance", math.nan
@@ -461,7 +512,7 @@ def fit(
 
     verbosity = optuna.logging.get_verbosity()
     try:
-        n_optuna = {"nm": 0, "tpe+nm": max(1, budget // 2)}.get(sampler, budget)
+        n_optuna = {"nm": 0, "ls": 0, "tpe+nm": max(1, budget // 2)}.get(sampler, budget)
         if n_optuna:
             optuna.logging.set_verbosity(optuna.logging.WARNING)  # Optuna logs every trial otherwise
             study = optuna.create_study(
@@ -494,7 +545,11 @@ def fit(
                 x0 = scaler.to_unit(start_values)
             else:
                 x0 = np.full(len(keys), 0.5)
-            _nelder_mead(run_trials, scaler, x0, budget - len(history), float(nm_step))
+            if sampler == "ls" and counts is not None:
+                _least_squares(run_trials, residuals, counts.real_stats.size, scaler, x0, budget - len(history),
+                               float(step_ls))
+            else:
+                _nelder_mead(run_trials, scaler, x0, budget - len(history), float(nm_step))
         description = executor.description
     finally:
         if bar is not None:
@@ -510,7 +565,8 @@ def fit(
         # The probes run like trials but stay out of the history (they are not the search's).
         executor, bar, n_searched = make_executor(scheduler, workers), None, len(history)
         try:
-            found = _curvature_intervals(run_trials, scaler, best_rec)
+            found = _curvature_intervals(run_trials, scaler, best_rec,
+                                         None if counts is None else 1.0 / counts.real_stats.size)
         finally:
             executor.close()
             del history[n_searched:]
@@ -542,6 +598,7 @@ def fit(
         roi=None if objective.roi is None else objective.roi.as_tuple(),
         mask=objective.mask,
         intervals=found,
+        distance=distance,
     )
 
 
@@ -550,12 +607,14 @@ INTERVAL_STEP = 0.05
 
 
 def _curvature_intervals(
-    run_trials: Callable[[list[dict[str, float]], str], list[TrialRecord]], scaler: _Scaler, best: TrialRecord
+    run_trials: Callable[[list[dict[str, float]], str], list[TrialRecord]], scaler: _Scaler, best: TrialRecord,
+    rise: float | None = None,
 ) -> dict[str, tuple[float, float]]:
     """fit(intervals=True): per parameter, d(u) ~ d0 + c (u - u0)^2 / 2 from the best and two
     probes (the stencil kept inside [0, 1]); the interval is u0 +- sqrt(2 sigma / c) with sigma
-    the standard error of the best's mean distance over its seeds."""
-    sigma = float(np.std(best.run_distances, ddof=1) / math.sqrt(len(best.run_distances)))
+    ``rise`` if given, else the standard error of the best's mean distance over its seeds."""
+    sigma = (float(np.std(best.run_distances, ddof=1) / math.sqrt(len(best.run_distances)))
+             if rise is None else rise)
     u0 = scaler.to_unit(best.params)
     h = INTERVAL_STEP
     points = []
@@ -669,3 +728,86 @@ def _nelder_mead(
         restart += 1
         if not best_f[0] < before:
             edge = edge / 2.0 if edge > step / 8.0 * 1.0001 else step
+
+
+LS_STEP = 0.02
+"""The forward-difference step of ``sampler='ls'``'s Jacobian, as a share of each parameter's
+(log) bound width: 5.5 % of a threshold, 20 % of a dark or background rate with the default
+bounds. Large enough that the trials' common seeds make the difference a change of the
+expected counts rather than of which events happen to fire; small enough for the
+Gauss-Newton model to hold over the last steps."""
+
+LS_FAILED_RESIDUAL = 1e3
+"""The residuals given to 'ls' for a failed trial (every statistic 1000 standard deviations
+off): a point the trust region steps back from."""
+
+
+def _least_squares(
+    run_trials: Callable[[list[dict[str, float]], str], list[TrialRecord]],
+    residuals: Mapping[int, np.ndarray],
+    n_stats: int,
+    scaler: _Scaler,
+    x0: np.ndarray,
+    budget: int,
+    step: float,
+) -> None:
+    """SciPy's bounded trust-region least squares on [0, 1]^n from x0 over the chi-square's
+    residuals. Each residual evaluation is one trial; the Jacobian is one batch of n trials
+    (forward differences of ``step``, away from the nearer bound), run in parallel. When
+    SciPy's run ends (converged) with budget left, it restarts from the best point with half
+    the step (back to ``step`` below step / 8), until the budget is spent or a restart would
+    evaluate nothing new. Deterministic: no random numbers."""
+    from scipy.optimize import least_squares
+
+    n = x0.size
+    used = [0]
+    cache: dict[bytes, np.ndarray] = {}
+    best: list[Any] = [np.clip(x0, 0.0, 1.0), math.inf]
+    failed = np.full(n_stats, LS_FAILED_RESIDUAL)
+
+    def at(points: list[np.ndarray]) -> list[np.ndarray]:
+        new: list[np.ndarray] = []
+        for u in points:
+            if u.tobytes() not in cache and all(u.tobytes() != v.tobytes() for v in new):
+                new.append(u)
+        if new:
+            if used[0] + len(new) > budget:
+                raise _BudgetSpent
+            used[0] += len(new)
+            for u, rec in zip(new, run_trials([scaler.from_unit(u) for u in new], "ls")):
+                r = residuals.get(rec.trial) if math.isfinite(rec.distance) else None
+                cache[u.tobytes()] = failed if r is None else r
+                if math.isfinite(rec.distance) and rec.distance < best[1]:
+                    best[0], best[1] = u.copy(), rec.distance
+        return [cache[u.tobytes()] for u in points]
+
+    def fun(u: np.ndarray) -> np.ndarray:
+        return at([np.clip(u, 0.0, 1.0)])[0]
+
+    def make_jac(h: float) -> Callable[[np.ndarray], np.ndarray]:
+        def jac(u: np.ndarray) -> np.ndarray:
+            u = np.clip(u, 0.0, 1.0)
+            steps = np.where(u + h <= 1.0, h, -h)
+            points = [u]
+            for i in range(n):
+                v = u.copy()
+                v[i] += steps[i]
+                points.append(v)
+            r = at(points)
+            return np.column_stack([(r[i + 1] - r[0]) / steps[i] for i in range(n)])
+
+        return jac
+
+    h = step
+    while used[0] < budget:
+        before = used[0]
+        # SciPy's trf wants a start strictly inside the bounds.
+        start = np.clip(best[0], 1e-9, 1.0 - 1e-9)
+        try:
+            least_squares(fun, start, jac=make_jac(h), bounds=(0.0, 1.0), method="trf", x_scale=1.0,
+                          xtol=1e-4, ftol=1e-4, gtol=1e-8, max_nfev=10 * budget)
+        except _BudgetSpent:
+            return
+        if used[0] == before and h <= step / 8.0 * 1.0001:
+            return  # nothing new to evaluate at any step: the search is done
+        h = h / 2.0 if h > step / 8.0 * 1.0001 else step
