@@ -3,16 +3,15 @@
 Three entry points, each a grid or a search of independent simulations ("jobs"):
 
 * :func:`fit` -- search of named twin parameters within documented bounds
-  (:data:`FIT_BOUNDS`) minimising the comparison distance of
-  :func:`evstwin.validation.compare` between a real recording and the simulated scenario
-  (mean over ``runs_per_trial`` seeds): SciPy's Nelder-Mead from the scenario's values by
-  default, or Optuna (seeded TPE, CMA-ES, random; ask/tell, trials batched to the workers);
-  see :data:`SAMPLERS`. ``sampler='ls'`` fits with SciPy's trust-region least squares on the
-  residuals of a lower-noise chi-square of grouped per-pixel counts (:mod:`.counts`), its
-  Jacobian one parallel batch of trials; ``distance='chi2'`` gives that distance to the
-  other samplers. :class:`FitResult.write` writes the best scenario as a TOML that
-  ``evstwin simulate`` takes, the history, a convergence figure and the comparison figures
-  of the best fit.
+  (:data:`FIT_BOUNDS`) minimising a distance between a real recording and the simulated
+  scenario: by default SciPy's trust-region least squares (``sampler='ls'``) from the
+  scenario's values on the residuals of a low-noise chi-square of grouped per-pixel counts
+  (:mod:`.counts`, the ``runs_per_trial`` seeds averaged), its Jacobian one parallel batch of
+  trials; or SciPy's Nelder-Mead and Optuna (seeded TPE, CMA-ES, random; ask/tell, trials
+  batched to the workers) on :func:`evstwin.validation.compare`'s distance (mean over the
+  seeds) or, with ``distance='chi2'``, on the chi-square; see :data:`SAMPLERS`.
+  :class:`FitResult.write` writes the best scenario as a TOML that ``evstwin simulate``
+  takes, the history, a convergence figure and the comparison figures of the best fit.
 * :func:`sweep` -- every combination of a grid of scenario values (``--set`` keys) times K
   seeds, scored by an objective (:data:`OBJECTIVES`: ``match``, ``detect``, ``noise``; see
   :class:`MatchObjective`, :class:`DetectObjective`, :class:`NoiseObjective`), tabulated in a

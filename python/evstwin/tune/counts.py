@@ -174,7 +174,7 @@ class CountsObjective(MatchObjective):
             pixel = real["y"].astype(np.int64) * self.width + real["x"].astype(np.int64)
             keep = self.groups.reshape(-1)[pixel] >= 0
             for polarity in (1, 0):
-                sel = pixel[keep & (real["p"][keep] == polarity)] if keep.any() else pixel[:0]
+                sel = pixel[keep & (real["p"] == polarity)]
                 if sel.size:
                     top = max(top, int(np.bincount(sel).max()))
         self.edges = count_bin_edges(top)
