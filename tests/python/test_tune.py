@@ -838,6 +838,21 @@ def test_least_squares_search_on_a_linear_model_is_exact_deterministic_and_budge
     assert len(runs(4)[0]) <= 4  # the start and one Jacobian batch (3 trials) fit; no more
 
 
+def test_fit_least_squares_is_reproducible_and_independent_of_workers() -> None:
+    real = simulate(recovery_scenario(0.3, 0.2, 2000.0), duration_s=0.2, seed=5, num_threads=1)
+    start = recovery_scenario(0.4, 0.15, 4000.0)
+    kw = {"params": ["theta_on", "dark_rate_e_per_s"], "budget": 7, "seed": 3, "runs_per_trial": 2}
+    a = tune.fit(real.events, real.meta, start, workers=0, **kw)
+    b = tune.fit(real.events, real.meta, start, workers=2, **kw)
+    assert a.sampler == "ls" and a.distance == "chi2"  # the defaults
+    assert [(r.params, r.distance, r.run_distances) for r in a.history] == [
+        (r.params, r.distance, r.run_distances) for r in b.history
+    ]
+    # The start, then a Jacobian batch (one trial a parameter), then the first step.
+    assert len(a.history) == 7 and a.history[0].params["pixel.theta_on"] == pytest.approx(0.4)
+    assert a.best_distance < a.history[0].distance
+
+
 def test_fit_distance_and_least_squares_reject_bad_input() -> None:
     real = simulate(recovery_scenario(0.3, 0.2, 2000.0), duration_s=0.1, seed=1, num_threads=1)
     start = recovery_scenario(0.3, 0.2, 2000.0)

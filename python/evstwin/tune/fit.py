@@ -107,7 +107,7 @@ class FitResult:
         lines.insert(1, "-" * len(lines[0]))
         n_ok = sum(math.isfinite(r.distance) for r in self.history)
         lines.append(
-            f"best distance {self.best_distance:.6g} (trial {self.best_trial} of {len(self.history)}, "
+            f"best distance {self.best_distance:.6g} ({self.distance}; trial {self.best_trial} of {len(self.history)}, "
             f"{n_ok} finished; {self.runs_per_trial} run(s) per trial, seeds {self.sim_seeds}; "
             f"{self.elapsed_s:.1f} s on {self.executor})"
         )
