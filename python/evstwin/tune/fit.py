@@ -252,8 +252,11 @@ DISTANCES = ("compare", "chi2")
 * ``tpe``: Optuna's multivariate TPE (seeded), global, trials batched to the workers with
   ask/tell. ``random``: Optuna's seeded random sampler, the same way.
 * ``tpe+nm``: TPE for half the budget, then Nelder-Mead from the best point found.
-* ``cmaes``: Optuna's CMA-ES from the starting point (needs the ``cmaes`` package), trials
-  batched like TPE's.
+* ``cmaes``: CMA-ES (the ``cmaes`` package, bounded) from the starting point with a step of
+  :data:`CMAES_SIGMA` in the [0, 1] coordinates, seeded; each generation (its default
+  population, 4 + 3 ln n) is one batch of trials run in parallel; restarted from the best
+  point when it stops with budget left. (Optuna's wrapper, used before, sampled the first
+  batch uniformly over the bounds: it learns the search space from finished trials.)
 * ``ls`` (default): SciPy's trust-region least squares (``least_squares``, method 'trf', bounded) on
   the chi-square distance's residuals (:mod:`evstwin.tune.counts`; ``distance='chi2'``), in
   the same [0, 1] coordinates. Its Jacobian is a batch of forward differences (one trial a
@@ -274,7 +277,7 @@ curved valley between higher thresholds and a lower dark rate.
 """
 
 
-def _make_sampler(sampler: str, seed: int, n_startup: int, start: dict[str, float] | None) -> Any:
+def _make_sampler(sampler: str, seed: int, n_startup: int) -> Any:
     optuna = require("optuna")
 
     with warnings.catch_warnings():
@@ -284,12 +287,6 @@ def _make_sampler(sampler: str, seed: int, n_startup: int, start: dict[str, floa
             return optuna.samplers.TPESampler(seed=seed, multivariate=True, n_startup_trials=n_startup)
         if sampler == "random":
             return optuna.samplers.RandomSampler(seed=seed)
-        if sampler == "cmaes":
-            try:
-                import cmaes  # noqa: F401
-            except ImportError:
-                raise ValueError("sampler 'cmaes' needs the cmaes package (pip install cmaes)") from None
-            return optuna.samplers.CmaEsSampler(seed=seed, x0=start, n_startup_trials=0 if start else 1)
     raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
 
 
@@ -389,7 +386,11 @@ def fit(
         ls_step: the Jacobian's forward-difference step of 'ls', as a share of each bound's
         (log) width (default :data:`LS_STEP`).
     """
-    optuna = require("optuna")
+    if sampler == "cmaes":
+        require("cmaes")
+    else:
+        require("optuna")
+    optuna: Any = None
 
     t0 = time.perf_counter()
     for name, value, low in (
@@ -514,14 +515,16 @@ def fit(
                 bar.set_postfix(best=f"{best[0]:.4g}")
         return records
 
-    verbosity = optuna.logging.get_verbosity()
+    verbosity = None
     try:
-        n_optuna = {"nm": 0, "ls": 0, "tpe+nm": max(1, budget // 2)}.get(sampler, budget)
+        n_optuna = {"nm": 0, "ls": 0, "cmaes": 0, "tpe+nm": max(1, budget // 2)}.get(sampler, budget)
         if n_optuna:
+            optuna = require("optuna")
+            verbosity = optuna.logging.get_verbosity()
             optuna.logging.set_verbosity(optuna.logging.WARNING)  # Optuna logs every trial otherwise
             study = optuna.create_study(
                 direction="minimize",
-                sampler=_make_sampler(sampler, seed, max(4, min(10, n_optuna // 4)), start_values),
+                sampler=_make_sampler(sampler, seed, max(4, min(10, n_optuna // 4))),
             )
             dists: dict[str, Any] = {
                 k: optuna.distributions.FloatDistribution(bnds[k].low, bnds[k].high, log=bnds[k].log)
@@ -549,7 +552,9 @@ def fit(
                 x0 = scaler.to_unit(start_values)
             else:
                 x0 = np.full(len(keys), 0.5)
-            if sampler == "ls" and counts is not None:
+            if sampler == "cmaes":
+                _cma_es(run_trials, scaler, x0, budget - len(history), seed)
+            elif sampler == "ls" and counts is not None:
                 _least_squares(run_trials, residuals, counts.real_stats.size, scaler, x0, budget - len(history),
                                float(step_ls))
             else:
@@ -559,7 +564,8 @@ def fit(
         if bar is not None:
             bar.close()
         executor.close()
-        optuna.logging.set_verbosity(verbosity)
+        if optuna is not None and verbosity is not None:
+            optuna.logging.set_verbosity(verbosity)
     finite = [r for r in history if math.isfinite(r.distance)]
     if not finite:
         raise RuntimeError(f"every fit trial failed; first error: {history[0].error if history else 'none'}")
@@ -812,3 +818,43 @@ def _least_squares(
         if used[0] == before and h <= step / 8.0 * 1.0001:
             return  # nothing new to evaluate at any step: the search is done
         h = h / 2.0 if h > step / 8.0 * 1.0001 else step
+
+
+CMAES_SIGMA = 0.1
+"""The initial step of ``sampler='cmaes'`` in the [0, 1] coordinates (a tenth of each bound's
+(log) width), like Nelder-Mead's first simplex edge."""
+
+
+def _cma_es(
+    run_trials: Callable[[list[dict[str, float]], str], list[TrialRecord]],
+    scaler: _Scaler,
+    x0: np.ndarray,
+    budget: int,
+    seed: int,
+) -> None:
+    """CMA-ES (``cmaes.CMA``) on [0, 1]^n from x0, one generation a batch of trials; a failed
+    trial counts as worse than every finished one. When it stops (``should_stop``) with
+    budget left it restarts from the best point; a last generation the budget cannot hold
+    is evaluated in part (its trials are kept, not told). Seeded: the same arguments give
+    the same trials."""
+    from cmaes import CMA
+
+    n = x0.size
+    bounds = np.array([[0.0, 1.0]] * n)
+    used, restart = 0, 0
+    best_u, best_d = np.clip(x0, 0.0, 1.0), math.inf
+    while used < budget:
+        opt = CMA(mean=np.clip(best_u, 1e-9, 1.0 - 1e-9), sigma=CMAES_SIGMA, bounds=bounds, seed=seed + restart)
+        while used < budget and not opt.should_stop():
+            asked = [opt.ask() for _ in range(opt.population_size)][: budget - used]
+            recs = run_trials([scaler.from_unit(u) for u in asked], "cmaes")
+            used += len(recs)
+            finite = [r.distance for r in recs if math.isfinite(r.distance)]
+            worst = max(finite) if finite else 1.0
+            for u, r in zip(asked, recs):
+                if math.isfinite(r.distance) and r.distance < best_d:
+                    best_u, best_d = u.copy(), r.distance
+            if len(asked) == opt.population_size:
+                opt.tell([(u, r.distance if math.isfinite(r.distance) else 2.0 * abs(worst) + 1.0)
+                          for u, r in zip(asked, recs)])
+        restart += 1
