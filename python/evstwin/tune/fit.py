@@ -418,22 +418,20 @@ def fit(
     if sampler == "ls" and distance != "chi2":
         raise ValueError("sampler 'ls' fits the chi-square's residuals: it needs distance='chi2'; "
                          f"got distance={distance!r}")
+    objective = MatchObjective(
+        real_events, real_meta, bin_width=bin_width, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot
+    )
     base = load(scenario)
-    objective: MatchObjective
-    counts: CountsObjective | None = None
-    if distance == "chi2":
-        counts = objective = CountsObjective(real_events, real_meta, base, roi=roi, mask_pixels=mask_pixels,
-                                             mask_hot=mask_hot)
-    else:
-        objective = MatchObjective(
-            real_events, real_meta, bin_width=bin_width, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot
-        )
     sensor = build(base)
     if (sensor.width, sensor.height) != (objective.sensor_width, objective.sensor_height):
         raise ValueError(
             f"scenario sensor is {sensor.width}x{sensor.height} px but the real recording is "
             f"{objective.sensor_width}x{objective.sensor_height}: set sensor.width / sensor.height"
         )
+    counts: CountsObjective | None = None
+    if distance == "chi2":  # checked like compare's above; its pixel groups need the scenario
+        counts = CountsObjective(real_events, real_meta, base, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot)
+        objective = counts
     keys, bnds = _resolve_bounds(params, bounds)
     _check_not_shadowed(base, keys, "fitted parameter")
     for k in keys:  # every bound must give a valid scenario (fail now, not in a worker)
