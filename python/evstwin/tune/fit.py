@@ -361,7 +361,7 @@ def fit(
         fitted parameter. The default 40 suits up to about 4 parameters.
     runs_per_trial: seeds per trial (``seed .. seed + runs_per_trial - 1``, the same for every
         trial: common random numbers); the trial's value is the mean distance.
-    sampler: see :data:`SAMPLERS` (default 'ls'). Optuna samplers ask ``batch_size`` trials
+    sampler: see :data:`SAMPLERS` (default 'ls'). Optuna's samplers (tpe, random) ask ``batch_size`` trials
         per round (ask/tell, constant liar) and run them in parallel; the trials depend on
         seed and batch_size, not on workers or scheduler: the same arguments give the same
         trials and the same best. nm_step: the first Nelder-Mead simplex's edge, as a
