@@ -386,9 +386,10 @@ def fit(
         ls_step: the Jacobian's forward-difference step of 'ls', as a share of each bound's
         (log) width (default :data:`LS_STEP`).
     """
+    # The optional packages only where used: 'ls' and 'nm' need SciPy alone.
     if sampler == "cmaes":
         require("cmaes")
-    else:
+    elif sampler in ("tpe", "tpe+nm", "random"):
         require("optuna")
     optuna: Any = None
 
