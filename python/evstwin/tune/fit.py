@@ -271,7 +271,8 @@ five parameters of the DAVIS346 ``mcreynolds`` scene, budget 60) it recovered 9 
 settings of 10, CMA-ES on the chi-square none, Nelder-Mead 1 on ``compare``'s distance and 3 on
 the chi-square (the README's table "Recovery at full size"); it also recovers the small recovery problems of the tests that
 Nelder-Mead was chosen on (thresholds and dark rate of a 48 x 36 px scene, with the sampled
-and the continuous noise models, 1 or 2 seeds a trial). Nelder-Mead stays for the paper's
+and the continuous noise models, 1 or 2 seeds a trial; in trial runs, the tests keep 'nm'
+there). Nelder-Mead stays for the paper's
 distance (``distance='compare'``), where it beat TPE and CMA-ES: that distance has a long
 curved valley between higher thresholds and a lower dark rate.
 """
