@@ -1,7 +1,8 @@
 """Recovery of hidden twin parameters by ``tune.fit`` on a full-size DAVIS346 scene.
 
     PYTHONPATH=python python bench/bench_recovery.py [--settings 10] [--budget 60]
-        [--samplers nm,tpe+nm] [--duration 0.5] [--runs-per-trial 2] [--seed 0] [--csv FILE]
+        [--samplers ls,nm] [--duration 0.5] [--runs-per-trial 2] [--seed 0] [--csv FILE]
+    PYTHONPATH=python python bench/bench_recovery.py --profile [--settings 3]
 
 The scene is ``mcreynolds`` (346 x 260 px, five rotating LEDs, the default continuous noise
 model and the photoreceptor pole) shortened to --duration. Each hidden setting is drawn from
@@ -11,7 +12,16 @@ with a hidden engine seed (1000 + setting) that no fit trial uses; each optimise
 the five parameters with --budget trials of --runs-per-trial seeds from a perturbed start
 (thresholds x exp(+-U(0.15, 0.35)), rates x or / U(2, 3), signs drawn) and succeeds when
 both thresholds are within 10 % and the three rates within x1.5 of the hidden values.
-Prints a row per (setting, optimiser) and a summary; no asserts.
+Prints a row per (setting, optimiser) and a summary; no asserts. A sampler may name its
+distance: ``nm:chi2``, ``cmaes:chi2`` (default: each sampler's own, see ``tune.fit``).
+
+``--profile`` instead measures the two distances themselves on each setting: at the hidden
+values and with each threshold 10 % higher, over --profile-pairs pairs of engine seeds (the
+same pairs at every point), the mean and standard deviation of compare's distance (mean of
+the pair's two) and of the chi-square (of the pair's mean statistics); for each change, how
+many standard deviations of the distance at the hidden values it moves the mean ("sd"), and
+its mean over the standard deviation of the change itself with the same seed pairs ("paired":
+what a search with common seeds sees).
 """
 
 from __future__ import annotations
@@ -85,18 +95,67 @@ def success(hidden: dict[str, float], found: dict[str, float]) -> bool:
     return True
 
 
+def profile(base: dict[str, Any], seed: int, setting: int, pairs: int) -> None:
+    """The --profile table of one setting (see the module docstring)."""
+    from evstwin.tune.counts import CountsObjective
+
+    hidden, _ = draw(seed, setting)
+    s = base
+    for key, v in hidden.items():
+        s = set_value(s, key, v)
+    real = simulate(s, seed=1000 + setting, num_threads=os.cpu_count() or 1)
+    match = tune.MatchObjective(real.events, real.meta)
+    counts = CountsObjective(real.events, real.meta, base)
+    points = {"hidden": {}, "th_on x1.1": {"pixel.theta_on": 1.1}, "th_off x1.1": {"pixel.theta_off": 1.1}}
+    values: dict[str, dict[str, list[float]]] = {}
+    for name, factors in points.items():
+        sp = s
+        for key, f in factors.items():
+            sp = set_value(sp, key, hidden[key] * f)
+        w1, chi2 = [], []
+        for k in range(pairs):
+            runs = [simulate(sp, seed=2 * k + j, num_threads=os.cpu_count() or 1) for j in (0, 1)]
+            w1.append(float(np.mean([match.evaluate(r)["distance"] for r in runs])))
+            chi2.append(counts.trial_distance([counts.evaluate(r)["stats"] for r in runs]))
+        values[name] = {"compare": w1, "chi2": chi2}
+    print(f"setting {setting} ({pairs} seed pairs):")
+    for dist in ("compare", "chi2"):
+        ref = values["hidden"][dist]
+        sd = float(np.std(ref, ddof=1))
+        cells = []
+        for name in points:
+            v = values[name][dist]
+            cell = f"{name} {np.mean(v):.4f} +- {np.std(v, ddof=1):.4f}"
+            if name != "hidden":
+                diff = np.array(v) - np.array(ref)
+                cell += (f" ({np.mean(diff) / sd:+.1f} sd, paired {np.mean(diff) / np.std(diff, ddof=1):+.1f})"
+                         if sd > 0 else "")
+            cells.append(cell)
+        print(f"  {dist:8s} " + "; ".join(cells), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--settings", type=int, default=10, help="hidden settings (default 10)")
     ap.add_argument("--first", type=int, default=0, help="first setting's number (default 0)")
     ap.add_argument("--budget", type=int, default=60, help="trials per fit (default 60)")
-    ap.add_argument("--samplers", default="nm,tpe+nm", help="optimisers compared (default nm,tpe+nm)")
+    ap.add_argument("--samplers", default="ls,nm",
+                    help="optimisers compared, each optionally with its distance (e.g. cmaes:chi2; default ls,nm)")
     ap.add_argument("--duration", type=float, default=0.5, help="recording length [s] (default 0.5)")
     ap.add_argument("--runs-per-trial", type=int, default=2, help="seeds per trial (default 2)")
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: cores)")
+    ap.add_argument("--batch-size", type=int, default=4, help="Optuna samplers' trials per round (default 4)")
     ap.add_argument("--seed", type=int, default=0, help="generator seed of the hidden settings")
     ap.add_argument("--csv", default=None, help="also write the rows to this CSV file")
+    ap.add_argument("--score-hidden", action="store_true",
+                    help="also print each setting's hidden values' distance with the fits' seeds (one trial)")
+    ap.add_argument("--profile", action="store_true", help="measure the distances' noise and sensitivity instead")
+    ap.add_argument("--profile-pairs", type=int, default=5, help="seed pairs per point of --profile (default 5)")
     args = ap.parse_args()
+    if args.profile:
+        for i in range(args.first, args.first + args.settings):
+            profile(scene(args.duration), args.seed, i, args.profile_pairs)
+        return
     samplers = [s.strip() for s in args.samplers.split(",") if s.strip()]
     base = scene(args.duration)
     print(f"mcreynolds {args.duration:g} s, 346 x 260 px, budget {args.budget} x {args.runs_per_trial} seed(s), "
@@ -114,9 +173,10 @@ def main() -> None:
               + f"; {real.events.size} events", flush=True)
         for sampler in samplers:
             t0 = time.perf_counter()
+            name, _, distance = sampler.partition(":")
             res = tune.fit(real.events, real.meta, base, params=PARAMS, budget=args.budget,
-                           runs_per_trial=args.runs_per_trial, seed=0, sampler=sampler, start=start,
-                           workers=args.workers)
+                           runs_per_trial=args.runs_per_trial, seed=0, sampler=name, start=start,
+                           workers=args.workers, distance=distance or None, batch_size=args.batch_size)
             elapsed = time.perf_counter() - t0
             found = res.best_params
             ok = success(hidden, found)
@@ -127,8 +187,12 @@ def main() -> None:
                             f"{SHORT[k]}_found": found[k]})
             rows.append(row)
             ratios = " ".join(f"{SHORT[k]} {found[k] / hidden[k]:.3f}" for k in PARAMS)
-            print(f"  {sampler:7s} {'ok  ' if ok else 'FAIL'} d={res.best_distance:.4f} {elapsed:5.1f} s  "
+            print(f"  {sampler:11s} {'ok  ' if ok else 'FAIL'} d={res.best_distance:.4f} {elapsed:5.1f} s  "
                   f"found/hidden: {ratios}", flush=True)
+            if args.score_hidden:  # the hidden values as the one trial of a fit: same seeds, same distance
+                at = tune.fit(real.events, real.meta, base, params=PARAMS, budget=1, runs_per_trial=args.runs_per_trial,
+                              seed=0, sampler=name, start=hidden, workers=args.workers, distance=distance or None)
+                print(f"  {'':11s} the hidden values score d={at.history[0].distance:.4f}", flush=True)
     if args.csv:
         with open(args.csv, "w", newline="", encoding="utf-8") as fh:
             w = csv.DictWriter(fh, fieldnames=header)

@@ -3,13 +3,15 @@
 Three entry points, each a grid or a search of independent simulations ("jobs"):
 
 * :func:`fit` -- search of named twin parameters within documented bounds
-  (:data:`FIT_BOUNDS`) minimising the comparison distance of
-  :func:`evstwin.validation.compare` between a real recording and the simulated scenario
-  (mean over ``runs_per_trial`` seeds): SciPy's Nelder-Mead from the scenario's values by
-  default, or Optuna (seeded TPE, CMA-ES, random; ask/tell, trials batched to the workers);
-  see :data:`SAMPLERS`. :class:`FitResult.write` writes the best scenario as a TOML that
-  ``evstwin simulate`` takes, the history, a convergence figure and the comparison figures
-  of the best fit.
+  (:data:`FIT_BOUNDS`) minimising a distance between a real recording and the simulated
+  scenario: by default SciPy's trust-region least squares (``sampler='ls'``) from the
+  scenario's values on the residuals of a low-noise chi-square of grouped per-pixel counts
+  (:mod:`.counts`, the ``runs_per_trial`` seeds averaged), its Jacobian one parallel batch of
+  trials; or SciPy's Nelder-Mead and Optuna (seeded TPE, CMA-ES, random; ask/tell, trials
+  batched to the workers) on :func:`evstwin.validation.compare`'s distance (mean over the
+  seeds) or, with ``distance='chi2'``, on the chi-square; see :data:`SAMPLERS`.
+  :class:`FitResult.write` writes the best scenario as a TOML that ``evstwin simulate``
+  takes, the history, a convergence figure and the comparison figures of the best fit.
 * :func:`sweep` -- every combination of a grid of scenario values (``--set`` keys) times K
   seeds, scored by an objective (:data:`OBJECTIVES`: ``match``, ``detect``, ``noise``; see
   :class:`MatchObjective`, :class:`DetectObjective`, :class:`NoiseObjective`), tabulated in a
@@ -34,6 +36,8 @@ The package is laid out by the user's verbs and what they share:
 
 * :mod:`.bounds` -- parameter names, documented search bounds, scenario keys.
 * :mod:`.objectives` -- what a job measures: ``match``, ``detect``, ``noise``.
+* :mod:`.counts` -- the fit's chi-square distance (pixel groups by source light, count
+  histograms, Pearson terms of the seeds' mean).
 * :mod:`.execution` -- jobs on local worker processes or a Dask cluster, retries, progress.
 * :mod:`.fit`, :mod:`.sweep`, :mod:`.limits` -- the three verbs; each returns data and
   writes its tables.
@@ -44,6 +48,14 @@ The package is laid out by the user's verbs and what they share:
 from __future__ import annotations
 
 from .bounds import DEFAULT_FIT_PARAMS, FIT_BOUNDS, ParamBound, canonical_key, parse_bound
+from .counts import (
+    CHI2_FORMULA,
+    CountsObjective,
+    chi2_distance,
+    count_statistics,
+    pixel_groups,
+    source_flux_map,
+)
 from .execution import JOB_RETRIES, DaskExecutor, JobFailure, LocalExecutor, evaluate, make_executor
 from .figures import (
     draw_fit,
@@ -53,7 +65,7 @@ from .figures import (
     plot_limiting_magnitude,
     plot_sweep,
 )
-from .fit import SAMPLERS, FitResult, TrialRecord, fit
+from .fit import DISTANCES, SAMPLERS, FitResult, TrialRecord, fit
 from .limits import (
     DEFAULT_MAGNITUDES,
     DEFAULT_RATES_ARCSEC_S,
@@ -79,6 +91,9 @@ from .objectives import (
 from .sweep import SweepResult, parse_grid, sweep
 
 __all__ = [
+    "CHI2_FORMULA",
+    "CountsObjective",
+    "DISTANCES",
     "DEFAULT_FIT_PARAMS",
     "DEFAULT_MAGNITUDES",
     "DEFAULT_RATES_ARCSEC_S",
@@ -104,6 +119,8 @@ __all__ = [
     "SweepResult",
     "TrialRecord",
     "canonical_key",
+    "chi2_distance",
+    "count_statistics",
     "detect_metrics",
     "draw_fit",
     "draw_limiting_magnitude",
@@ -117,8 +134,10 @@ __all__ = [
     "parse_bound",
     "parse_float_list",
     "parse_grid",
+    "pixel_groups",
     "plot_convergence",
     "plot_limiting_magnitude",
     "plot_sweep",
+    "source_flux_map",
     "sweep",
 ]

@@ -10,6 +10,8 @@ from collections.abc import Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from .._extras import require
 from ..scenario import set_value
 from .objectives import Objective
@@ -31,7 +33,7 @@ def evaluate(
     overrides: Mapping[str, Any],
     seed: int,
     objective: Objective,
-) -> dict[str, float]:
+) -> dict[str, Any]:
     """One job: the scenario with ``overrides`` (dotted key -> value) set, prepared by the
     objective, simulated with ``seed`` on one engine thread for ``objective.duration_s`` (or
     the scenario's duration), and measured. Top level and pure (same arguments, same numbers),
@@ -44,7 +46,8 @@ def evaluate(
     s = objective.prepare(s)
     result = simulate(s, duration_s=objective.duration_s, seed=int(seed), num_threads=1)
     values = objective.evaluate(result)
-    return {m: float(values[m]) for m in objective.metrics}
+    # A metric is a number, or an array of them (the statistics vector of the fit's chi-square).
+    return {m: values[m] if isinstance(values[m], np.ndarray) else float(values[m]) for m in objective.metrics}
 
 
 @dataclass(frozen=True)

@@ -64,7 +64,7 @@ class MatchObjective(Objective):
     """
 
     name = "match"
-    metrics = ("distance", "total_rel_error", "on_off_ratio_rel_error", "sim_events")
+    metrics: tuple[str, ...] = ("distance", "total_rel_error", "on_off_ratio_rel_error", "sim_events")
     headline = ("distance",)
 
     def __init__(

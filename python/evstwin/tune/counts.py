@@ -1,0 +1,196 @@
+"""The fit's chi-square distance: grouped per-pixel count histograms, seeds averaged, Pearson terms.
+
+``compare``'s distance (W1 of the per-pixel count distributions, rate and polarity terms) is
+the paper's figure of merit, but as a fitting objective it mixes everything into one number a
+trial: on a sparse scene most pixels hold 0-1 noise events, the few thousand pixels a source
+lights are lost among them, and each seed's distance is taken apart before averaging. The
+distance here (``fit(..., distance="chi2")``, and the residuals of ``sampler="ls"``) keeps
+the parameters apart:
+
+* pixels are put in **groups by the light the scenario's sources bring them** (the largest
+  photon rate any source gives the pixel over the recording, as a share of the brightest
+  pixel's; :data:`GROUP_LEVELS`), computed once from the scenario, so the partition depends
+  on neither the fitted values nor any recording's noise. The quiet group sees only the
+  background (its ON and OFF rates fix the background-activity rates), the lit groups the
+  sources (their counts against the light level fix the thresholds and, through the
+  contrast ln(1 + I_source / I_dark), the dark rate);
+* per polarity and group: the histogram of per-pixel counts on bins that widen
+  geometrically (:func:`count_bin_edges`) and the group's event total;
+* the K seeds of a trial are **averaged statistic by statistic** (m = mean over seeds) and
+  compared with the real value r by a two-sample Pearson term (r - m)^2 / (m + r / K + 1):
+  for Poisson counts of mean lambda, var(r - m) = lambda (1 + 1/K) and m + r/K estimates it
+  (the +1 keeps rare bins from dominating). The distance is the sum over the S statistics
+  divided by S: about 1 or less for a simulation of the same parameters (binomial bins are
+  less variable than Poisson ones), and growing with the squared standardised differences.
+
+Measured on the full-size recovery benchmark (``bench/bench_recovery.py --profile``: 346 x
+260 px, 0.5 s, S of 60-110 statistics), it is 0.27-0.68 at the hidden values with a seed-to-seed
+standard deviation of about 30 % of that (the statistics share events, so it varies more than
+a chi-square of S independent terms), and it sees a 10 % change of the weakly constrained threshold (theta_off there)
+better than ``compare``'s distance does with the same seeds (2.7-6.3 against 0.2-4.4 times
+the change's own standard deviation); both see the strongly constrained one clearly. Its main
+use is as residuals: S standardised differences that a Gauss-Newton search
+(``sampler='ls'``) reads parameter by parameter.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .objectives import MatchObjective
+
+GROUP_LEVELS: tuple[float, ...] = (1e-3, 1e-2, 0.1, 0.3)
+"""Shares of the brightest pixel's source light that bound the pixel groups: group 0 (quiet)
+gets less than 1e-3 of it, group 1 1e-3 to 1e-2, ..., the last more than 0.3. Decades reach
+the PSF's wings (where I_source ~ I_dark and the count's dependence on the dark rate shows);
+the top split keeps the track's core apart from its edge."""
+
+FLUX_MAP_SHIFT_PX = 0.25
+"""The source-light map samples each source at steps of at most this many pixels of travel,
+so that no pixel a source crosses is missed (the simulation's own max_shift_px default)."""
+
+CHI2_FORMULA = (
+    "(1/S) sum_j (r_j - m_j)^2 / (m_j + r_j / K + 1) over S statistics: per polarity and per pixel group "
+    "(by source light), the histogram of per-pixel counts (geometric bins) and the group's event total; "
+    "r = the real recording's, m = the mean over the trial's K seeds"
+)
+"""The fit's chi-square distance in one line (written into fit.json)."""
+
+
+def source_flux_map(scene: Any) -> np.ndarray:
+    """(height, width) [photons/s]: per pixel, the largest photon rate any one of the
+    scene's targets brings it over [0, duration] (the uniform background excluded). The
+    targets are sampled at steps of at most :data:`FLUX_MAP_SHIFT_PX` of travel."""
+    from .. import psf as psf_mod
+
+    w, h = int(scene.width), int(scene.height)
+    flat = np.zeros(w * h)
+    duration_s = float(scene.duration_s)
+    targets = list(scene.targets)
+    if not targets:
+        return flat.reshape(h, w)
+    speed = max(float(t.max_speed_px_s(0.0, duration_s)) for t in targets)
+    n = max(2, math.ceil(duration_s * speed / FLUX_MAP_SHIFT_PX) + 1)
+    times = np.linspace(0.0, duration_s, n)
+    for a in range(0, n, 512):
+        t = times[a : a + 512]
+        xs, ys, fs = [], [], []
+        for target in targets:
+            x, y = target.position_px(t)
+            xs.append(np.broadcast_to(np.asarray(x, np.float64), t.shape))
+            ys.append(np.broadcast_to(np.asarray(y, np.float64), t.shape))
+            fs.append(np.broadcast_to(np.asarray(target.flux_ph_s(t), np.float64), t.shape))
+        x_all = np.ascontiguousarray(np.concatenate(xs))
+        y_all = np.ascontiguousarray(np.concatenate(ys))
+        f_all = np.ascontiguousarray(np.concatenate(fs))
+        for idx, val in psf_mod.contributions(w, h, x_all, y_all, f_all, scene.psf):
+            np.maximum.at(flat, idx, val)
+    return flat.reshape(h, w)
+
+
+def pixel_groups(flux_map: np.ndarray, mask: np.ndarray | None = None,
+                 levels: Sequence[float] = GROUP_LEVELS) -> np.ndarray:
+    """(height, width) int: each pixel's group (0 = quiet .. len(levels) = brightest) from
+    its source light as a share of the brightest pixel's; -1 for masked pixels. A scene
+    without sources puts every pixel in group 0."""
+    groups = np.zeros(flux_map.shape, np.int64)
+    peak = float(flux_map.max()) if flux_map.size else 0.0
+    if peak > 0.0:
+        for level in levels:
+            groups[flux_map > peak * level] += 1
+    if mask is not None:
+        groups[mask] = -1
+    return groups
+
+
+def count_bin_edges(max_count: int) -> np.ndarray:
+    """Lower edges of the per-pixel count bins: 0, 1, 2, 3, then widening by x1.5
+    (4, 6, 9, 13, 19, ...) up to ``max_count``; the last bin is open. Single counts where
+    noise lives, coarser bins where a source's pixels spread."""
+    edges = [0, 1, 2, 3]
+    while edges[-1] < max_count:
+        edges.append(max(edges[-1] + 1, math.floor(edges[-1] * 1.5)))
+    return np.array(edges, np.int64)
+
+
+def count_statistics(events: np.ndarray, width: int, height: int, groups: np.ndarray,
+                     n_groups: int, edges: np.ndarray) -> np.ndarray:
+    """The statistics vector of one recording: for ON then OFF, for each group 0..n_groups-1,
+    the number of its pixels in each count bin (``edges``) followed by its event total."""
+    pixel = events["y"].astype(np.int64) * width + events["x"].astype(np.int64)
+    flat = groups.reshape(-1)
+    out = []
+    for polarity in (1, 0):
+        counts = np.bincount(pixel[events["p"] == polarity], minlength=width * height)
+        for g in range(n_groups):
+            c = counts[flat == g]
+            hist = np.bincount(np.searchsorted(edges, c, side="right") - 1, minlength=edges.size)
+            out.append(hist.astype(np.float64))
+            out.append(np.array([float(c.sum())]))
+    return np.concatenate(out)
+
+
+def chi2_residuals(real: np.ndarray, sims: Sequence[np.ndarray]) -> np.ndarray:
+    """(r - m) / sqrt(m + r/K + 1) per statistic, m the mean of the K simulated vectors: the
+    standardised differences whose mean square is the chi-square distance."""
+    if len(sims) == 0:
+        raise ValueError("chi2_residuals needs at least one simulation")
+    m = np.mean(np.vstack(sims), axis=0)
+    return (real - m) / np.sqrt(m + real / len(sims) + 1.0)
+
+
+def chi2_distance(real: np.ndarray, sims: Sequence[np.ndarray]) -> float:
+    """:data:`CHI2_FORMULA`: the mean of the squared :func:`chi2_residuals`."""
+    r = chi2_residuals(real, sims)
+    return float(np.mean(r * r))
+
+
+class CountsObjective(MatchObjective):
+    """The fit's chi-square distance (:mod:`evstwin.tune.counts`): each job returns the
+    statistics vector of its simulation (metric ``stats``, an array) and ``distance``, its
+    own chi-square against the real recording (K = 1; the trial's distance is computed from
+    the mean of its seeds' vectors by :meth:`trial_distance`). ROI and mask as
+    :class:`MatchObjective`'s; the pixel groups come from ``scenario`` (prepared for the ROI)
+    and are fixed for the whole fit."""
+
+    name = "counts"
+    metrics: tuple[str, ...] = ("distance", "stats")
+    headline = ("distance",)
+
+    def __init__(self, real_events: np.ndarray, real_meta: Mapping[str, Any], scenario: Mapping[str, Any],
+                 roi: Any = None, mask_pixels: Sequence[tuple[int, int]] = (), mask_hot: bool = False,
+                 hot_false_alarms: float | None = None, levels: Sequence[float] = GROUP_LEVELS) -> None:
+        super().__init__(real_events, real_meta, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot,
+                         hot_false_alarms=hot_false_alarms)
+        from ..scenario import build, set_value
+
+        scene = build(set_value(self.prepare(dict(scenario)), "duration_s", self.duration_s))
+        self.groups = pixel_groups(source_flux_map(scene), self.mask, levels)
+        self.n_groups = len(levels) + 1
+        real = self.real_events
+        top = 0
+        if real.size:
+            pixel = real["y"].astype(np.int64) * self.width + real["x"].astype(np.int64)
+            keep = self.groups.reshape(-1)[pixel] >= 0
+            for polarity in (1, 0):
+                sel = pixel[keep & (real["p"] == polarity)]
+                if sel.size:
+                    top = max(top, int(np.bincount(sel).max()))
+        self.edges = count_bin_edges(top)
+        self.real_stats = count_statistics(real, self.width, self.height, self.groups, self.n_groups, self.edges)
+
+    def evaluate(self, result: Any) -> dict[str, Any]:  # type: ignore[override]
+        stats = count_statistics(result.events, self.width, self.height, self.groups, self.n_groups, self.edges)
+        return {"distance": chi2_distance(self.real_stats, [stats]), "stats": stats}
+
+    def residuals(self, sims: Sequence[np.ndarray]) -> np.ndarray:
+        """:func:`chi2_residuals` of the real recording against these seeds' vectors."""
+        return chi2_residuals(self.real_stats, sims)
+
+    def trial_distance(self, sims: Sequence[np.ndarray]) -> float:
+        """The trial's distance: :func:`chi2_distance` against the mean of its seeds' vectors."""
+        return chi2_distance(self.real_stats, sims)
