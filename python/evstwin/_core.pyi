@@ -49,6 +49,8 @@ class PixelParams:
     hot_pixel_rate_sigma: float
     hot_pixel_duty: float
     hot_pixel_burst_s: float
+    hot_pixel_on_share: float
+    hot_pixel_alternation: float
     noise_model: str
     def __init__(self) -> None: ...
     def validate(self) -> None: ...

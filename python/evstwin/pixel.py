@@ -72,6 +72,14 @@ class PixelParams:
     hot_pixel_burst_s: float = _DEFAULT.hot_pixel_burst_s
     """Mean length of a hot pixel's active period [s] (exponential); quiet periods last
     burst (1 - duty) / duty on average."""
+    hot_pixel_on_share: float = _DEFAULT.hot_pixel_on_share
+    """Long-run share of a hot pixel's events that are ON, in (0, 1); 0.5 with alternation 1
+    is strict alternation (the default)."""
+    hot_pixel_alternation: float = _DEFAULT.hot_pixel_alternation
+    """Share of a hot pixel's successive events of opposite polarity, in [0, 2 min(on_share,
+    1 - on_share)]: its polarities are a two-state chain that switches from ON with probability
+    alternation / (2 on_share) and from OFF alternation / (2 (1 - on_share)). The real IMX636
+    hot pixel: on_share 0.59, alternation 0.78."""
     noise_model: NoiseModel = _DEFAULT.noise_model  # type: ignore[assignment]
     """'continuous' (default): shot noise as a white process through the photoreceptor pole and
     source follower, advanced exactly between samples with threshold crossings inside an

@@ -523,6 +523,8 @@ IMX636 = SensorPreset(
         hot_pixel_rate_hz=1170.0,
         hot_pixel_duty=0.13,
         hot_pixel_burst_s=0.046,
+        hot_pixel_on_share=0.59,
+        hot_pixel_alternation=0.78,
     ),
     biases=None,
     qe_notes=(
@@ -549,7 +551,9 @@ IMX636 = SensorPreset(
         (
             f"{IMX636_RECORDING}: one hot pixel in 921,600 at (187, 261), 1447 events (134 Hz, 78 % of "
             "successive events alternate polarity) in bursts (`calibrate-noise ... --roi 0,0,240,720`): "
-            "1015 Hz while active, i.e. r = 1170 Hz with 130 us dead time, duty 0.13, mean burst 46 ms"
+            "1015 Hz while active, i.e. r = 1170 Hz with 130 us dead time, duty 0.13, mean burst 46 ms; "
+            "854 of its events ON (0.59), switching polarity after 66 % of its ON events and 95 % of its OFF "
+            "events: the two-state chain of hot_pixel_on_share 0.59 and hot_pixel_alternation 0.78"
         ),
     ),
     assumptions=(

@@ -30,12 +30,14 @@ else:  # pragma: no cover
 DATA = Path(__file__).resolve().parents[1] / "data"
 ON_HZ, OFF_HZ, SIGMA = 0.02, 0.05, 0.8
 DUTY, BURST_S, DURATION_S = 0.3, 0.1, 30.0
+ON_SHARE, ALTERNATION = 0.59, 0.78  # the hot pixels' polarity chain (the real IMX636 pixel's)
 HOT = [[10, 20, 300.0], [50, 60, 1000.0], [100, 90, 600.0], [30, 80, 400.0], [80, 10, 800.0], [5, 95, 500.0]]
 DARK = {
     "name": "dark", "duration_s": DURATION_S, "seed": 1,
     "sensor": {"preset": "imx636", "width": 120, "height": 100},  # its 130 us refractory period
     "pixel": {"shot_noise_on_rate_hz": ON_HZ, "shot_noise_off_rate_hz": OFF_HZ, "background_rate_sigma": SIGMA,
-              "hot_pixel_duty": DUTY, "hot_pixel_burst_s": BURST_S},
+              "hot_pixel_duty": DUTY, "hot_pixel_burst_s": BURST_S, "hot_pixel_on_share": ON_SHARE,
+              "hot_pixel_alternation": ALTERNATION},
     "sampling": {"rate_hz": 100.0},  # eq. 12's clocks and the telegraph are exact at any sampling
     "hot_pixels": {"pixels": HOT},
 }
@@ -77,7 +79,9 @@ def test_hot_pixels_and_their_telegraph_come_back(cal: NoiseCalibration) -> None
         within = DURATION_S * DUTY * rho  # about the intervals rho rests on
         assert h.active_rate_hz == pytest.approx(rho, rel=4 / math.sqrt(within))
         assert h.engine_rate_hz == pytest.approx(r, rel=5 / math.sqrt(within))
-        assert h.alternation == pytest.approx(1.0, abs=0.01)  # the engine's alternate
+        # The chain's switching share; its events are correlated, so 5 binomial se x 2.
+        n = h.on + h.off
+        assert h.alternation == pytest.approx(ALTERNATION, abs=10 * math.sqrt(ALTERNATION * (1 - ALTERNATION) / n))
     # Duty and burst length rest on the ~90 active periods of each pixel: each is a sum of
     # exponentials, so about sqrt(2 / 90) = 15 % per pixel; the median of six is within 4 se.
     cycles = DURATION_S * DUTY / BURST_S
@@ -85,6 +89,9 @@ def test_hot_pixels_and_their_telegraph_come_back(cal: NoiseCalibration) -> None
     assert table["hot_pixel_duty"] == pytest.approx(DUTY, rel=4 * math.sqrt(2 / cycles / len(HOT)) * 1.25)
     assert table["hot_pixel_burst_s"] == pytest.approx(BURST_S, rel=4 * math.sqrt(3 / cycles / len(HOT)) * 1.25)
     assert table["hot_pixel_fraction"] == pytest.approx(len(HOT) / 12000)
+    n_all = sum(h.on + h.off for h in cal.hot)
+    assert table["hot_pixel_on_share"] == pytest.approx(ON_SHARE, abs=10 * math.sqrt(ON_SHARE * (1 - ON_SHARE) / n_all))
+    assert table["hot_pixel_alternation"] == pytest.approx(ALTERNATION, abs=0.02)
     # The refractory period: the engine's hot pixels fire 130 us after an event at the earliest.
     assert cal.refractory_s is not None and 130e-6 <= cal.refractory_s <= 135e-6
     assert cal.preset == "imx636" and cal.dead_time_s == pytest.approx(dead)

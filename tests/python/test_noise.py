@@ -225,6 +225,52 @@ def test_a_hot_pixel_map_fires_at_its_rate_with_dead_time_alternating_polarity()
     assert len(ev) == np.sum((ev["x"] == 5) & (ev["y"] == 3)) + np.sum((ev["x"] == 1) & (ev["y"] == 6))
 
 
+@pytest.mark.parametrize(("share", "alternation"), [(0.59, 0.78), (0.3, 0.2), (0.5, 0.3)])
+def test_a_hot_pixels_polarities_follow_its_two_state_chain(share: float, alternation: float) -> None:
+    # The chain switches from ON with probability a = alt / (2 s) and from OFF with b = alt /
+    # (2 (1 - s)): the ON share is b / (a + b) = s and the switching share 2 a b / (a + b) = alt.
+    # 16 pixels x ~500 events: each share within 5 binomial standard errors (the chain's
+    # correlation widens them by at most sqrt((1 + |1 - a - b|) / (1 - |1 - a - b|)), <= 3 here).
+    params = PixelParams(photon_shot_noise=False, dark_model="none", shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
+                         refractory_s=1e-4, hot_pixel_on_share=share, hot_pixel_alternation=alternation)
+    sensor = Sensor(4, 4, params, seed=4, hot_pixel_rates_hz=np.full((4, 4), 50.0))
+    t = np.arange(0, 1001) / 100.0
+    ev = sensor.run(np.full((len(t), 4, 4), 1e9), t)
+    pix = ev["y"].astype(np.int64) * 4 + ev["x"]
+    order = np.lexsort((ev["t"], pix))
+    p, pix = ev["p"][order].astype(int), pix[order]
+    same_pixel = pix[1:] == pix[:-1]
+    switched = (p[1:] != p[:-1])[same_pixel]
+    n = len(p)
+    assert n > 6000
+    assert abs(p.mean() - share) < 5 * 3 * math.sqrt(share * (1 - share) / n)
+    se = math.sqrt(max(alternation * (1 - alternation), 1.0 / n) / switched.size)
+    assert abs(switched.mean() - alternation) < 5 * 3 * se + 1e-12
+    a, b = alternation / (2 * share), alternation / (2 * (1 - share))
+    from_on = switched[p[:-1][same_pixel] == 1]
+    assert abs(from_on.mean() - a) < 5 * math.sqrt(max(a * (1 - a), 1e-6) / from_on.size) + 1e-12
+
+
+def test_a_hot_pixel_that_never_switches_keeps_one_polarity() -> None:
+    params = PixelParams(photon_shot_noise=False, dark_model="none", shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
+                         refractory_s=1e-4, hot_pixel_alternation=0.0)
+    sensor = Sensor(4, 4, params, seed=4, hot_pixel_rates_hz=np.full((4, 4), 50.0))
+    t = np.arange(0, 201) / 100.0
+    ev = sensor.run(np.full((len(t), 4, 4), 1e9), t)
+    polarities = {(int(x), int(y)): set() for x, y in zip(ev["x"], ev["y"])}
+    for x, y, p in zip(ev["x"], ev["y"], ev["p"]):
+        polarities[(int(x), int(y))].add(int(p))
+    assert len(polarities) == 16 and all(len(v) == 1 for v in polarities.values())
+    assert {next(iter(v)) for v in polarities.values()} == {0, 1}  # each pixel its own, drawn
+
+
+def test_a_hot_pixel_chain_that_cannot_exist_is_refused() -> None:
+    with pytest.raises(ValueError, match=r"hot_pixel_alternation must be at most 2 min\(hot_pixel_on_share"):
+        Sensor(2, 2, PixelParams(hot_pixel_on_share=0.2, hot_pixel_alternation=0.5))
+    with pytest.raises(ValueError, match="hot_pixel_on_share"):
+        Sensor(2, 2, PixelParams(hot_pixel_on_share=1.0))
+
+
 def test_hot_pixels_flicker_in_bursts_with_the_duty_and_burst_length_given() -> None:
     # A random telegraph (active a share d of the time, active periods of mean tau) gating a
     # Poisson clock of rate r with dead time t_d: mean rate d r / (1 + r t_d), and the counts'

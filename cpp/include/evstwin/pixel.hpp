@@ -89,6 +89,13 @@ struct PixelParams {
     /// hot_pixel_burst_s (exponential), and fires only then. 1 = always active.
     double hot_pixel_duty = 1.0;
     double hot_pixel_burst_s = 0.1;
+    /// A hot pixel's polarities as a two-state Markov chain: its long-run share of ON events
+    /// and the share of successive events of opposite polarity (the chain switches from ON
+    /// with probability alternation / (2 on_share), from OFF alternation / (2 (1 - on_share)),
+    /// so alternation <= 2 min(on_share, 1 - on_share)). 0.5 and 1: strict alternation. The
+    /// real IMX636 hot pixel: 0.59 and 0.78 (switching 66 % from ON, 95 % from OFF).
+    double hot_pixel_on_share = 0.5;
+    double hot_pixel_alternation = 1.0;
     NoiseModel noise_model = NoiseModel::Continuous;
     double shot_noise_factor = 0.25;   ///< F, eq. 12; paper: 0.25
     double shot_noise_i_max_a = 3.16e-9;  ///< I_max, eq. 12 [A]; paper: 3.16 nA
@@ -156,6 +163,14 @@ inline void validate(const PixelParams& p) {
     require_range("hot_pixel_rate_sigma", p.hot_pixel_rate_sigma, 0.0, 3.0, " (natural-log units)");
     require_range("hot_pixel_duty", p.hot_pixel_duty, 1e-6, 1.0, " (share of the time)");
     require_range("hot_pixel_burst_s", p.hot_pixel_burst_s, 1e-6, 1e6, " s");
+    require_range("hot_pixel_on_share", p.hot_pixel_on_share, 1e-6, 1.0 - 1e-6, " (share of a hot pixel's events)");
+    require_range("hot_pixel_alternation", p.hot_pixel_alternation, 0.0, 1.0, " (share of successive events)");
+    if (p.hot_pixel_alternation > 2.0 * std::min(p.hot_pixel_on_share, 1.0 - p.hot_pixel_on_share) * (1.0 + 1e-12))
+        throw std::invalid_argument("hot_pixel_alternation must be at most 2 min(hot_pixel_on_share, 1 - "
+                                    "hot_pixel_on_share) (a chain that is ON a share s of the time switches at most "
+                                    "2 min(s, 1 - s) of its events); got hot_pixel_alternation=" +
+                                    detail::fmt(p.hot_pixel_alternation) + " with hot_pixel_on_share=" +
+                                    detail::fmt(p.hot_pixel_on_share));
     if (p.noise_model == NoiseModel::Continuous && p.dark_model == DarkModel::Paper)
         throw std::invalid_argument("dark_model='paper' (eq. 4: Poisson(rate) electrons per sample, whatever dt) is a "
                                     "per-sample model; use it with noise_model='sampled'");
@@ -255,6 +270,10 @@ struct PixelModel {
     bool continuous = false;      ///< NoiseModel::Continuous
     double bg_on_hz = 0, bg_off_hz = 0;  ///< eq. 12's R_n per polarity
     double inv_i_max = 0;                ///< 1 / I_max of eq. 12
+    /// A hot pixel's chance to switch polarity after an event, from OFF [0] and from ON [1];
+    /// strict alternation (both 1) takes no random number.
+    double hot_switch[2] = {1.0, 1.0};
+    bool hot_strict = true;
 
     explicit PixelModel(const PixelParams& params) : p(params) {
         validate(p);
@@ -266,6 +285,9 @@ struct PixelModel {
         bg_on_hz = p.shot_noise_on_rate_hz.value_or(p.shot_noise_rate_hz);
         bg_off_hz = p.shot_noise_off_rate_hz.value_or(p.shot_noise_rate_hz);
         inv_i_max = 1.0 / p.shot_noise_i_max_a;
+        hot_switch[1] = std::min(1.0, p.hot_pixel_alternation / (2.0 * p.hot_pixel_on_share));
+        hot_switch[0] = std::min(1.0, p.hot_pixel_alternation / (2.0 * (1.0 - p.hot_pixel_on_share)));
+        hot_strict = hot_switch[0] >= 1.0 && hot_switch[1] >= 1.0;
     }
 
     /// Whether eq. 12's background is on for any pixel.
@@ -323,7 +345,9 @@ struct PixelModel {
                                                         : 1.0)
                            : 0.0;
         }
-        s.hot_pol = static_cast<std::uint8_t>(b[3] & 1u);
+        // The chain's stationary polarity (the low bit, as before, at an even share).
+        s.hot_pol = static_cast<std::uint8_t>(p.hot_pixel_on_share == 0.5 ? (b[3] & 1u)
+                                                                          : uniform_open(b[3]) < p.hot_pixel_on_share);
     }
 
     /// The first sample of a run: the noise-free state starts at the steady state of the mean
@@ -472,8 +496,8 @@ struct PixelModel {
         return active ? p.hot_pixel_burst_s : p.hot_pixel_burst_s * (1.0 - p.hot_pixel_duty) / p.hot_pixel_duty;
     }
 
-    /// A hot pixel's events up to t1 (its own Poisson clock with dead time, alternating
-    /// polarity, running only in the active periods of its telegraph), independent of the
+    /// A hot pixel's events up to t1 (its own Poisson clock with dead time, polarities from
+    /// its two-state chain, running only in the active periods of its telegraph), independent of the
     /// comparator and of the sampling.
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void hot_events(PixelState& s, double t1, Philox4x32Key key, std::uint32_t pixel,
@@ -481,12 +505,13 @@ struct PixelModel {
         while (s.next_hot_t <= t1) {
             if (s.hot_event_t <= s.hot_switch_t) {
                 emit(s.hot_event_t, static_cast<Polarity>(s.hot_pol), LABEL_HOT_PIXEL);
-                s.hot_pol ^= 1u;
                 s.hot_last_t = s.hot_event_t;
                 ++s.hot_count;
                 const Philox4x32Counter w = philox4x32({static_cast<std::uint32_t>(s.hot_count),
                                                         static_cast<std::uint32_t>(s.hot_count >> 32), pixel, PURPOSE_HOT},
                                                        key);
+                // The next polarity: the same draw's second word decides a switch.
+                if (hot_strict || uniform_open(w[1]) < hot_switch[s.hot_pol]) s.hot_pol ^= 1u;
                 s.hot_event_t += p.refractory_s - std::log(uniform_open(w[0])) / s.hot_hz;
             } else {
                 ++s.hot_switches;

@@ -104,7 +104,7 @@ class HotPixel:
     rate_hz: float
     """Mean rate over the recording [Hz]."""
     alternation: float
-    """Share of successive events of opposite polarity (the engine's are all, 1.0)."""
+    """Share of successive events of opposite polarity (the engine's ``hot_pixel_alternation``)."""
     active_rate_hz: float
     """rho: events per second while active [Hz]."""
     engine_rate_hz: float
@@ -187,6 +187,14 @@ class NoiseCalibration:
             table["hot_pixel_rate_sigma"] = _round(min(SIGMA_MAX, float(np.std(np.log(rates)))))
             table["hot_pixel_duty"] = _round(max(1e-6, min(1.0, float(np.median([h.duty for h in self.hot])))))
             table["hot_pixel_burst_s"] = _round(float(np.median([h.burst_s for h in self.hot])))
+            # Polarities: the event-weighted ON share and alternation of the hot pixels, the
+            # engine's two-state chain (kept within what a chain with that share can switch).
+            n = np.array([h.on + h.off for h in self.hot], float)
+            share = float(min(1.0 - 1e-3, max(1e-3, sum(h.on for h in self.hot) / n.sum())))
+            alternation = float(np.average([h.alternation for h in self.hot], weights=np.maximum(n - 1.0, 1e-9)))
+            table["hot_pixel_on_share"] = _round(share)
+            table["hot_pixel_alternation"] = min(_round(alternation), 2.0 * min(table["hot_pixel_on_share"],
+                                                                                 1.0 - table["hot_pixel_on_share"]))
         return table
 
     def hot_pixel_table(self) -> dict[str, Any]:
