@@ -335,6 +335,10 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
     for key in _TARGET_PSF_KEYS[1:]:
         if key in target and "defocus_radius_px" not in target:
             raise ScenarioError(f"targets[{i}].{key} needs targets[{i}].defocus_radius_px")
+    for key in ("centre_x_px", "centre_y_px", "magnification", "flux_fraction") + _TARGET_PSF_KEYS:
+        if key in target and (kind == "ghost" or key in _TARGET_PSF_KEYS) and (
+                isinstance(target[key], bool) or not isinstance(target[key], (int, float))):
+            raise ScenarioError(f"targets[{i}].{key} must be a number; got {target[key]!r}")
     if kind == "ghost":
         for key in ("of", "flux_fraction"):
             if key not in target:
@@ -602,7 +606,16 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             f"optics give a PSF sigma of {sigma:.3g} px (> {MAX_PSF_SIGMA_PX:g}): check optics.mean_wavelength_m, "
             f"optics.f_number and optics.extra_blur_sigma_px; got {s.get('optics', {})}"
         )
-    atmosphere = _atmosphere(s, optics)
+    site_alt: float | None = None
+    if sky_scene.uses_sky(s):
+        table = s.get("atmosphere") or {}
+        if table.get("scintillation") and "airmass" not in table and "elevation_deg" not in table:
+            raise ScenarioError("atmosphere.scintillation in a scenario on the sky needs atmosphere.airmass or "
+                                "atmosphere.elevation_deg (the pointing's elevation changes over a pass; the "
+                                "scintillation's strength is set once, as X^3): give the one for your run")
+        alt = s.get("site", {}).get("alt_m")
+        site_alt = None if alt is None else float(alt)
+    atmosphere = _atmosphere(s, optics, site_altitude_m=site_alt)
     if atmosphere is not None and atmosphere.seeing_fwhm_arcsec is not None:
         shape = _wrap(f"atmosphere.seeing_fwhm_arcsec={atmosphere.seeing_fwhm_arcsec!r} with optics={s.get('optics', {})}",
                       atmosphere.psf, optics)
@@ -818,6 +831,9 @@ def _field_path(s: dict[str, Any]) -> FieldPath | None:
     table = s.get("star_field", {}).get("path")
     if table is None:
         return None
+    if not isinstance(table, dict):
+        raise ScenarioError(f"star_field.path must be a table {{ t_s = [...], dx_px = [...], dy_px = [...] }}; "
+                            f"got {table!r}")
     allowed = ("t_s", "dx_px", "dy_px")
     if set(table) != set(allowed):
         raise ScenarioError(f"star_field.path takes exactly {', '.join(allowed)} (arrays of one length); got keys "
@@ -921,7 +937,9 @@ def _check_work(s: dict[str, Any], width: int, height: int, shape: psf.PSFShape,
     if not 1.0 / rate / n_sub >= 1e-12:
         raise ScenarioError(f"{why}, {1.0 / rate / n_sub:.3g} s apart (< 1e-12 s, the engine's shortest interval)")
     if n_sub > 1 and sp["sparse"]:
-        half = shape.half_width_px
+        # The widest window any moving target renders (a defocused ghost's may be wider).
+        half = max([shape.half_width_px] + [targets[j].psf.half_width_px for _, j in moving  # type: ignore[union-attr]
+                                            if targets[j].psf is not None])
         window = min((2 * half + 1) ** 2, width * height)
         fine = max(chunk, n_sub) + n_sub  # the fine samples of one sparse chunk, at most
         # Windows off the sensor are skipped: a drifting field's stars, most of them outside

@@ -446,6 +446,9 @@ class DriftingTarget(Target):
         x, y = self.target.position_px(t)
         return x + self.dx_px + self.vx_px_s * t, y + self.dy_px + self.vy_px_s * t
 
+    def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
+        return self.target.flux_ph_s(t_s)  # the wrapped target's (it may compute its own)
+
     def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         vx, vy = self.target.velocity_px_s(t_s)
         return vx + self.vx_px_s, vy + self.vy_px_s
@@ -571,6 +574,9 @@ class MirroredTarget(Target):
     def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
         return self.magnification * self.source.max_speed_px_s(t0_s, t1_s)
 
+    def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
+        return self.flux_fraction * self.source.flux_ph_s(t_s)
+
 
 @dataclass(frozen=True, eq=False)
 class FieldPath:
@@ -648,6 +654,9 @@ class PathTarget(Target):
     def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
         """A bound: the target's own largest speed plus the path's (only ever samples more finely)."""
         return self.target.max_speed_px_s(t0_s, t1_s) + self.path.max_speed_px_s(t0_s, t1_s)
+
+    def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
+        return self.target.flux_ph_s(t_s)
 
 
 def along_path(target: Target, path: FieldPath | None) -> Target:

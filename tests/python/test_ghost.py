@@ -147,3 +147,35 @@ def test_a_ghost_keeps_its_share_of_a_light_curve_through_the_wrappers() -> None
     ghost = MirroredTarget(star, 50.0, 50.0, flux_fraction=0.1)
     for t in (ghost, shifted(ghost, -5.0, 7.0), drifting(ghost, 1.0, 1.0)):
         np.testing.assert_allclose(t.flux_ph_s([0.0, 0.5, 1.0]), [1e5, 2e5, 3e5])
+
+
+def test_a_ghost_with_image_motion_or_scintillation_is_refused() -> None:
+    s = ghost_scenario()
+    s["atmosphere"] = {"jitter_rms_arcsec": 1.0, "jitter_tau_s": 0.05}
+    with pytest.raises(ScenarioError, match="a ghost \\(kind='ghost'\\) with image motion or scintillation is not"):
+        build(s)
+
+
+def test_ghost_and_defocus_numbers_must_be_numbers() -> None:
+    for key, value in (("centre_x_px", "a"), ("magnification", True), ("defocus_radius_px", "abc")):
+        s = ghost_scenario()
+        s["targets"][1][key] = value
+        with pytest.raises(ScenarioError, match=f"targets\\[1\\].{key} must be a number; got {value!r}"):
+            build(s)
+
+
+def test_the_fit_groups_see_a_ghost_through_its_own_psf() -> None:
+    # The chi-square's pixel groups come from each source's light through the PSF it is
+    # rendered with: a 6 px defocused ghost lights a disc, not a point.
+    from evstwin.tune.counts import source_flux_map
+
+    s = ghost_scenario()
+    s["targets"][0].update(vx_px_s=0.0, vy_px_s=0.0)  # both at rest: the map is one frame
+    scene = build(s)
+    flux = source_flux_map(scene)
+    gx, gy = scene.targets[1].position_px(np.array([0.0]))
+    yy, xx = np.mgrid[0:scene.height, 0:scene.width]
+    ring = np.abs(np.hypot(xx - gx[0], yy - gy[0]) - 4.0) < 0.5  # inside the 6 px disc, past the shadow
+    # The disc holds 0.5 x 1e9 / (pi 36) ~ 4e6 photons/s a pixel, 2 % of the star's peak; a
+    # point-like ghost would leave the ring at its Gaussian tail, ~1e-6 of the peak.
+    assert flux[ring].min() > 1e-3 * flux.max()

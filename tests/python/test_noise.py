@@ -247,8 +247,9 @@ def test_a_hot_pixels_polarities_follow_its_two_state_chain(share: float, altern
     se = math.sqrt(max(alternation * (1 - alternation), 1.0 / n) / switched.size)
     assert abs(switched.mean() - alternation) < 5 * 3 * se + 1e-12
     a, b = alternation / (2 * share), alternation / (2 * (1 - share))
-    from_on = switched[p[:-1][same_pixel] == 1]
-    assert abs(from_on.mean() - a) < 5 * math.sqrt(max(a * (1 - a), 1e-6) / from_on.size) + 1e-12
+    was_on = p[:-1][same_pixel] == 1
+    for after, rate in ((switched[was_on], a), (switched[~was_on], b)):
+        assert abs(after.mean() - rate) < 5 * math.sqrt(max(rate * (1 - rate), 1e-6) / after.size) + 1e-12
 
 
 def test_a_hot_pixel_that_never_switches_keeps_one_polarity() -> None:

@@ -271,3 +271,20 @@ def test_same_seed_same_events_with_the_atmosphere_whatever_the_threads_and_chun
     s = load(scene)
     a = simulate(s, num_threads=1)
     assert a.sub_sampled_chunks > 0 and np.array_equal(a.events, simulate(s, num_threads=2).events)
+
+
+def test_scintillation_multiplies_a_light_curve_without_smoothing_its_steps() -> None:
+    # A satellite entering the Earth's shadow: its flux drops 100x within 0.1 ms. Through the
+    # scintillation it must still drop there (the product at that time, not a curve resampled
+    # on the scintillation's grid, which smeared the step over ~25 ms).
+    from evstwin.targets import LightCurve, StaticTarget
+
+    optics = Optics(focal_length_m=0.2, f_number=2.0, pixel_pitch_m=18.5e-6, width_px=64, height_px=64)
+    step = LightCurve(np.array([0.0, 0.1, 0.1001, 1.0]), np.array([1e9, 1e9, 1e7, 1e7]))
+    target = StaticTarget(10.0, 10.0, step)
+    seen = atm.Atmosphere(scintillation=atm.Scintillation(altitude_m=2000.0, airmass=1.5)).apply(
+        [target], optics, 1.0, seed=3)[0]
+    t = np.array([0.0999, 0.1002, 0.102, 0.5])
+    ratio = seen.flux_ph_s(t) / target.flux_ph_s(t)
+    assert np.all((ratio > 0.2) & (ratio < 5.0))  # a scintillation factor of mean 1 at each time
+    assert seen.flux_ph_s(np.array([0.102]))[0] < 0.1 * seen.flux_ph_s(np.array([0.0999]))[0]

@@ -125,8 +125,9 @@ inline void noise_stationary(double a, double b, double D, double& szz, double& 
 /// threshold sweeps, for a leak cycle's survival (l1 <= l0). With x = l / sd:
 /// - the slower pole, rate c = min(a, b), sets an escape rate over a high level: the inverse
 ///   of an OU process's mean first-passage time, sqrt(2 pi) / (c x) exp(x^2 / 2) (1 + 1 / x^2)
-///   asymptotically, so h = c x phi(x) x^2 / (x^2 + 1); within 3 % of the exact mean time's
-///   inverse at x >= 2.7, 20 % at x = 2; its integral is closed-form with E1 (A&S 5.1.56);
+///   asymptotically, so h = c x phi(x) x^2 / (x^2 + 1); against the inverse of the exact mean
+///   first-passage time from the mean, +4 % at x = 2.7 to 3, -10 % at x = 2 (checked by
+///   quadrature); its integral is closed-form with E1 (A&S 5.1.56);
 /// - with two poles n_y is differentiable and Rice's up-crossing rate
 ///   sqrt(a b) / (2 pi) exp(-x^2 / 2) = k phi(x), k = sqrt(a b / (2 pi)), bounds the first
 ///   crossings; where it is the smaller (x > k / c) it is used;

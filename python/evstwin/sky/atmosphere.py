@@ -397,6 +397,8 @@ class AtmosphericTarget(Target):
     target: Target
     motion: MotionPath | None
     brightness: Any
+    scintillation: tuple[np.ndarray, np.ndarray] | None = None
+    """(t_grid, multiplier): the flux is the target's times the multiplier interpolated."""
     label: str = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
@@ -411,6 +413,13 @@ class AtmosphericTarget(Target):
             return x, y
         dx, dy = self.motion.offset_px(t_s)
         return x + dx, y + dy
+
+    def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
+        flux = self.target.flux_ph_s(t_s)
+        if self.scintillation is None:
+            return flux
+        t_grid, m = self.scintillation
+        return flux * np.interp(np.asarray(t_s, np.float64), t_grid, m)
 
     def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         vx, vy = self.target.velocity_px_s(t_s)
@@ -468,14 +477,32 @@ class Atmosphere:
         path = None
         if self.motion is not None and self.motion.rms_arcsec > 0.0:
             path = self.motion.path(optics, duration_s, seed)
+        if any(_is_ghost(t) for t in targets):
+            raise ValueError("a ghost (kind='ghost') with image motion or scintillation is not modelled: its light "
+                             "and motion must follow its source's through the atmosphere, which they would not "
+                             "(each target gets its own); leave out jitter_rms_arcsec and scintillation, or the ghost")
         curves: list[Any] = [t.brightness for t in targets]
+        factors: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(targets)
         if self.scintillation is not None and targets:
             t_grid, m = self.scintillation.multipliers(float(optics.aperture_diameter_m), duration_s,  # type: ignore[arg-type]
                                                        len(targets), seed)
+            # brightness: the product on the scintillation's grid (for the scene's bounds and
+            # to mark the target as varying); flux_ph_s: the exact product at any time, so a
+            # target's own light curve keeps its steps (a shadow entry, a flash).
             curves = [LightCurve(t_grid, t.flux_ph_s(t_grid) * m[j], log_interp=False) for j, t in enumerate(targets)]
+            factors = [(t_grid, m[j]) for j in range(len(targets))]
         if path is None and self.scintillation is None:
             return list(targets)
-        return [AtmosphericTarget(t, path, b) for t, b in zip(targets, curves)]
+        return [AtmosphericTarget(t, path, b, f) for t, b, f in zip(targets, curves, factors)]
+
+
+def _is_ghost(target: Target) -> bool:
+    """Whether a target is a MirroredTarget, bare or under offset/drift wrappers."""
+    from ..targets import DriftingTarget, MirroredTarget, PathTarget
+
+    while isinstance(target, (DriftingTarget, PathTarget)):
+        target = target.target
+    return isinstance(target, MirroredTarget)
 
 
 def airmass_from_elevation_deg(elevation_deg: float) -> float:

@@ -483,6 +483,11 @@ def build_sky(s: dict[str, Any], optics: Optics, width: int, height: int, t_end:
     coarse_att = _attitude(ctx, p, sats, coarse)
 
     sf = dict(s.get("star_field", {}))
+    for key in ("distribution", "density_scale", "path"):
+        if key in sf:  # not drawn on the sky yet: refuse rather than ignore
+            raise ValueError(f"star_field.{key} does not apply with a [pointing] (its stars are drawn on the sky from "
+                             f"n_stars or density_per_deg2, mag_min, mag_max, counts_slope and seed); got "
+                             f"star_field.{key}={sf[key]!r}")
     directions, mag_v = np.zeros((0, 3)), np.zeros(0)
     if "n_stars" in sf or "density_per_deg2" in sf:
         for key in ("drift_px_s", "drift_arcsec_s"):

@@ -78,17 +78,23 @@ def source_flux_map(scene: Any) -> np.ndarray:
     times = np.linspace(0.0, duration_s, n)
     for a in range(0, n, 512):
         t = times[a : a + 512]
-        xs, ys, fs = [], [], []
+        # Each target through the PSF it is rendered with (a defocused ghost through its own).
+        by_psf: dict[int, tuple[Any, list[Any]]] = {}
         for target in targets:
-            x, y = target.position_px(t)
-            xs.append(np.broadcast_to(np.asarray(x, np.float64), t.shape))
-            ys.append(np.broadcast_to(np.asarray(y, np.float64), t.shape))
-            fs.append(np.broadcast_to(np.asarray(target.flux_ph_s(t), np.float64), t.shape))
-        x_all = np.ascontiguousarray(np.concatenate(xs))
-        y_all = np.ascontiguousarray(np.concatenate(ys))
-        f_all = np.ascontiguousarray(np.concatenate(fs))
-        for idx, val in psf_mod.contributions(w, h, x_all, y_all, f_all, scene.psf):
-            np.maximum.at(flat, idx, val)
+            shape = scene.psf if target.psf is None else target.psf
+            by_psf.setdefault(id(shape), (shape, []))[1].append(target)
+        for shape, group in by_psf.values():
+            xs, ys, fs = [], [], []
+            for target in group:
+                x, y = target.position_px(t)
+                xs.append(np.broadcast_to(np.asarray(x, np.float64), t.shape))
+                ys.append(np.broadcast_to(np.asarray(y, np.float64), t.shape))
+                fs.append(np.broadcast_to(np.asarray(target.flux_ph_s(t), np.float64), t.shape))
+            x_all = np.ascontiguousarray(np.concatenate(xs))
+            y_all = np.ascontiguousarray(np.concatenate(ys))
+            f_all = np.ascontiguousarray(np.concatenate(fs))
+            for idx, val in psf_mod.contributions(w, h, x_all, y_all, f_all, shape):
+                np.maximum.at(flat, idx, val)
     return flat.reshape(h, w)
 
 
