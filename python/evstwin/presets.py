@@ -573,7 +573,7 @@ IMX636 = SensorPreset(
 """Sony IMX636 / Prophesee EVK4: geometry sourced; refractory period and background (rates per polarity,
 their spread, hot pixels) measured on a real recording; thresholds and photodiode assumed."""
 
-GEN3_VGA_THETA = math.log(1.25)
+GEN3_VGA_THETA = IMX636_THETA  # the same assumed 25 % contrast step (no Gen3 figure at hand)
 """The Gen3 VGA preset's ON and OFF thresholds [ln units]: a 25 % contrast step, as assumed for
 the IMX636 (Prophesee's biases are DAC settings, not currents)."""
 

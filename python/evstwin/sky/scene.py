@@ -524,8 +524,12 @@ def build_sky(s: dict[str, Any], optics: Optics, width: int, height: int, t_end:
             g, m = slice(0, None, 2), slice(1, None, 2)
             near = ctx.in_box(x[g][1:], y[g][1:]) | ctx.in_box(x[g][:-1], y[g][:-1])
             error = max(error, _interp_error(x[g], x[m], near), _interp_error(y[g], y[m], near))
-        if error <= TABLE_TOLERANCE_PX or 2 * n + 1 > MAX_TABLE_POINTS:
+        if error <= TABLE_TOLERANCE_PX:
             break
+        if 2 * n + 1 > MAX_TABLE_POINTS:
+            raise ValueError(f"the sky's position tables would need more than {MAX_TABLE_POINTS} points to follow "
+                             f"the motion within {TABLE_TOLERANCE_PX} px over duration_s={t_end:g} (still "
+                             f"{error:.3g} px off at {n} points): shorten the run or slow the pointing")
         n *= 2
     g = slice(0, None, 2)
     att_grid = Attitude(grid, att.b[g], att.e_x[g], att.e_y[g])

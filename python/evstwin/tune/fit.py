@@ -262,7 +262,8 @@ DISTANCES = ("compare", "chi2")
   the same [0, 1] coordinates. Its Jacobian is a batch of forward differences (one trial a
   parameter, :data:`LS_STEP` of the bound width, run in parallel with the seeds of each);
   restarted from the best point with half the step when SciPy's run converges, until the
-  budget is spent. Deterministic. The distance is a sum of squared standardised
+  budget cannot hold another step (a point and its n-trial Jacobian: up to n trials of the
+  budget may stay unused). Deterministic. The distance is a sum of squared standardised
   differences, so Gauss-Newton steps use its structure where Nelder-Mead and CMA-ES see
   one number a trial.
 
@@ -762,8 +763,9 @@ def _least_squares(
     residuals. Each residual evaluation is one trial; the Jacobian is one batch of n trials
     (forward differences of ``step``, away from the nearer bound), run in parallel. When
     SciPy's run ends (converged) with budget left, it restarts from the best point with half
-    the step (back to ``step`` below step / 8), until the budget is spent or a restart would
-    evaluate nothing new. Deterministic: no random numbers."""
+    the step (back to ``step`` below step / 8), until the budget cannot hold a point and its
+    Jacobian (up to n trials may stay unused) or a restart would evaluate nothing new.
+    Deterministic: no random numbers."""
     from scipy.optimize import least_squares
 
     n = x0.size

@@ -28,7 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from ..optics import ARCSEC_PER_RAD
 from ..scenario import ARCSEC_RAD, build, load, parse_assignment, set_value
+from ..sky.earth import EARTH_ROTATION_RAD_S
 from ._types import PathLike
 from .objectives import DetectObjective
 from .sweep import SweepResult, _atomic_write_text, _csv_text, _fmt_num, sweep
@@ -45,7 +47,7 @@ DEFAULT_MAGNITUDES: tuple[float, ...] = (6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 1
 """Visual magnitudes (V zero point of :mod:`evstwin.optics`)."""
 
 
-SIDEREAL_RATE_ARCSEC_S = 360.0 * 3600.0 / 86164.0905
+SIDEREAL_RATE_ARCSEC_S = EARTH_ROTATION_RAD_S * ARCSEC_PER_RAD
 """The stars' apparent rate at declination 0 [arcsec/s]: 360 deg per sidereal day (86164.0905 s)."""
 POINTINGS = ("sidereal", "staring", "target")
 """Pointing modes of the limiting-magnitude map (module docstring)."""
