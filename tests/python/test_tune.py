@@ -792,8 +792,14 @@ def test_static_detect_metrics_by_hand() -> None:
     n_noise_px = far_cols * 12 + (30 - far_cols) * 3  # plus rows 0, 10, 11 of columns 6..14
     assert out["track_px"] == 9 and out["track_fraction"] == pytest.approx(3 / 9)
     assert out["noise_rate_per_px_hz"] == pytest.approx(2 / (n_noise_px * 2.0))
-    chance = 1 - math.exp(-out["noise_rate_per_px_hz"] * 2.0)
+    chance = 2 / n_noise_px  # two noise pixels fired, once each
     assert out["chance_fraction"] == pytest.approx(chance)
+    # A hot pixel's thousand events raise the noise rate a thousandfold but the chance share by
+    # one pixel: chance is the share of noise pixels that fired, not a Poisson guess from the rate.
+    hot = np.zeros(1000, dtype=ev.dtype)
+    hot["t"], hot["x"], hot["y"] = np.arange(1000) + 600, 0, 0
+    out_hot = static_detect_metrics(np.concatenate([ev, hot]), 30, 12, 2.0, 10.0, 5.0)
+    assert out_hot["chance_fraction"] == pytest.approx(3 / n_noise_px)
     assert out["excess_fraction"] == pytest.approx((3 / 9 - chance) / (1 - chance))
     assert out["signal_rate_per_px_hz"] == pytest.approx(3 / (9 * 2.0))
 

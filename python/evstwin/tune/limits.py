@@ -216,10 +216,11 @@ def static_detect_metrics(events: np.ndarray, width: int, height: int, duration_
     """The :class:`DetectObjective` metrics for a source at rest at (x_px, y_px): its "track
     pixels" are the core pixels whose square lies within ``radius_px`` (Chebyshev) of it, each
     watched for the whole run; ``track_fraction`` is the share of them with an event,
-    ``chance_fraction`` the share noise alone would fire in that time (1 - exp(-noise rate x
-    duration), the noise rate measured on the pixels farther than ``exclude_px`` from the core,
-    stars included), ``excess_fraction`` = (track - chance) / (1 - chance), ``snr`` the core's
-    event rate per pixel over the noise's; latency: nan (nothing enters)."""
+    ``chance_fraction`` the share noise alone fires in that time, measured directly: the share
+    of the pixels farther than ``exclude_px`` from the core (stars included) with an event (a
+    hot pixel or a streaking star adds its pixels, not its rate spread over all of them),
+    ``excess_fraction`` = (track - chance) / (1 - chance), ``snr`` the core's event rate per
+    pixel over the noise's; latency: nan (nothing enters)."""
     xs = np.arange(width)
     ys = np.arange(height)
     core_x = xs[np.abs(xs - x_px) <= 0.5 + radius_px]
@@ -239,7 +240,7 @@ def static_detect_metrics(events: np.ndarray, width: int, height: int, duration_
     noise_rate = n_noise_ev / (n_noise_px * duration_s) if n_noise_px and duration_s > 0 else math.nan
     n_sig = int(np.count_nonzero(core.reshape(-1)[ek]))
     signal_rate = n_sig / (n_core * duration_s) if n_core and duration_s > 0 else math.nan
-    chance = 1.0 - math.exp(-noise_rate * duration_s) if math.isfinite(noise_rate) else math.nan
+    chance = float(fired[noise.reshape(-1)].mean()) if n_noise_px else math.nan
     excess = (track_fraction - chance) / (1.0 - chance) if math.isfinite(chance) and chance < 1.0 else math.nan
     snr = signal_rate / noise_rate if noise_rate > 0 else (math.inf if signal_rate > 0 else math.nan)
     return {
