@@ -696,7 +696,10 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         if slope is not None and not -5.0 <= slope <= 5.0:
             raise ScenarioError(f"star_field.counts_slope must be in [-5, 5] (dex per magnitude; ~0.4 for stars); "
                                 f"got {slope!r}")
-        stars = _wrap("star_field", random_star_field, width, height, optics, **sf, drift_px_s=drift, duration_s=t_end)
+        # A path (a slew) brings in stars from up to its largest offset beyond the field.
+        margin = 0.0 if path is None else float(np.max(np.hypot(path.dx_px, path.dy_px)))
+        stars = _wrap("star_field", random_star_field, width, height, optics, **sf, drift_px_s=drift, duration_s=t_end,
+                      margin_px=margin)
         stars = [along_path(t, path) for t in stars]
         targets.extend(stars)
         sources.extend([f"star_field (moved by {drift_key})" if moves else "star_field"] * len(stars))

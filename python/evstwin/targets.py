@@ -694,6 +694,7 @@ def random_star_field(
     duration_s: float = 0.0,
     distribution: str = "uniform",
     density_scale: float = 1.0,
+    margin_px: float = 0.0,
 ) -> list[StaticTarget] | list[LinearTarget]:
     """Random stars, uniform over the sensor, with power-law or the sky's magnitude counts.
 
@@ -723,6 +724,9 @@ def random_star_field(
     count on the sensor is then the same in distribution at every time in [0, duration_s].
     The stars on the sensor at t = 0 are those of the field without drift (their random
     numbers come first). With no drift (the default) they are StaticTargets, as before.
+    ``margin_px`` [px] adds, at the same density, the stars of a frame that wide around that
+    area (drawn last, from their own stream, so the others do not change): the ones a field
+    path (a slew of up to margin_px) brings in.
     """
     width = _check_int("width", width, 1)
     height = _check_int("height", height, 1)
@@ -796,6 +800,33 @@ def random_star_field(
         x = np.concatenate([x, xs, along + s * dx])
         y = np.concatenate([y, ys, (height - 0.5 if dy > 0 else -0.5) + s * dy])
         u = np.concatenate([u, rng.uniform(0.0, 1.0, n_x + n_y)])
+        n = x.size
+    margin = _non_negative("margin_px", margin_px)
+    if margin > 0.0 and per_px2 > 0.0:
+        # The frame: the bounding box of the sensor and its strips, widened by the margin, less
+        # the sensor and strips themselves (rejection, at the same density).
+        bx0, bx1 = -0.5 + min(dx, 0.0), width - 0.5 + max(dx, 0.0)
+        by0, by1 = -0.5 + min(dy, 0.0), height - 0.5 + max(dy, 0.0)
+        fx0, fx1, fy0, fy1 = bx0 - margin, bx1 + margin, by0 - margin, by1 + margin
+        frame_rng = np.random.default_rng([seed, 1])
+        n_f = int(frame_rng.poisson(per_px2 * (fx1 - fx0) * (fy1 - fy0)))
+        fx, fy = frame_rng.uniform(fx0, fx1, n_f), frame_rng.uniform(fy0, fy1, n_f)
+        fu = frame_rng.uniform(0.0, 1.0, n_f)
+        in_sensor = (fx >= -0.5) & (fx < width - 0.5) & (fy >= -0.5) & (fy < height - 0.5)
+        keep = ~in_sensor
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if dx != 0.0:  # the strip swept by the x edge: edge + s d, s in [0, 1), sheared by dy
+                sx = (fx - (width - 0.5 if dx > 0 else -0.5)) / dx
+                along = fy - sx * dy
+                keep &= ~((sx >= 0.0) & (sx < 1.0) & (along >= -0.5) & (along < height - 0.5))
+            if dy != 0.0:
+                sy = (fy - (height - 0.5 if dy > 0 else -0.5)) / dy
+                along = fx - sy * dx
+                keep &= ~((sy >= 0.0) & (sy < 1.0) & (along >= -0.5) & (along < width - 0.5))
+        if not (n + int(keep.sum())) <= MAX_STARS:
+            raise ValueError(f"margin_px={margin_px!r} around the {width}x{height} field gives {n + int(keep.sum())} "
+                             f"stars, more than {MAX_STARS:,}")
+        x, y, u = np.concatenate([x, fx[keep]]), np.concatenate([y, fy[keep]]), np.concatenate([u, fu[keep]])
         n = x.size
     if distribution == "all-sky":
         from .sky import stars

@@ -312,3 +312,34 @@ def test_a_scenario_field_path_carries_frame_field_targets_and_the_random_stars(
     s["star_field"]["path"] = {"t_s": [0.1, 0.2], "dx_px": [0.0, 1.0]}
     with pytest.raises(ScenarioError, match="star_field.path takes exactly t_s, dx_px, dy_px"):
         build(s)
+
+
+@pytest.mark.parametrize("drift", [(0.0, 0.0), (30.0, -20.0)])
+def test_a_field_path_brings_in_the_stars_beyond_the_field(drift: tuple[float, float]) -> None:
+    # A slew of 60 px down and 40 px left: the stars on the sensor after it must be as many
+    # (in distribution) as before, not the field's stars less the strips the slew emptied
+    # (without the frame: -300 static, -190 with the drift). The counts differ by the stars
+    # exchanged, ~2 x 0.02 (60 x 200 + 40 x 150) = 720 in variance: 4 sd = 107.
+    # With a drift the frame is drawn around the drift-swept area too (sheared strips).
+    from evstwin.targets import FieldPath, along_path, random_star_field
+
+    optics = get_preset("davis346").optics(0.041, 1.8)
+    w, h, density, duration = 200, 150, 2.0, 1.0  # 2 stars a 100 px^2: 600 on the sensor
+    path = FieldPath(np.array([0.4, 0.5]), np.array([0.0, -40.0]), np.array([0.0, 60.0]))
+    margin = float(np.hypot(40.0, 60.0))
+    stars = random_star_field(w, h, optics, n_stars=int(density * w * h / 100), seed=5, drift_px_s=drift,
+                              duration_s=duration, margin_px=margin)
+    plain = random_star_field(w, h, optics, n_stars=int(density * w * h / 100), seed=5, drift_px_s=drift,
+                              duration_s=duration)
+    assert [t.label for t in stars[:len(plain)]] == [t.label for t in plain]  # the frame comes last
+    moved = [along_path(t, path) for t in stars]
+
+    def on_sensor(t_s: float) -> int:
+        xy = np.array([t.position_px(np.array([t_s])) for t in moved])[:, :, 0]
+        return int(np.sum((xy[:, 0] >= -0.5) & (xy[:, 0] < w - 0.5) & (xy[:, 1] >= -0.5) & (xy[:, 1] < h - 0.5)))
+
+    before, after = on_sensor(0.0), on_sensor(0.9)
+    assert abs(before - 600) < 5 * math.sqrt(600)
+    assert abs(after - before) < 4 * math.sqrt(2 * 0.02 * (60 * 200 + 40 * 150)), (before, after)
+    with pytest.raises(ValueError, match="margin_px must be"):
+        random_star_field(w, h, optics, n_stars=10, margin_px=-1.0)
