@@ -339,48 +339,58 @@ def draw_sky_stars(ctx: _Context, attitude: Attitude, density_per_deg2: float, m
     """Random stars (directions (S, 3), V magnitudes (S,)) uniform on the sky over every
     direction the sensor (plus its PSF margin) sees during the run.
 
-    The run's boresights (``attitude``, sampled finely enough that successive ones are close)
-    each get a spherical cap holding the sensor's footprint and the step to its neighbour;
-    a Poisson number of stars is drawn uniformly in each cap and a star is kept by the cap
-    whose centre is nearest (so the union is uniform, without duplicates). Magnitudes follow
+    The sky is cut into fixed cells (declination bands ``cell`` wide, each band cut into
+    segments of right ascension about ``cell`` wide; ``cell`` is half the footprint's half
+    diagonal, a property of the sensor and optics alone). Each cell's stars come from its own
+    random stream, keyed by (seed, band, segment): a Poisson number uniform over its area.
+    The cells within reach of the run's boresights (``attitude``) are drawn and their stars
+    within reach kept, so a star's place does not depend on the run's duration or on how its
+    attitude was sampled: a longer run adds cells, it does not redraw them. Magnitudes follow
     dN/dm ~ 10^(counts_slope m) on [mag_min, mag_max] (``evstwin.targets.random_star_field``'s law)."""
-    rng = np.random.default_rng(seed)
     lo_x, hi_x, lo_y, hi_y = ctx.box
     half_diag = math.atan(ctx.k * math.hypot(max(hi_x - ctx.centre[0], ctx.centre[0] - lo_x),
                                              max(hi_y - ctx.centre[1], ctx.centre[1] - lo_y)))
-    # Caps a quarter of the footprint apart (the first and the last boresight always): the draw
-    # then depends on where the sensor looks, not on how finely the attitude was sampled.
-    kept = [0]
-    for j in range(1, attitude.b.shape[0]):
-        if float(attitude.b[j] @ attitude.b[kept[-1]]) < math.cos(0.25 * half_diag) or j == attitude.b.shape[0] - 1:
-            kept.append(j)
-    centres = attitude.b[kept]
-    steps = np.arccos(np.clip(np.sum(centres[1:] * centres[:-1], axis=-1), -1, 1)) if len(centres) > 1 else [0.0]
-    radius = min(half_diag + float(np.max(steps)) + 1e-6, math.radians(80.0))
-    cap_sr = 2.0 * math.pi * (1.0 - math.cos(radius))
+    b = attitude.b
+    steps = np.arccos(np.clip(np.sum(b[1:] * b[:-1], axis=-1), -1, 1)) if b.shape[0] > 1 else np.zeros(1)
+    # Everything the footprint covers between two sampled boresights lies within this of one.
+    reach = min(half_diag + 0.5 * float(np.max(steps)) + 1e-6, math.radians(80.0))
+    cell = max(0.5 * half_diag, 1e-4)
     per_sr = density_per_deg2 * (180.0 / math.pi) ** 2
-    expected = per_sr * cap_sr * len(centres)
+    dec_b = np.arcsin(np.clip(b[:, 2], -1.0, 1.0))
+    n_bands = max(1, int(math.ceil(math.pi / cell)))
+    band_h = math.pi / n_bands
+    first = max(0, int(math.floor((float(dec_b.min()) - reach + 0.5 * math.pi) / band_h)))
+    last = min(n_bands - 1, int(math.floor((float(dec_b.max()) + reach + 0.5 * math.pi) / band_h)))
+    cells: list[tuple[int, int, int, float, float, float, float]] = []  # (band, seg, n_seg, d0, d1, ra0, ra1)
+    cos_reach = math.cos(min(math.pi, reach + 2.0 * cell))
+    for band in range(first, last + 1):
+        d0, d1 = -0.5 * math.pi + band * band_h, -0.5 * math.pi + (band + 1) * band_h
+        n_seg = max(1, int(math.floor(2.0 * math.pi * math.cos(0.5 * (d0 + d1)) / cell)))
+        ra_c = (np.arange(n_seg) + 0.5) * (2.0 * math.pi / n_seg)
+        dm = 0.5 * (d0 + d1)
+        centres = np.stack([math.cos(dm) * np.cos(ra_c), math.cos(dm) * np.sin(ra_c), np.full(n_seg, math.sin(dm))], 1)
+        near = np.max(centres @ b.T, axis=1) >= cos_reach  # a cell's centre within reach + its size
+        for k_seg in np.flatnonzero(near).tolist():
+            cells.append((band, k_seg, n_seg, d0, d1, k_seg * 2.0 * math.pi / n_seg, (k_seg + 1) * 2.0 * math.pi / n_seg))
+    areas = [(math.sin(d1) - math.sin(d0)) * (ra1 - ra0) for _, _, _, d0, d1, ra0, ra1 in cells]
+    expected = per_sr * float(np.sum(areas)) if cells else 0.0
     if expected > 50 * MAX_SKY_STARS:
-        raise ValueError(f"star_field: {density_per_deg2:g} stars/deg2 over the {math.degrees(radius):.3g} deg "
+        raise ValueError(f"star_field: {density_per_deg2:g} stars/deg2 over the {math.degrees(reach):.3g} deg "
                          f"reach of the sensor draws ~{expected:.3g} stars (> {50 * MAX_SKY_STARS:g}): lower "
                          "star_field.density_per_deg2 or mag_max")
+    cos_keep = math.cos(reach)
     dirs, mags = [], []
-    for j, c in enumerate(centres):
-        n = int(rng.poisson(per_sr * cap_sr))
-        cos_t = rng.uniform(math.cos(radius), 1.0, n)
-        phi = rng.uniform(0.0, 2.0 * math.pi, n)
-        u = rng.uniform(0.0, 1.0, n)
+    for (band, seg, n_seg, d0, d1, ra0, ra1), area in zip(cells, areas):
+        rng = np.random.default_rng([int(seed), int(band), int(seg), int(n_seg)])
+        n = int(rng.poisson(per_sr * area))
         if n == 0:
             continue
-        # an orthonormal basis around the cap's centre
-        a = np.array([1.0, 0.0, 0.0]) if abs(c[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        e1 = np.cross(c, a)
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(c, e1)
-        sin_t = np.sqrt(1.0 - cos_t**2)
-        d = cos_t[:, None] * c + sin_t[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
-        nearest = np.argmax(d @ centres.T, axis=1)
-        keep = nearest == j
+        sin_d = rng.uniform(math.sin(d0), math.sin(d1), n)
+        ra = rng.uniform(ra0, ra1, n)
+        u = rng.uniform(0.0, 1.0, n)
+        cos_d = np.sqrt(1.0 - sin_d**2)
+        d = np.stack([cos_d * np.cos(ra), cos_d * np.sin(ra), sin_d], 1)
+        keep = np.max(d @ b.T, axis=1) >= cos_keep
         dirs.append(d[keep])
         mags.append(u[keep])
     d_all = np.concatenate(dirs) if dirs else np.zeros((0, 3))
