@@ -38,7 +38,7 @@ from ._core import __version__
 from .readout import Readout
 from .scenario import ScenarioError, Scene, build, load, parse_assignment, set_value
 from .sensor import EVENT_DTYPE, Sensor
-from .targets import LightCurve, LinearTarget, Target
+from .targets import LightCurve, LinearTarget, Target, psf_groups
 
 
 @dataclass
@@ -244,21 +244,6 @@ def _stats(runner: _Runner, meta: dict[str, Any], wall0: float, n_events: int, n
     }
 
 
-def _psf_groups(targets: Sequence[Target], scene_psf: psf.PSFShape) -> list[tuple[psf.PSFShape, np.ndarray]]:
-    """The targets' column indices grouped by the PSF they are rendered with: the scene's
-    first (possibly empty), then each distinct own PSF (``Target.psf``) in order of appearance."""
-    own: dict[int, tuple[psf.PSFShape, list[int]]] = {}
-    plain: list[int] = []
-    for j, t in enumerate(targets):
-        if t.psf is None or t.psf is scene_psf:
-            plain.append(j)
-        else:
-            own.setdefault(id(t.psf), (t.psf, []))[1].append(j)
-    groups = [(scene_psf, np.array(plain, np.int64))]
-    groups += [(shape, np.array(cols, np.int64)) for shape, cols in own.values()]
-    return groups
-
-
 def track_names(scene: Scene) -> list[str]:
     """The names under which a scene's moving targets' ground truth is written (their labels,
     ``target<j>`` for unlabelled ones, ``#<j>`` appended to a repeated label). The stars of a
@@ -351,13 +336,13 @@ class _Runner:
         self._linear = _LinearColumns(self.moving)
         # The moving targets by PSF: the scene's first (all of them, most often), then each
         # target's own (a defocused ghost).
-        self._groups = _psf_groups(self.moving, self.psf)
+        self._groups = psf_groups(self.moving, self.psf)
         self.static_map = np.full((scene.height, scene.width), scene.background_ph_s, np.float64)
         if static:
             x = np.array([float(t.position_px(0.0)[0]) for t in static])
             y = np.array([float(t.position_px(0.0)[1]) for t in static])
             f = np.array([float(t.flux_ph_s(0.0)) for t in static])
-            for shape, cols in _psf_groups(static, self.psf):
+            for shape, cols in psf_groups(static, self.psf):
                 psf.render_points(scene.width, scene.height, x[cols], y[cols], f[cols], shape, out=self.static_map)
         self.scene_s = time.perf_counter() - t0
         self.engine_s = 0.0

@@ -433,13 +433,9 @@ class DriftingTarget(Target):
     label: str = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.target, Target):
-            raise TypeError(f"target must be a Target; got {self.target!r}")
+        adopt(self, self.target)
         for name in ("vx_px_s", "vy_px_s", "dx_px", "dy_px"):
             _finite(name, getattr(self, name))
-        object.__setattr__(self, "brightness", self.target.brightness)
-        object.__setattr__(self, "label", self.target.label)
-        object.__setattr__(self, "psf", self.target.psf)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         t = _times(t_s)
@@ -518,6 +514,21 @@ def shifted(target: Target, dx_px: float, dy_px: float) -> Target:
     return with_psf(out, target.psf)
 
 
+def psf_groups(targets: Sequence[Target], scene_psf: PSFShape) -> list[tuple[PSFShape, np.ndarray]]:
+    """The targets' indices grouped by the PSF they are rendered with: the scene's first
+    (possibly empty), then each distinct own PSF (``Target.psf``) in order of appearance."""
+    own: dict[int, tuple[PSFShape, list[int]]] = {}
+    plain: list[int] = []
+    for j, t in enumerate(targets):
+        if t.psf is None or t.psf is scene_psf:
+            plain.append(j)
+        else:
+            own.setdefault(id(t.psf), (t.psf, []))[1].append(j)
+    groups = [(scene_psf, np.array(plain, np.int64))]
+    groups += [(shape, np.array(cols, np.int64)) for shape, cols in own.values()]
+    return groups
+
+
 def with_psf(target: Target, psf: PSFShape | None) -> Target:
     """``target`` rendered with its own PSF (None: the scene's). Returns a copy; the target
     classes are frozen, and the PSF is not part of their constructor."""
@@ -526,6 +537,17 @@ def with_psf(target: Target, psf: PSFShape | None) -> Target:
     out = dataclasses.replace(target) if dataclasses.is_dataclass(target) else target  # type: ignore[type-var]
     object.__setattr__(out, "psf", psf)
     return out
+
+
+def adopt(wrapper: Target, inner: object, brightness: bool = True) -> None:
+    """In a wrapper's ``__post_init__``: check that it wraps a Target and take its label, PSF
+    and (unless the wrapper sets its own) brightness."""
+    if not isinstance(inner, Target):
+        raise TypeError(f"target must be a Target; got {inner!r}")
+    if brightness:
+        object.__setattr__(wrapper, "brightness", inner.brightness)
+    object.__setattr__(wrapper, "label", inner.label)
+    object.__setattr__(wrapper, "psf", inner.psf)
 
 
 @dataclass(frozen=True, eq=False)
@@ -634,11 +656,7 @@ class PathTarget(Target):
     label: str = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.target, Target):
-            raise TypeError(f"target must be a Target; got {self.target!r}")
-        object.__setattr__(self, "brightness", self.target.brightness)
-        object.__setattr__(self, "label", self.target.label)
-        object.__setattr__(self, "psf", self.target.psf)
+        adopt(self, self.target)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         t = _times(t_s)

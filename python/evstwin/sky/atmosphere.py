@@ -92,7 +92,7 @@ import numpy.typing as npt
 from ..optics import ARCSEC_PER_RAD, Optics, _finite, _non_negative, _positive
 from ..psf import KernelPSF, PSFShape, from_optics, moffat_alpha_px, moffat_psf
 from ..psf.shapes import DEFAULT_TAIL_FRACTION, _default_half, _grid
-from ..targets import LightCurve, Target, _interval, _times
+from ..targets import LightCurve, Target, _interval, _times, adopt
 
 KOLMOGOROV_MOFFAT_BETA = 4.765
 """Moffat beta of long-exposure Kolmogorov seeing (Trujillo et al. 2001, MNRAS 328, 977)."""
@@ -402,10 +402,7 @@ class AtmosphericTarget(Target):
     label: str = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.target, Target):
-            raise TypeError(f"target must be a Target; got {self.target!r}")
-        object.__setattr__(self, "label", self.target.label)
-        object.__setattr__(self, "psf", self.target.psf)
+        adopt(self, self.target, brightness=False)  # its brightness: the scintillating curve
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         x, y = self.target.position_px(t_s)

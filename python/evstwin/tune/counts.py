@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from ..targets import psf_groups
 from .objectives import MatchObjective
 
 GROUP_LEVELS: tuple[float, ...] = (1e-3, 1e-2, 0.1, 0.3)
@@ -79,13 +80,11 @@ def source_flux_map(scene: Any) -> np.ndarray:
     for a in range(0, n, 512):
         t = times[a : a + 512]
         # Each target through the PSF it is rendered with (a defocused ghost through its own).
-        by_psf: dict[int, tuple[Any, list[Any]]] = {}
-        for target in targets:
-            shape = scene.psf if target.psf is None else target.psf
-            by_psf.setdefault(id(shape), (shape, []))[1].append(target)
-        for shape, group in by_psf.values():
+        for shape, cols in psf_groups(targets, scene.psf):
+            if not cols.size:
+                continue
             xs, ys, fs = [], [], []
-            for target in group:
+            for target in (targets[j] for j in cols):
                 x, y = target.position_px(t)
                 xs.append(np.broadcast_to(np.asarray(x, np.float64), t.shape))
                 ys.append(np.broadcast_to(np.asarray(y, np.float64), t.shape))
