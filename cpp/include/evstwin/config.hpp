@@ -36,6 +36,23 @@
 #define EVSTWIN_NOINLINE
 #endif
 
+// No fused multiply-adds in the engine: a compiler may contract a * b + c into one FMA
+// (rounded once instead of twice) wherever the target has FMA, which GCC does by default for
+// the AVX2 / AVX-512 kernels that simd.hpp and the block kernels compile alongside the
+// portable baseline, and for a consumer who builds with -march=native. The events would then
+// depend on the instruction set. Every engine header turns contraction off between these two
+// markers, so the events are the same bit for bit at every SIMD level and for any -march.
+#if defined(__clang__)
+#define EVSTWIN_FP_STRICT_BEGIN _Pragma("STDC FP_CONTRACT OFF")
+#define EVSTWIN_FP_STRICT_END _Pragma("STDC FP_CONTRACT DEFAULT")
+#elif defined(__GNUC__)
+#define EVSTWIN_FP_STRICT_BEGIN _Pragma("GCC push_options") _Pragma("GCC optimize(\"fp-contract=off\")")
+#define EVSTWIN_FP_STRICT_END _Pragma("GCC pop_options")
+#else
+#define EVSTWIN_FP_STRICT_BEGIN
+#define EVSTWIN_FP_STRICT_END
+#endif
+
 namespace evstwin {
 
 /// Number of threads a parallel loop would use by default (1 without OpenMP).

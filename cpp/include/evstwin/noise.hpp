@@ -30,6 +30,8 @@
 
 #include "config.hpp"
 
+EVSTWIN_FP_STRICT_BEGIN
+
 namespace evstwin {
 
 /// (1 - exp(-x)) / x, stable for small x, 1 at x = 0.
@@ -235,3 +237,4 @@ inline double bridge_first_passage_sample(double u0, double u1, double sigma2, d
 }
 
 }  // namespace evstwin
+EVSTWIN_FP_STRICT_END

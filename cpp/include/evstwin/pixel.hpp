@@ -28,6 +28,8 @@
 #include "rng.hpp"
 #include "simd.hpp"
 
+EVSTWIN_FP_STRICT_BEGIN
+
 namespace evstwin {
 
 enum class DarkModel { Poisson, Paper, None };
@@ -1516,3 +1518,4 @@ inline double PixelModel::theta_with_sigma(double theta, Philox4x32Key key, std:
 }
 
 }  // namespace evstwin
+EVSTWIN_FP_STRICT_END

@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+EVSTWIN_FP_STRICT_BEGIN
+
 namespace evstwin {
 
 /// A readout of limited rate: one server, a FIFO, a timestamp counter.
@@ -215,3 +217,4 @@ private:
 };
 
 }  // namespace evstwin
+EVSTWIN_FP_STRICT_END

@@ -16,6 +16,8 @@
 
 #include "config.hpp"
 
+EVSTWIN_FP_STRICT_BEGIN
+
 namespace evstwin {
 
 using Philox4x32Counter = std::array<std::uint32_t, 4>;
@@ -347,3 +349,4 @@ private:
 };
 
 }  // namespace evstwin
+EVSTWIN_FP_STRICT_END

@@ -24,6 +24,8 @@
 #include "pixel.hpp"
 #include "rng.hpp"
 
+EVSTWIN_FP_STRICT_BEGIN
+
 namespace evstwin {
 
 class Sensor {
@@ -697,3 +699,4 @@ private:
 };
 
 }  // namespace evstwin
+EVSTWIN_FP_STRICT_END

@@ -34,6 +34,8 @@
 #define EVSTWIN_MULTIVERSION 0
 #endif
 
+EVSTWIN_FP_STRICT_BEGIN
+
 namespace evstwin {
 
 /// The instruction sets the batched loops are compiled for. Baseline: whatever the build
@@ -197,3 +199,4 @@ inline void ziggurat_batch(const std::uint32_t* w, std::size_t n, double* g, std
 }
 
 }  // namespace evstwin
+EVSTWIN_FP_STRICT_END
