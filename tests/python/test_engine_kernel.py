@@ -37,11 +37,15 @@ CONFIGS: dict[str, dict[str, object]] = {
 
 
 def scene(kind: str, n: int, seed: int, dtype: type = np.float64) -> tuple[np.ndarray, np.ndarray]:
-    """Irregular sample times and (n, H, W) photon rates: a moving bright spot, or darkness."""
+    """Irregular sample times and (n, H, W) photon rates: a moving bright spot on a uniform
+    background, darkness, or a gradient with a different rate on every pixel (no rate that
+    the block kernel could share between pixels)."""
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(2e-4, 3e-3, n))
     if kind == "dark":
         rate = np.full((n, H, W), 1.0)
+    elif kind == "gradient":
+        rate = np.broadcast_to(np.geomspace(1e3, 1e8, H * W).reshape(H, W), (n, H, W)) * (1 + 0.3 * np.sin(t))[:, None, None]
     else:
         yy, xx = np.mgrid[0:H, 0:W]
         cx = 3 + 16 * t / t[-1]
@@ -59,7 +63,7 @@ def run_calls(params: PixelParams, kind: str, per_pixel: bool, threads: int, chu
     """Events and labels of a run cut into `chunks`, through the kernel or the per-pixel path,
     with (sparse) a finer sampling of some pixels between the chunks (run_pixels)."""
     dtype = np.float32 if kind == "spot32" else np.float64
-    t, rate = scene("dark" if kind == "dark" else "spot", 160, 3, dtype)
+    t, rate = scene(kind if kind in ("dark", "gradient") else "spot", 160, 3, dtype)
     sensor = Sensor(W, H, params, seed=5, num_threads=threads)
     sub = np.arange(0, W * H, 7, dtype=np.uint32)
     events, labels = [], []
@@ -82,7 +86,7 @@ def run_calls(params: PixelParams, kind: str, per_pixel: bool, threads: int, chu
 
 
 @pytest.mark.parametrize("name", sorted(CONFIGS))
-@pytest.mark.parametrize("kind", ["spot", "spot32", "dark"])
+@pytest.mark.parametrize("kind", ["spot", "spot32", "dark", "gradient"])
 def test_block_kernel_gives_the_per_pixel_events(name: str, kind: str) -> None:
     params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
     kernel = run_calls(params, kind, per_pixel=False, threads=1, chunks=[160], sparse=False)

@@ -15,6 +15,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <sstream>
@@ -261,6 +262,262 @@ struct TraceSample {
     double filtered;     ///< y, the comparator input
     double reference;    ///< the comparator reference at the end of the interval
 };
+
+/// The fields of a block's pixel states that the continuous block kernel's common path reads
+/// or writes, as a structure of arrays: a working copy of the block for the samples of one
+/// run call (loaded before the first, stored after the last), so that path is one loop over
+/// contiguous arrays that the compiler vectorises. The array-of-structures PixelState stays
+/// the state between calls and for the rare pixels that need the whole comparator.
+///
+/// The fields a sample changes for every pixel are double-buffered: a sample reads `now()`
+/// and writes `next()` for every pixel (a quiet pixel's new values, or a busy one's after the
+/// per-pixel path), then flip() makes them current. So the vector loop stores everything
+/// unconditionally (a conditional store, "keep the old value unless quiet", is what stops a
+/// compiler vectorising it) and the per-pixel path still starts from the old state.
+struct BlockSoA {
+    struct Levels {
+        std::vector<double> x, z, y, nz, ny, ref, clock_on, clock_off;
+        std::vector<std::uint64_t> n;
+    };
+    Levels buf[2];
+    int cur = 0;
+    std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
+    std::vector<double> theta_on, theta_off, leak_hz, bg_on_hz, bg_off_hz;  ///< constant in a run
+    std::vector<std::uint64_t> spare_words, spare_sample;  ///< changed in place by the word batch
+    std::vector<std::uint8_t> busy;
+
+    Levels& now() { return buf[cur]; }
+    const Levels& now() const { return buf[cur]; }
+    Levels& next() { return buf[cur ^ 1]; }
+    void flip() { cur ^= 1; }
+
+    void resize(std::size_t m) {
+        if (busy.size() >= m) return;
+        for (Levels& l : buf) {
+            for (auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off}) v->resize(m);
+            l.n.resize(m);
+        }
+        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_hz, &bg_on_hz, &bg_off_hz}) v->resize(m);
+        spare_words.resize(m);
+        spare_sample.resize(m);
+        busy.resize(m);
+    }
+    /// Pixel j's fields from its state, its changing levels into `into`.
+    EVSTWIN_ALWAYS_INLINE void take(const PixelState& s, std::size_t j, Levels& into) {
+        into.x[j] = s.x; into.z[j] = s.z; into.y[j] = s.y; into.nz[j] = s.nz; into.ny[j] = s.ny;
+        into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off; into.n[j] = s.n;
+        refr_until[j] = s.refr_until; next_hot_t[j] = s.next_hot_t;
+        spare_words[j] = s.spare_words; spare_sample[j] = s.spare_sample;
+    }
+    /// Pixel j's fields back into its state, its changing levels from `from` (the constant
+    /// ones are not written).
+    EVSTWIN_ALWAYS_INLINE void give(PixelState& s, std::size_t j, const Levels& from) const {
+        s.x = from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
+        s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = from.n[j];
+        s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
+        s.spare_words = spare_words[j]; s.spare_sample = spare_sample[j];
+    }
+    void load(const PixelState* st, std::size_t m) {
+        resize(m);
+        for (std::size_t j = 0; j < m; ++j) {
+            take(st[j], j, now());
+            theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_hz[j] = st[j].leak_hz;
+            bg_on_hz[j] = st[j].bg_on_hz; bg_off_hz[j] = st[j].bg_off_hz;
+        }
+    }
+    /// Back into the states, which all stand at t_s now.
+    void store(PixelState* st, std::size_t m, double t_s) const {
+        for (std::size_t j = 0; j < m; ++j) {
+            give(st[j], j, now());
+            st[j].t = t_s;
+        }
+    }
+};
+
+/// What the continuous block kernel's common path needs: the block's arrays and the numbers
+/// of one photon rate (the block's common one) for one sample interval.
+struct QuietPass {
+    const BlockSoA::Levels* now;
+    BlockSoA::Levels* next;
+    const double *refr_until, *next_hot_t, *theta_on, *theta_off, *leak_hz, *bg_on_hz, *bg_off_hz;
+    const double *g1, *g2;
+    std::uint8_t* busy;
+    std::size_t count;
+    double rate;  ///< the common photon rate: the pixels at any other are left busy
+    double cx, pole_decay, pole_ramp;                 ///< NoiseCache's x and pole numbers at that rate
+    double phi_zz, phi_yz, phi_yy, l_zz, l_yz, l_yy;  ///< its noise transition and innovation
+    double bg_factor, bridge_bound;
+    double sf_decay, sf_ramp, dt, inv_dt, t0, t1;
+    /// Whether a pixel that only the bridge keeps from quiet may be settled by the bridge stage
+    /// (step_block_soa_impl): the bridge has a variance and continuous_finish() would not refine.
+    bool bridge_stage;
+};
+
+/// The first index i in [from, n) with flag[i] != 0 (n if none), eight flags at a time: the
+/// block kernels' lists of the few pixels that need more (a slow normal, a bridge draw, the
+/// per-pixel path) are byte flags, mostly zero.
+inline std::size_t next_flagged(const std::uint8_t* flag, std::size_t from, std::size_t n) {
+    std::size_t i = from;
+    while (i < n && (i & 7u)) {
+        if (flag[i]) return i;
+        ++i;
+    }
+    for (; i + 8 <= n; i += 8) {
+        std::uint64_t eight;
+        std::memcpy(&eight, flag + i, 8);
+        if (eight) break;
+    }
+    for (; i < n; ++i)
+        if (flag[i]) return i;
+    return n;
+}
+
+/// The configurations the quiet pass is compiled for: the exact source follower alone (the
+/// default) or behind the photoreceptor pole (DAVIS346-like presets). Others (Euler, no
+/// source follower) keep the array-of-structures kernel.
+enum class QuietChain { SfOnly, PoleSf };
+
+namespace detail {
+
+/// The continuous block kernel's common path for every pixel of a block: continuous_levels(),
+/// background_spend() and the quiet test of step_block_continuous(), one loop over the arrays
+/// without branches or conditional stores, so it vectorises. Every pixel's new levels go to
+/// q.next (a quiet pixel's are final: what continuous_finish() would leave); q.busy says 0 for
+/// quiet, 1 where only the bridge's draw could fire (the bridge stage), 2 for the per-pixel
+/// path, which starts over from q.now. The same operations in
+/// the same order as the scalar code and no contraction (EVSTWIN_FP_STRICT): the same bits at
+/// every instruction set. Noise: the rate's noise intensity is > 0; Background: eq. 12's
+/// background is on (both compile-time, so no operation sits behind a branch).
+template <QuietChain Chain, bool Noise, bool Background, class Real>
+EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __restrict rate) {
+    const double* __restrict sx = q.now->x.data();
+    const double* __restrict sz = q.now->z.data();
+    const double* __restrict sy = q.now->y.data();
+    const double* __restrict snz = q.now->nz.data();
+    const double* __restrict sny = q.now->ny.data();
+    const double* __restrict sref = q.now->ref.data();
+    const double* __restrict son = q.now->clock_on.data();
+    const double* __restrict soff = q.now->clock_off.data();
+    const std::uint64_t* __restrict sn = q.now->n.data();
+    double* __restrict ox = q.next->x.data();
+    double* __restrict oz = q.next->z.data();
+    double* __restrict oy = q.next->y.data();
+    double* __restrict onz = q.next->nz.data();
+    double* __restrict ony = q.next->ny.data();
+    double* __restrict oref = q.next->ref.data();
+    double* __restrict oon = q.next->clock_on.data();
+    double* __restrict ooff = q.next->clock_off.data();
+    std::uint64_t* __restrict on_ = q.next->n.data();
+    const double* __restrict refr = q.refr_until;
+    const double* __restrict hot = q.next_hot_t;
+    const double* __restrict th_on_a = q.theta_on;
+    const double* __restrict th_off_a = q.theta_off;
+    const double* __restrict leak = q.leak_hz;
+    const double* __restrict bon = q.bg_on_hz;
+    const double* __restrict boff = q.bg_off_hz;
+    const double* __restrict g1 = q.g1;
+    const double* __restrict g2 = q.g2;
+    std::uint8_t* __restrict busy = q.busy;
+    constexpr bool pole = Chain == QuietChain::PoleSf;
+    const double x = q.cx, common = q.rate;
+    const double pole_decay = q.pole_decay, pole_ramp = q.pole_ramp, sf_decay = q.sf_decay, sf_ramp = q.sf_ramp;
+    const double phi_zz = q.phi_zz, phi_yz = q.phi_yz, phi_yy = q.phi_yy, l_zz = q.l_zz, l_yz = q.l_yz, l_yy = q.l_yy;
+    const double bg_factor = q.bg_factor, bridge_bound = q.bridge_bound, dt = q.dt, inv_dt = q.inv_dt;
+    const double t0 = q.t0, t1 = q.t1;
+    const bool bridge_stage = q.bridge_stage;
+    const std::size_t count = q.count;
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC ivdep
+#endif
+    for (std::size_t j = 0; j < count; ++j) {
+        const double s_x = sx[j], s_z = sz[j], s_y = sy[j], s_nz = snz[j], s_ny = sny[j];
+        // continuous_levels(): the pole (if any), the exact source follower, the noise.
+        double z = x;
+        if constexpr (pole) z = x + (s_z - s_x) * pole_decay - (x - s_x) * pole_ramp;
+        const double yd0 = s_y - s_ny;
+        const double yd = z + (yd0 - s_z) * sf_decay - (z - s_z) * sf_ramp;
+        double nz = 0.0, ny = 0.0;
+        if constexpr (Noise) {
+            nz = phi_zz * s_nz + l_zz * g1[j];
+            // With the pole its rate is > 0 wherever there is noise: the two-pole system.
+            if constexpr (pole)
+                ny = phi_yz * s_nz + phi_yy * s_ny + l_yz * g1[j] + l_yy * g2[j];
+            else
+                ny = phi_yy * s_ny + l_yy * g1[j];
+        }
+        const double y = yd + ny;
+        // background_spend().
+        double on = son[j], off = soff[j];
+        bool ran_out = false;
+        if constexpr (Background) {
+            on = son[j] - bon[j] * bg_factor * dt;
+            off = soff[j] - boff[j] * bg_factor * dt;
+            ran_out = !((on > 0.0) & (off > 0.0));
+        }
+        // The quiet test (step_block_continuous()).
+        const double th_on = th_on_a[j], th_off = th_off_a[j];
+        const double g = (y - s_y) * inv_dt + leak[j] * th_on;
+        const double db = s_y - sref[j];
+        const double d1 = db + g * dt;
+        const double on0 = th_on - db, off0 = th_off + db;
+        const bool plain = (static_cast<double>(rate[j]) == common) & !ran_out & (hot[j] > t1) & (refr[j] <= t0);
+        const bool quiet = plain & (std::min(on0, off0) > 0.0) &
+                           (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > bridge_bound);
+        // Not quiet, but the line stays between the levels (compare_bridged()'s test): only the
+        // bridge's draw can make it fire.
+        const bool bridge = bridge_stage & plain & (db < th_on) & (db > -th_off) & (d1 < th_on) & (d1 > -th_off);
+        oref[j] = y - d1;
+        ox[j] = x;
+        oz[j] = z;
+        oy[j] = y;
+        onz[j] = nz;
+        ony[j] = ny;
+        oon[j] = on;
+        ooff[j] = off;
+        on_[j] = sn[j] + 1u;
+        // 0, 1 or 2 as arithmetic: a nested select here becomes a branch and stops the vectoriser.
+        const unsigned not_quiet = !quiet;
+        busy[j] = static_cast<std::uint8_t>(2u * not_quiet - (not_quiet & static_cast<unsigned>(bridge)));
+    }
+}
+
+#define EVSTWIN_QUIET_PASS_LEVEL(NAME, TARGET)                                                        \
+    template <QuietChain Chain, bool Noise, bool Background, class Real>                              \
+    TARGET inline void NAME(const QuietPass& q, const Real* rate) {                                   \
+        quiet_pass_body<Chain, Noise, Background>(q, rate);                                           \
+    }
+EVSTWIN_QUIET_PASS_LEVEL(quiet_pass_baseline, )
+#if EVSTWIN_MULTIVERSION
+EVSTWIN_QUIET_PASS_LEVEL(quiet_pass_avx2, EVSTWIN_TARGET_AVX2)
+EVSTWIN_QUIET_PASS_LEVEL(quiet_pass_avx512, EVSTWIN_TARGET_AVX512)
+#endif
+#undef EVSTWIN_QUIET_PASS_LEVEL
+
+/// quiet_pass_body() at the current SIMD level (simd.hpp).
+template <QuietChain Chain, bool Noise, bool Background, class Real>
+inline void quiet_pass_at_level(const QuietPass& q, const Real* rate) {
+#if EVSTWIN_MULTIVERSION
+    switch (simd_level()) {
+        case SimdLevel::AVX512: return quiet_pass_avx512<Chain, Noise, Background>(q, rate);
+        case SimdLevel::AVX2: return quiet_pass_avx2<Chain, Noise, Background>(q, rate);
+        default: break;
+    }
+#endif
+    quiet_pass_baseline<Chain, Noise, Background>(q, rate);
+}
+
+/// quiet_pass_body() for the run-time noise and background switches.
+template <QuietChain Chain, class Real>
+inline void quiet_pass(const QuietPass& q, const Real* rate, bool noise, bool background) {
+    if (noise) {
+        if (background) return quiet_pass_at_level<Chain, true, true>(q, rate);
+        return quiet_pass_at_level<Chain, true, false>(q, rate);
+    }
+    if (background) return quiet_pass_at_level<Chain, false, true>(q, rate);
+    quiet_pass_at_level<Chain, false, false>(q, rate);
+}
+
+}  // namespace detail
 
 /// Parameters turned into the numbers the hot loop needs.
 struct PixelModel {
@@ -679,6 +936,8 @@ struct PixelModel {
         std::vector<std::uint8_t> pr_known;
         double pr_dt = -1.0;
         NoiseCache noise;  ///< the continuous model's per-rate numbers (advance())
+        NoiseCache noise_other;  ///< step_block_soa's: the numbers of the pixels off the block's common rate
+        BlockSoA soa;  ///< step_block_soa's working copy of a block's state
         void resize(std::size_t n) {
             if (x.size() < n) {
                 u_noise.resize(n); x.resize(n); current.resize(n); y.resize(n); busy.resize(n); count_word.resize(n);
@@ -700,73 +959,140 @@ struct PixelModel {
         std::size_t n_active;
     };
 
-    /// sample_words() for every active pixel of a block: the pixels whose words are not kept
-    /// from the previous sample are listed, their Philox calls made in one batch (simd.hpp:
-    /// vectorised, the same bits at every instruction set), and the words handed out and kept
-    /// as sample_words() does.
-    template <bool AllActive>
-    EVSTWIN_ALWAYS_INLINE static void block_sample_words(const BlockView& v, Philox4x32Key key, BlockScratch& scratch,
-                                                         std::uint32_t* w0, std::uint32_t* w1) {
-        const std::size_t n = v.n_active;
-        PixelState* st = v.state;
-        const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
+    /// sample_words() for n pixels of a block: the pixels whose words are not kept from the
+    /// previous sample are listed, their Philox calls made in one batch (simd.hpp: vectorised,
+    /// the same bits at every instruction set), and the words handed out and kept as
+    /// sample_words() does. count(j): the j-th pixel's sample counter; id(j): its global index;
+    /// spare(j, words, sample): its kept words and the sample they belong to (references).
+    template <class Count, class Id, class Spare>
+    EVSTWIN_ALWAYS_INLINE static void batch_sample_words(std::size_t n, Count count, Id id, Spare spare,
+                                                         Philox4x32Key key, BlockScratch& scratch, std::uint32_t* w0,
+                                                         std::uint32_t* w1) {
         std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
         std::uint32_t* need = scratch.need_at.data();
         std::size_t m = 0;
         for (std::size_t j = 0; j < n; ++j) {
-            const PixelState& s = st[at(j)];
-            if ((s.n & 1u) && s.spare_sample == s.n) {
-                w0[j] = static_cast<std::uint32_t>(s.spare_words);
-                w1[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
-            } else {
-                const std::uint64_t pair = s.n >> 1;
-                c0[m] = static_cast<std::uint32_t>(pair);
-                c1[m] = static_cast<std::uint32_t>(pair >> 32);
-                c2[m] = v.ids[at(j)];
-                need[m] = static_cast<std::uint32_t>(j);
-                ++m;
-            }
+            const std::uint64_t sample = count(j);
+            spare(j, [&](std::uint64_t& words, std::uint64_t& kept_for) {
+                if ((sample & 1u) && kept_for == sample) {
+                    w0[j] = static_cast<std::uint32_t>(words);
+                    w1[j] = static_cast<std::uint32_t>(words >> 32);
+                } else {
+                    const std::uint64_t pair = sample >> 1;
+                    c0[m] = static_cast<std::uint32_t>(pair);
+                    c1[m] = static_cast<std::uint32_t>(pair >> 32);
+                    c2[m] = id(j);
+                    need[m] = static_cast<std::uint32_t>(j);
+                    ++m;
+                }
+            });
         }
         if (m == 0) return;
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, m, r0, r1, r2, r3);
         for (std::size_t q = 0; q < m; ++q) {
             const std::size_t j = need[q];
-            PixelState& s = st[at(j)];
-            const bool odd = (s.n & 1u) != 0;
+            const std::uint64_t sample = count(j);
+            const bool odd = (sample & 1u) != 0;
             w0[j] = odd ? r2[q] : r0[q];
             w1[j] = odd ? r3[q] : r1[q];
-            s.spare_words = static_cast<std::uint64_t>(r2[q]) | (static_cast<std::uint64_t>(r3[q]) << 32);
-            s.spare_sample = s.n | 1u;
+            spare(j, [&](std::uint64_t& words, std::uint64_t& kept_for) {
+                words = static_cast<std::uint64_t>(r2[q]) | (static_cast<std::uint64_t>(r3[q]) << 32);
+                kept_for = sample | 1u;
+            });
         }
     }
 
-    /// sample_normals() for every active pixel of a block: the ziggurat's common path as one
-    /// batch for each word (simd.hpp), then the few normals in a wedge or the tail finished as
+    /// batch_sample_words() for a block held as arrays, with the two cases of a block whose
+    /// pixels all share the sample's parity as loops without branches: an odd sample whose
+    /// words every pixel kept (no Philox call), and an even one where every pixel needs one.
+    /// Anything else (pixels sub-sampled apart) goes through batch_sample_words(). The same words.
+    EVSTWIN_ALWAYS_INLINE static void soa_sample_words(BlockSoA& h, const std::uint32_t* ids, std::size_t n,
+                                                       Philox4x32Key key, BlockScratch& scratch, std::uint32_t* w0,
+                                                       std::uint32_t* w1) {
+        const std::uint64_t* __restrict sample = h.now().n.data();
+        std::uint64_t* __restrict words = h.spare_words.data();
+        std::uint64_t* __restrict kept_for = h.spare_sample.data();
+        std::size_t kept = 0, even = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            kept += static_cast<std::size_t>((sample[j] & 1u) & (kept_for[j] == sample[j]));
+            even += static_cast<std::size_t>(!(sample[j] & 1u));
+        }
+        if (kept == n) {
+            for (std::size_t j = 0; j < n; ++j) {
+                w0[j] = static_cast<std::uint32_t>(words[j]);
+                w1[j] = static_cast<std::uint32_t>(words[j] >> 32);
+            }
+            return;
+        }
+        if (even == n) {
+            std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
+            for (std::size_t j = 0; j < n; ++j) {
+                const std::uint64_t pair = sample[j] >> 1;
+                c0[j] = static_cast<std::uint32_t>(pair);
+                c1[j] = static_cast<std::uint32_t>(pair >> 32);
+                c2[j] = ids[j];
+            }
+            std::uint32_t *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
+            philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, w0, w1, r2, r3);
+            for (std::size_t j = 0; j < n; ++j) {
+                words[j] = static_cast<std::uint64_t>(r2[j]) | (static_cast<std::uint64_t>(r3[j]) << 32);
+                kept_for[j] = sample[j] | 1u;
+            }
+            return;
+        }
+        batch_sample_words(
+            n, [sample](std::size_t j) { return sample[j]; }, [ids](std::size_t j) { return ids[j]; },
+            [&](std::size_t j, auto&& use) { use(words[j], kept_for[j]); }, key, scratch, w0, w1);
+    }
+
+    /// batch_sample_words() for the active pixels of a block view (array-of-structures state).
+    template <bool AllActive>
+    EVSTWIN_ALWAYS_INLINE static void block_sample_words(const BlockView& v, Philox4x32Key key, BlockScratch& scratch,
+                                                         std::uint32_t* w0, std::uint32_t* w1) {
+        PixelState* st = v.state;
+        const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
+        batch_sample_words(
+            v.n_active, [&](std::size_t j) { return st[at(j)].n; }, [&](std::size_t j) { return v.ids[at(j)]; },
+            [&](std::size_t j, auto&& use) { use(st[at(j)].spare_words, st[at(j)].spare_sample); }, key, scratch, w0,
+            w1);
+    }
+
+    /// sample_normals() for n pixels of a block: the ziggurat's common path as one batch for
+    /// each word (simd.hpp), then the few normals in a wedge or the tail finished as
     /// sample_normals() would (both sharing the pixel's further words, the first one first).
     /// Without `second` only g1 is made (g2 is left as it was): with one low-pass the noise is
     /// a 1-D process that uses g1 alone (continuous_levels), and skipping g2 cannot change g1,
-    /// which takes the further words first.
+    /// which takes the further words first. count(j), id(j) as in batch_sample_words.
+    template <class Count, class Id>
+    EVSTWIN_ALWAYS_INLINE static void batch_sample_normals(std::size_t n, Count count, Id id, Philox4x32Key key,
+                                                           BlockScratch& scratch, const std::uint32_t* w0,
+                                                           const std::uint32_t* w1, double* g1, double* g2,
+                                                           bool second) {
+        std::uint8_t *slow1 = scratch.slow1.data(), *slow2 = scratch.slow2.data();
+        ziggurat_batch(w0, n, g1, slow1);
+        if (second) ziggurat_batch(w1, n, g2, slow2);
+        // The flags of both words in one array, so one scan finds the few to finish.
+        if (second)
+            for (std::size_t j = 0; j < n; ++j) slow1[j] |= static_cast<std::uint8_t>(slow2[j] << 1);
+        for (std::size_t j = next_flagged(slow1, 0, n); j < n; j = next_flagged(slow1, j + 1, n)) {
+            const bool first_slow = slow1[j] & 1u, second_slow = slow1[j] >> 1;
+            CounterStream extra(key, id(j), count(j), PURPOSE_NORMAL);
+            auto more = [&extra] { return extra.word(); };
+            if (first_slow) g1[j] = normal_ziggurat_slow(w0[j], more);
+            if (second_slow) g2[j] = normal_ziggurat_slow(w1[j], more);
+        }
+    }
+
+    /// batch_sample_normals() for the active pixels of a block view.
     template <bool AllActive>
     EVSTWIN_ALWAYS_INLINE static void block_sample_normals(const BlockView& v, Philox4x32Key key, BlockScratch& scratch,
                                                            const std::uint32_t* w0, const std::uint32_t* w1, double* g1,
                                                            double* g2, bool second) {
-        const std::size_t n = v.n_active;
         const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
-        std::uint8_t *slow1 = scratch.slow1.data(), *slow2 = scratch.slow2.data();
-        ziggurat_batch(w0, n, g1, slow1);
-        if (second) {
-            ziggurat_batch(w1, n, g2, slow2);
-        } else {
-            for (std::size_t j = 0; j < n; ++j) slow2[j] = 0;
-        }
-        for (std::size_t j = 0; j < n; ++j) {
-            if (!(slow1[j] | slow2[j])) continue;
-            CounterStream extra(key, v.ids[at(j)], v.state[at(j)].n, PURPOSE_NORMAL);
-            auto more = [&extra] { return extra.word(); };
-            if (slow1[j]) g1[j] = normal_ziggurat_slow(w0[j], more);
-            if (slow2[j]) g2[j] = normal_ziggurat_slow(w1[j], more);
-        }
+        batch_sample_normals(
+            v.n_active, [&](std::size_t j) { return v.state[at(j)].n; }, [&](std::size_t j) { return v.ids[at(j)]; },
+            key, scratch, w0, w1, g1, g2, second);
     }
 
     /// advance() for pixels that all stand at c.t0 with n > 0, as separate passes (random
@@ -893,6 +1219,154 @@ struct PixelModel {
             s.t = c.t1;
             ++s.n;
         }
+    }
+
+    /// Whether step_block_soa() handles this configuration: the continuous model with the exact
+    /// source follower, behind the photoreceptor pole or not.
+    bool has_soa_kernel() const { return continuous && has_filter && !euler; }
+
+    /// step_block_continuous() for every pixel of a block held as a structure of arrays (h,
+    /// loaded from st; all pixels stand at c.t0 with n > 0): the random words and normals in
+    /// batches; then one vectorised pass (detail::quiet_pass) over the pixels at the block's
+    /// most common photon rate, which settles the quiet ones; then, for the few left busy (a
+    /// crossing is possible, a clock ran out, a hot pixel is due, refractory, or another
+    /// rate), the per-pixel path on the array-of-structures state from the start of the
+    /// interval (levels, clocks, continuous_finish, hot events). The same events as
+    /// step_block_continuous(). Needs has_soa_kernel().
+    /// Returns how many pixels took the per-pixel path.
+    template <class Real, class Emit>
+    std::size_t step_block_soa(BlockSoA& h, PixelState* st, const std::uint32_t* ids, std::size_t n, const Real* rate,
+                               const SampleConstants& c, Philox4x32Key key, BlockScratch& scratch, Emit&& emit,
+                               std::uint32_t& pixel) const {
+        if (p.pr_pole) return step_block_soa_impl<QuietChain::PoleSf>(h, st, ids, n, rate, c, key, scratch, emit, pixel);
+        return step_block_soa_impl<QuietChain::SfOnly>(h, st, ids, n, rate, c, key, scratch, emit, pixel);
+    }
+
+    template <QuietChain Chain, class Real, class Emit>
+    EVSTWIN_ALWAYS_INLINE std::size_t step_block_soa_impl(BlockSoA& h, PixelState* st, const std::uint32_t* ids, std::size_t n,
+                                                   const Real* rate, const SampleConstants& c, Philox4x32Key key,
+                                                   BlockScratch& scratch, Emit&& emit, std::uint32_t& pixel) const {
+        constexpr bool sf_only = Chain == QuietChain::SfOnly;
+        scratch.resize(n);
+        BlockSoA::Levels& now = h.now();
+        BlockSoA::Levels& next = h.next();
+        std::uint32_t* w0 = scratch.count_word.data();
+        std::uint32_t* w1 = scratch.word1.data();
+        const auto count = [&now](std::size_t j) { return now.n[j]; };
+        const auto id = [ids](std::size_t j) { return ids[j]; };
+        soa_sample_words(h, ids, n, key, scratch, w0, w1);
+        double* g1s = scratch.u_noise.data();
+        double* g2s = scratch.count.data();
+        const bool noisy = p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
+        if (noisy) {
+            // The second normal only drives the two-pole system (continuous_levels).
+            batch_sample_normals(n, count, id, key, scratch, w0, w1, g1s, g2s, !sf_only);
+        } else {
+            for (std::size_t j = 0; j < n; ++j) g1s[j] = g2s[j] = 0.0;
+        }
+        // The block's common rate: the cache's if a probe has it (no refill), else the most
+        // common of three probes. Any choice gives the same events; a good one leaves the
+        // per-pixel path to the pixels that need it.
+        NoiseCache& common = scratch.noise;
+        if (common.dt != c.dt) common.photon_rate = std::numeric_limits<double>::quiet_NaN();
+        const double probe[3] = {static_cast<double>(rate[0]), static_cast<double>(rate[n / 2]),
+                                 static_cast<double>(rate[n - 1])};
+        double pick = probe[1] == probe[2] ? probe[1] : probe[0];
+        for (double r : probe)
+            if (r == common.photon_rate) pick = r;
+        if (pick != common.photon_rate) fill_noise_cache(common, pick, c);
+        const bool background = has_background(), noise = common.D > 0.0;
+        QuietPass q;
+        q.now = &now;
+        q.next = &next;
+        q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
+        q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_hz = h.leak_hz.data();
+        q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data();
+        q.g1 = g1s; q.g2 = g2s; q.busy = h.busy.data(); q.count = n;
+        // The pass takes the two-pole noise wherever there is noise behind the pole, which holds
+        // when the pole's rate is > 0; were it not (a current that underflows), no pixel is
+        // taken as quiet and the per-pixel path does them all.
+        q.rate = (!sf_only && noise && !(common.a > 0.0)) ? std::numeric_limits<double>::quiet_NaN() : common.photon_rate;
+        q.cx = common.x; q.pole_decay = common.pole_decay; q.pole_ramp = common.pole_ramp;
+        q.phi_zz = common.k.phi_zz; q.phi_yz = common.k.phi_yz; q.phi_yy = common.k.phi_yy;
+        q.l_zz = common.k.l_zz; q.l_yz = common.k.l_yz; q.l_yy = common.k.l_yy;
+        q.bg_factor = common.bg_factor; q.bridge_bound = common.bridge_bound;
+        q.sf_decay = c.sf_decay; q.sf_ramp = c.sf_ramp; q.dt = c.dt; q.inv_dt = c.inv_dt; q.t0 = c.t0; q.t1 = c.t1;
+        // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling.
+        q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
+        detail::quiet_pass<Chain>(q, rate, noise, background);
+        std::uint8_t* busy = h.busy.data();
+        if (q.bridge_stage) bridge_stage(h, ids, n, common, c, key, scratch);
+        // The busy pixels, from their state at c.t0 (now), as step_continuous() does; their new
+        // state goes to next, beside the quiet ones'.
+        NoiseCache& other = scratch.noise_other;
+        if (other.dt != c.dt) other.photon_rate = std::numeric_limits<double>::quiet_NaN();
+        std::size_t n_busy = 0;
+        for (std::size_t j = next_flagged(busy, 0, n); j < n; j = next_flagged(busy, j + 1, n)) {
+            ++n_busy;
+            PixelState& s = st[j];
+            h.give(s, j, now);
+            const double r = static_cast<double>(rate[j]);
+            NoiseCache& cache = r == common.photon_rate ? common : other;
+            if (r != cache.photon_rate) fill_noise_cache(cache, r, c);
+            double zj, yj, nzj, nyj;
+            continuous_levels<sf_only>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
+            if (background) background_spend(s, cache.bg_factor, c);
+            pixel = ids[j];
+            continuous_finish(s, cache.x, zj, yj, nzj, nyj, cache.current_a, cache.k.bridge_var, cache.D, c, key, pixel,
+                              emit, nullptr);
+            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
+            ++s.n;
+            h.take(s, j, next);
+        }
+        h.flip();
+        return n_busy;
+    }
+
+    /// The pixels the quiet pass left to the bridge alone (h.busy 1): their levels in h.next()
+    /// are final unless the bridge's draw fires. As compare_bridged() (the interval starts at
+    /// c.t0: not refractory), each one's crossing probability, and for those where it is above
+    /// the smallest uniform, its uniform, all in one Philox batch; a pixel whose draw fires is
+    /// handed to the per-pixel path (h.busy 2), which draws the same uniform again and places
+    /// the event; the others are settled (h.busy 0).
+    void bridge_stage(BlockSoA& h, const std::uint32_t* ids, std::size_t n, const NoiseCache& common,
+                      const SampleConstants& c, Philox4x32Key key, BlockScratch& scratch) const {
+        const BlockSoA::Levels& now = h.now();
+        const BlockSoA::Levels& next = h.next();
+        std::uint8_t* busy = h.busy.data();
+        const double t_start = c.t0;
+        const double sigma2 = 4.0 * common.k.bridge_var * c.inv_dt;
+        const double span = c.t1 - t_start;
+        const double mid = 0.25 * sigma2 * span;
+        std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
+        std::uint32_t* at = scratch.need_at.data();
+        double* p_fire = scratch.noise_d.data();
+        std::size_t m = 0;
+        for (std::size_t j = next_flagged(busy, 0, n); j < n; j = next_flagged(busy, j + 1, n)) {
+            if (busy[j] != 1) continue;
+            const double s_y = now.y[j], ref = now.ref[j], th_on = h.theta_on[j], th_off = h.theta_off[j];
+            const double g = (next.y[j] - s_y) * c.inv_dt + h.leak_hz[j] * th_on;
+            const double d_start = (s_y - ref) + g * (t_start - c.t0);
+            const double d_end = (s_y - ref) + g * c.dt;
+            const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
+            const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
+            if (p_on + p_off > 0x1p-33) {
+                const std::uint64_t sample = now.n[j];
+                c0[m] = static_cast<std::uint32_t>(sample);
+                c1[m] = static_cast<std::uint32_t>(sample >> 32);
+                c2[m] = ids[j];
+                at[m] = static_cast<std::uint32_t>(j);
+                p_fire[m] = p_on + p_off;
+                ++m;
+            }
+            busy[j] = 0;
+        }
+        if (m == 0) return;
+        // CounterStream(key, pixel, sample, PURPOSE_BRIDGE)'s first word.
+        std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
+        philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, m, r0, r1, r2, r3);
+        for (std::size_t q = 0; q < m; ++q)
+            if (uniform_open(r0[q]) < p_fire[q]) busy[at[q]] = 2;
     }
 
     template <bool AllActive, class Real, class Emit>

@@ -484,9 +484,22 @@ private:
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
+        const bool soa_kernel = kernel && model_.has_soa_kernel();
         std::uint32_t ids[BLOCK], active[BLOCK];
         for (std::size_t i = lo; i < hi; ++i) ids[i - lo] = static_cast<std::uint32_t>(i);
         bool synced = false;  // after a kernel step that skipped nobody, all stand at the next t0
+        // Whether scratch.soa holds this block's state (standing at soa_t), to be stored back
+        // before any other path touches it and at the end.
+        bool in_soa = false;
+        double soa_t = 0.0;
+        // Where most of a block's pixels need the per-pixel path (an event-heavy scene), copying
+        // them out of the arrays and back costs more than the vector pass saves: the block goes
+        // on with the array-of-structures kernel for the rest of the call. The same events.
+        bool soa_pays = soa_kernel;
+        const auto leave_soa = [&] {
+            if (in_soa) scratch.soa.store(state_.data() + lo, hi - lo, soa_t);
+            in_soa = false;
+        };
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
@@ -505,12 +518,25 @@ private:
                     n_active += at_t0;
                 }
             }
-            if (eligible) {
+            if (eligible && soa_pays && n_active == hi - lo) {
+                if (!in_soa) scratch.soa.load(state_.data() + lo, hi - lo);
+                in_soa = true;
+                const std::size_t n_busy = model_.step_block_soa(scratch.soa, state_.data() + lo, ids, hi - lo, row + lo,
+                                                                 c, key_, scratch, emit, pixel);
+                soa_t = c.t1;
+                synced = true;
+                if (2 * n_busy > hi - lo) {
+                    soa_pays = false;
+                    leave_soa();
+                }
+            } else if (eligible) {
+                leave_soa();
                 const bool all = n_active == hi - lo;
                 model_.step_block(PixelModel::BlockView{state_.data() + lo, ids, all ? nullptr : active, n_active},
                                   row + lo, c, key_, poisson, scratch, emit, pixel);
                 synced = all;
             } else if (!probe_slot) {
+                leave_soa();
                 for (std::size_t i = lo; i < hi; ++i) {
                     pixel = static_cast<std::uint32_t>(i);
                     model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, scratch.noise, emit);
@@ -524,6 +550,7 @@ private:
             }
             ends[k] = static_cast<std::uint32_t>(out.size());
         }
+        leave_soa();
     }
 
     /// The sparse counterpart of run_block: entries [lo, hi) of a pixel list, each with its
@@ -563,7 +590,17 @@ private:
             }
         }
         ends[0] = static_cast<std::uint32_t>(out.size());
-        for (std::size_t k = 1; k < n_samples; ++k) {
+        if (kernel && model_.has_soa_kernel() && n_samples > 1) {
+            // Every pixel now stands at t_s[0]: the rest of the samples on the block's arrays.
+            scratch.soa.load(local.data(), m);
+            for (std::size_t k = 1; k < n_samples; ++k) {
+                model_.step_block_soa(scratch.soa, local.data(), pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
+                                      scratch, emit, pixel);
+                ends[k] = static_cast<std::uint32_t>(out.size());
+            }
+            scratch.soa.store(local.data(), m, t_s[n_samples - 1]);
+        }
+        for (std::size_t k = 1; k < n_samples && !(kernel && model_.has_soa_kernel()); ++k) {
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
                 model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
