@@ -217,6 +217,85 @@ TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
     set_simd_level(before);
 }
 
+TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
+    // The block kernel's vectorised pass on random levels (around both thresholds, so every
+    // class occurs), every chain and switch, against the baseline build's scalar loop: the
+    // same bits in every output array. A compiler that contracted a multiply-add into an FMA
+    // at AVX2 / AVX-512 (what EVSTWIN_FP_STRICT_BEGIN forbids) would fail this.
+    const std::size_t n = 203;  // not a multiple of a vector: the loops' remainders too
+    std::uint64_t state = 0x9E3779B97F4A7C15ull;
+    const auto unit = [&state] {  // splitmix64 -> [0, 1)
+        std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+        z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+        return static_cast<double>((z ^ (z >> 31)) >> 11) * 0x1p-53;
+    };
+    BlockSoA h;
+    h.resize(n);
+    std::vector<float> rate(n);
+    std::vector<double> g1(n), g2(n);
+    for (std::size_t j = 0; j < n; ++j) {
+        BlockSoA::Levels& l = h.now();
+        l.x[j] = -30.0 + unit(); l.z[j] = -30.0 + unit(); l.ny[j] = 0.1 * (unit() - 0.5);
+        l.nz[j] = 0.1 * (unit() - 0.5); l.ref[j] = -30.0 + unit();
+        h.theta_on[j] = 0.15 + 0.1 * unit(); h.theta_off[j] = 0.1 + 0.1 * unit();
+        l.y[j] = l.ref[j] + (unit() - 0.4) * 0.5;  // some past a threshold, most between
+        l.clock_on[j] = 3.0 * unit(); l.clock_off[j] = 0.002 * unit(); l.n[j] = j * 3;
+        h.leak_hz[j] = 0.1 * unit(); h.bg_on_hz[j] = 5.0 * unit(); h.bg_off_hz[j] = 5.0 * unit();
+        h.refr_until[j] = unit() < 0.1 ? 0.0105 : 0.0;
+        h.next_hot_t[j] = unit() < 0.05 ? 0.0101 : 1e300;
+        rate[j] = unit() < 0.9 ? 2e6f : 3e6f;
+        g1[j] = 2.0 * (unit() - 0.5); g2[j] = 2.0 * (unit() - 0.5);
+    }
+    QuietPass q{};
+    q.now = &h.now(); q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
+    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_hz = h.leak_hz.data();
+    q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data(); q.g1 = g1.data(); q.g2 = g2.data();
+    q.count = n; q.rate = 2e6; q.cx = -29.7; q.pole_decay = 0.93; q.pole_ramp = 0.97;
+    q.phi_zz = 0.91; q.phi_yz = 0.05; q.phi_yy = 0.94; q.l_zz = 0.013; q.l_yz = 0.004; q.l_yy = 0.011;
+    q.bg_factor = 0.77; q.bridge_bound = 2e-3; q.sf_decay = 0.939; q.sf_ramp = 0.969; q.dt = 1e-3; q.inv_dt = 1e3;
+    q.t0 = 0.010; q.t1 = 0.011; q.bridge_stage = true;
+    const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background) {
+        BlockSoA::Levels out = h.buf[1];
+        std::vector<std::uint8_t> busy(n, 7);
+        QuietPass qq = q;
+        qq.next = &out;
+        qq.busy = busy.data();
+        set_simd_level(l);
+        if (chain == QuietChain::SfOnly)
+            detail::quiet_pass<QuietChain::SfOnly>(qq, rate.data(), noise, background);
+        else
+            detail::quiet_pass<QuietChain::PoleSf>(qq, rate.data(), noise, background);
+        std::vector<unsigned char> bytes;
+        const auto add = [&bytes](const void* p, std::size_t size) {
+            const auto* b = static_cast<const unsigned char*>(p);
+            bytes.insert(bytes.end(), b, b + size);
+        };
+        for (const auto* v : {&out.x, &out.z, &out.y, &out.nz, &out.ny, &out.ref, &out.clock_on, &out.clock_off})
+            add(v->data(), n * sizeof(double));
+        add(out.n.data(), n * sizeof(std::uint64_t));
+        add(busy.data(), n);
+        std::size_t classes[3] = {0, 0, 0};
+        for (std::uint8_t b : busy) classes[b < 3 ? b : 0] += b < 3;
+        return std::make_pair(bytes, classes[0] > 0 && classes[1] > 0 && classes[2] > 0);
+    };
+    const SimdLevel before = simd_level();
+    int compared = 0;
+    for (QuietChain chain : {QuietChain::SfOnly, QuietChain::PoleSf})
+        for (bool noise : {false, true})
+            for (bool background : {false, true}) {
+                const auto ref = pass(SimdLevel::Baseline, chain, noise, background);
+                CHECK(ref.second);  // quiet, bridge and busy pixels all occur
+                for (SimdLevel l : {SimdLevel::AVX2, SimdLevel::AVX512}) {
+                    if (!simd_level_supported(l)) continue;
+                    CHECK(pass(l, chain, noise, background).first == ref.first);
+                    ++compared;
+                }
+            }
+    set_simd_level(before);
+    std::printf("  quiet pass: %d level comparisons\n", compared);
+}
+
 TEST(step_gives_floor_ln_r_over_theta_events) {
     for (double R : {1.5, 3.0, 10.0, 0.1}) {
         Sensor s(1, 1, ideal());
