@@ -1,0 +1,139 @@
+"""Where the IMX636 point-source recording's OFF events come from, against a twin's
+(``python bench/imx636_ghost_polarity.py [RAW] [--twin EVENTS]``; issue 10).
+
+The recording (../shared/data/imx636_pointsource_evt3.raw) has 665,323 OFF events to 553,295
+ON. This prints, for the recording and (``--twin``) for a simulated event file of the same
+scene (``evstwin simulate imx636-pointsource -o twin.npz``; an ROI run's offset is read from
+its metadata):
+
+- **ghost window** (660, 320, 260 x 280): ON and OFF per second, and per 100 ms over the first
+  and last 0.5 s, where the star's light curve has its largest excursions (its first 0.2 s and
+  the slew at 10.6 s);
+- **ghost, per radius** from its track (the star's line mirrored through the scenario's
+  centre), in events per pixel per second, and per sector: ``lead`` (within 60 degrees of
+  the ghost's motion), ``side``, ``trail``;
+- **star image motion**: per 20 ms over 0-0.3 s, the centroids of the ON and of the OFF
+  events within 30 px of the star's line, relative to it (a flux change puts both on the star;
+  a moving image puts ON where it arrives and OFF where it leaves);
+- **OFF by region**: the ghost window, the 200 x 200 star window, the rest; and per radius
+  from the star outside the ghost window.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+STAR_T0_PX = (483.08, 287.11)
+"""The star at t = 0 and its drift [px/s]: the scenario's (bench/make_imx636_pointsource.py)."""
+STAR_V_PX_S = (-2.954, 3.428)
+GHOST_CENTRE_PX = (642.08, 387.03)
+"""The ghost's mirror centre and magnification (the scenario's, measured by measure_ghost)."""
+GHOST_MAGNIFICATION = 0.819
+GHOST_WINDOW = (660, 320, 260, 280)
+STAR_WINDOW = (367, 205, 200, 200)
+STEADY_END_S = 10.47
+"""Radial and sector tables stop here, before the slew (the last 0.3 s)."""
+
+
+Events = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def load(path: str, twin: bool) -> Events:
+    """(t [s] from the first event or from 0 for a twin, x, y [sensor px], p) of a file."""
+    if twin and path.endswith(".npz"):
+        d = np.load(path)
+        ev = d["events"]
+        x0 = int(d["meta/roi_x0_px"]) if "meta/roi_x0_px" in d.files else 0
+        y0 = int(d["meta/roi_y0_px"]) if "meta/roi_y0_px" in d.files else 0
+        t = ev["t"] / 1e6
+    else:
+        from evstwin.io import read_events
+
+        ev = read_events(path)[0]
+        x0 = y0 = 0
+        t = (ev["t"] - (0 if twin else ev["t"][0])) / 1e6
+    return t, ev["x"].astype(float) + x0, ev["y"].astype(float) + y0, np.asarray(ev["p"])
+
+
+def star_track(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return STAR_T0_PX[0] + STAR_V_PX_S[0] * t, STAR_T0_PX[1] + STAR_V_PX_S[1] * t
+
+
+def in_window(x: np.ndarray, y: np.ndarray, w: tuple[int, int, int, int]) -> np.ndarray:
+    return (x >= w[0]) & (x < w[0] + w[2]) & (y >= w[1]) & (y < w[1] + w[3])
+
+
+def report(name: str, ev: Events) -> None:
+    t, x, y, p = ev
+    on, off = p == 1, p == 0
+    print(f"=== {name}: {on.sum()} ON, {off.sum()} OFF")
+    g = in_window(x, y, GHOST_WINDOW)
+    print(f"ghost window: ON {np.sum(g & on)}, OFF {np.sum(g & off)}, ON/OFF {np.sum(g & on) / max(np.sum(g & off), 1):.3f}")
+    sec = np.minimum(t, 10.999).astype(int)
+    print("  per second ON: ", np.bincount(sec[g & on], minlength=11).tolist())
+    print("  per second OFF:", np.bincount(sec[g & off], minlength=11).tolist())
+    for a in (0.0, 10.3):
+        b = ((t - a) / 0.1).astype(int)
+        m = g & (t >= a) & (t < a + 0.5)
+        print(f"  per 100 ms from {a:.1f} s, ON {np.bincount(b[m & on], minlength=5)[:5].tolist()}"
+              f" OFF {np.bincount(b[m & off], minlength=5)[:5].tolist()}")
+
+    sx, sy = star_track(t)
+    cx, cy = GHOST_CENTRE_PX
+    gx, gy = cx - GHOST_MAGNIFICATION * (sx - cx), cy - GHOST_MAGNIFICATION * (sy - cy)
+    dx, dy = x - gx, y - gy
+    rg = np.hypot(dx, dy)
+    keep = t < STEADY_END_S
+    print("ghost per radius [px]: ON and OFF per pixel per second, ON/OFF")
+    for r0 in range(0, 120, 8):
+        m = keep & (rg >= r0) & (rg < r0 + 8)
+        area = np.pi * ((r0 + 8) ** 2 - r0**2) * STEADY_END_S
+        a, b = np.sum(m & on) / area, np.sum(m & off) / area
+        print(f"  {r0:3d}-{r0 + 8:3d}  {a:.4f}  {b:.4f}  {a / b if b else float('nan'):.2f}")
+    v = -GHOST_MAGNIFICATION * np.array(STAR_V_PX_S)
+    cos = (dx * v[0] + dy * v[1]) / np.maximum(rg, 1e-9) / np.hypot(*v)
+    print("ghost per sector (lead: within 60 deg of its motion), ON / OFF")
+    for r0, r1 in ((0, 24), (24, 56), (56, 88), (88, 104)):
+        row = []
+        for label, s in (("lead", cos > 0.5), ("side", np.abs(cos) <= 0.5), ("trail", cos < -0.5)):
+            m = keep & (rg >= r0) & (rg < r1) & s
+            row.append(f"{label} {np.sum(m & on)}/{np.sum(m & off)}")
+        print(f"  r {r0}-{r1}: " + ", ".join(row))
+
+    rs = np.hypot(x - sx, y - sy)
+    near = rs < 30.0
+    print("star image, per 20 ms: ON and OFF counts within 30 px, their centroids less the star's line [px]")
+    for k in range(15):
+        m = near & (t >= 0.02 * k) & (t < 0.02 * (k + 1))
+        cen = []
+        for pol in (on, off):
+            w = m & pol
+            cen.append(f"({np.mean(x[w] - sx[w]):6.1f}, {np.mean(y[w] - sy[w]):6.1f})" if w.any() else "(  -  ,   -  )")
+        print(f"  {0.02 * k:4.2f} s  ON {np.sum(m & on):5d} at {cen[0]}   OFF {np.sum(m & off):5d} at {cen[1]}")
+
+    s = in_window(x, y, STAR_WINDOW) & ~g
+    rest = ~g & ~s
+    print("by region: ON / OFF")
+    for label, m in (("ghost window", g), ("star window", s), ("rest", rest)):
+        print(f"  {label:12s} {np.sum(m & on):8d} {np.sum(m & off):8d}")
+    print("by radius from the star, ghost window left out: ON / OFF")
+    edges = (0, 10, 20, 30, 40, 60, 80, 100, 120, 150, 200, 300, 500, 2000)
+    for r0, r1 in zip(edges[:-1], edges[1:]):
+        m = ~g & (rs >= r0) & (rs < r1)
+        print(f"  {r0:4d}-{r1:4d} {np.sum(m & on):8d} {np.sum(m & off):8d}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("raw", nargs="?", default="../shared/data/imx636_pointsource_evt3.raw")
+    ap.add_argument("--twin", help="a simulated event file of imx636-pointsource (times from 0)")
+    a = ap.parse_args()
+    report("real " + a.raw, load(a.raw, twin=False))
+    if a.twin:
+        report("twin " + a.twin, load(a.twin, twin=True))
+
+
+if __name__ == "__main__":
+    main()
