@@ -16,7 +16,11 @@ its metadata):
   events within 30 px of the star's line, relative to it (a flux change puts both on the star;
   a moving image puts ON where it arrives and OFF where it leaves);
 - **OFF by region**: the ghost window, the 200 x 200 star window, the rest; and per radius
-  from the star outside the ghost window.
+  from the star outside the ghost window; at 150-300 px, per 30 degree sector about the star.
+
+``--dimmed-ghost K OUT.npz`` also simulates the ghost window (seed 0, one thread) with the
+ghost's steady flux times exp(-K t), rescaled to the same mean: an OFF drift of ln I in the
+ghost's pixels, the scenario-level stand-in for an OFF leak; then ``--twin OUT.npz`` reads it.
 """
 
 from __future__ import annotations
@@ -45,8 +49,9 @@ def load(path: str, twin: bool) -> Events:
     if twin and path.endswith(".npz"):
         d = np.load(path)
         ev = d["events"]
-        x0 = int(d["meta/roi_x0_px"]) if "meta/roi_x0_px" in d.files else 0
-        y0 = int(d["meta/roi_y0_px"]) if "meta/roi_y0_px" in d.files else 0
+        # an ROI run's offset: evstwin's metadata, or the keys simulate_dimmed_ghost writes
+        x0 = next((int(d[k]) for k in ("meta/roi_x0_px", "roi_x0_px") if k in d.files), 0)
+        y0 = next((int(d[k]) for k in ("meta/roi_y0_px", "roi_y0_px") if k in d.files), 0)
         t = ev["t"] / 1e6
     else:
         from evstwin.io import read_events
@@ -102,6 +107,22 @@ def report(name: str, ev: Events) -> None:
             row.append(f"{label} {np.sum(m & on)}/{np.sum(m & off)}")
         print(f"  r {r0}-{r1}: " + ", ".join(row))
 
+    centre = keep & (rg < 20.0) & off
+    key = np.round(x[centre]).astype(np.int64) * 4096 + np.round(y[centre]).astype(np.int64)
+    order = np.lexsort((t[centre], key))
+    k_sorted, t_sorted = key[order], t[centre][order]
+    _, first, count = np.unique(k_sorted, return_index=True, return_counts=True)
+    cvs, gaps = [], []
+    for i, n in zip(first, count):
+        if n >= 4:
+            dt = np.diff(t_sorted[i:i + n])
+            cvs.append(dt.std() / dt.mean())
+            gaps.extend(dt.tolist())
+    if cvs:
+        q = np.percentile(gaps, [1, 50])
+        print(f"ghost centre (< 20 px), OFF intervals in the {len(cvs)} pixels with >= 4 OFF: median "
+              f"{q[1]:.2f} s, 1st percentile {q[0]:.2f} s, median CV {np.median(cvs):.2f} (Poisson: 1)")
+
     rs = np.hypot(x - sx, y - sy)
     near = rs < 30.0
     print("star image, per 20 ms: ON and OFF counts within 30 px, their centroids less the star's line [px]")
@@ -113,6 +134,17 @@ def report(name: str, ev: Events) -> None:
             cen.append(f"({np.mean(x[w] - sx[w]):6.1f}, {np.mean(y[w] - sy[w]):6.1f})" if w.any() else "(  -  ,   -  )")
         print(f"  {0.02 * k:4.2f} s  ON {np.sum(m & on):5d} at {cen[0]}   OFF {np.sum(m & off):5d} at {cen[1]}")
 
+    print("star image, per second: RMS distance between the ON and the OFF centroid of each 20 ms [px]")
+    row = []
+    for k in range(10):
+        d2 = []
+        for j in range(50):
+            m = near & (t >= k + 0.02 * j) & (t < k + 0.02 * (j + 1))
+            if np.sum(m & on) >= 20 and np.sum(m & off) >= 20:
+                d2.append((np.mean(x[m & on]) - np.mean(x[m & off])) ** 2 + (np.mean(y[m & on]) - np.mean(y[m & off])) ** 2)
+        row.append(f"{np.sqrt(np.mean(d2)):.1f}" if d2 else "-")
+    print("  ", row)
+
     s = in_window(x, y, STAR_WINDOW) & ~g
     rest = ~g & ~s
     print("by region: ON / OFF")
@@ -123,13 +155,75 @@ def report(name: str, ev: Events) -> None:
     for r0, r1 in zip(edges[:-1], edges[1:]):
         m = ~g & (rs >= r0) & (rs < r1)
         print(f"  {r0:4d}-{r1:4d} {np.sum(m & on):8d} {np.sum(m & off):8d}")
+    m = ~g & (rs >= 150.0) & (rs < 300.0)
+    motion_deg = np.degrees(np.arctan2(STAR_V_PX_S[1], STAR_V_PX_S[0]))
+    rel = (np.degrees(np.arctan2(y - sy, x - sx)) - motion_deg + 180.0) % 360.0 - 180.0
+    sector = ((rel[m] + 180.0) // 30.0).astype(int)
+    print(f"150-300 px, per 30 deg sector from -180 (behind) to +180 about the star's motion ({motion_deg:.0f} deg): ON / OFF")
+    print("   ON ", np.bincount(sector[on[m]], minlength=12)[:12].tolist())
+    print("   OFF", np.bincount(sector[off[m]], minlength=12)[:12].tolist())
+
+
+def simulate_dimmed_ghost(k_per_s: float, out: str) -> None:
+    """The ghost window of imx636-pointsource with the ghost's flux times exp(-k t) (same
+    mean), seed 0, one thread, written as an .npz that ``--twin`` reads."""
+    import dataclasses
+    from importlib.resources import files
+
+    import tomllib
+
+    from evstwin.scenario import build
+    from evstwin.simulate import _Runner
+    from evstwin.targets import LightCurve, Target, with_psf
+
+    @dataclasses.dataclass(frozen=True, eq=False)
+    class Dimmed(Target):
+        inner: Target
+        curve: LightCurve
+        label: str = "ghost"
+
+        def __post_init__(self) -> None:
+            object.__setattr__(self, "brightness", self.curve)
+
+        def position_px(self, t_s: np.typing.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+            return self.inner.position_px(t_s)
+
+        def velocity_px_s(self, t_s: np.typing.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+            return self.inner.velocity_px_s(t_s)
+
+        def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+            return self.inner.max_speed_px_s(t0_s, t1_s)
+
+        def flux_ph_s(self, t_s: np.typing.ArrayLike) -> np.ndarray:
+            return self.curve(t_s)
+
+    text = files("evstwin").joinpath("scenarios/imx636-pointsource.toml").read_text()
+    table = tomllib.loads(text)
+    table["sensor"]["roi"] = list(GHOST_WINDOW)
+    scene = build(table)
+    labels = [tg.label for tg in scene.targets]
+    ghost = scene.targets[labels.index("ghost")]
+    t = np.linspace(0.0, scene.duration_s, 1001)
+    shape = np.exp(-k_per_s * t)
+    mean = float(ghost.flux_ph_s(np.array([0.0]))[0])
+    curve = LightCurve(t, mean * shape / (np.trapezoid(shape, t) / (t[-1] - t[0])))
+    targets = list(scene.targets)
+    targets[labels.index("ghost")] = with_psf(Dimmed(ghost, curve), ghost.psf)
+    runner = _Runner(dataclasses.replace(scene, targets=targets), 1, truth_sink=lambda name, rows: None)
+    ev = np.concatenate([e for e, _ in runner.chunks()])
+    np.savez(out, events=ev, roi_x0_px=np.array(GHOST_WINDOW[0]), roi_y0_px=np.array(GHOST_WINDOW[1]))
+    print(f"wrote {out}: {len(ev)} events, {int(np.sum(ev['p'] == 1))} ON, {int(np.sum(ev['p'] == 0))} OFF")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("raw", nargs="?", default="../shared/data/imx636_pointsource_evt3.raw")
     ap.add_argument("--twin", help="a simulated event file of imx636-pointsource (times from 0)")
+    ap.add_argument("--dimmed-ghost", nargs=2, metavar=("K", "OUT"),
+                    help="first simulate the ghost window with the ghost dimming as exp(-K t) into OUT (.npz)")
     a = ap.parse_args()
+    if a.dimmed_ghost:
+        simulate_dimmed_ghost(float(a.dimmed_ghost[0]), a.dimmed_ghost[1])
     report("real " + a.raw, load(a.raw, twin=False))
     if a.twin:
         report("twin " + a.twin, load(a.twin, twin=True))
