@@ -18,6 +18,11 @@ its metadata):
 - **OFF by region**: the ghost window, the 200 x 200 star window, the rest; and per radius
   from the star outside the ghost window; at 150-300 px, per 30 degree sector about the star.
 
+``--image-motion-scenario OUT.toml`` writes imx636-pointsource with the star's light curve
+replaced by a steady 6e9 photons/s and its image motion as the field's path: the centroid of
+all events within 25 px of the star's line per 10 ms, less the line, smoothed over 3 bins,
+less its mean over 0-10.4 s (the slew included). Compare it on the star window.
+
 ``--dimmed-ghost K OUT.npz`` also simulates the ghost window (seed 0, one thread) with the
 ghost's steady flux times exp(-K t), rescaled to the same mean: an OFF drift of ln I in the
 ghost's pixels, the scenario-level stand-in for an OFF leak; then ``--twin OUT.npz`` reads it.
@@ -164,6 +169,43 @@ def report(name: str, ev: Events) -> None:
     print("   OFF", np.bincount(sector[off[m]], minlength=12)[:12].tolist())
 
 
+IMAGE_MOTION_BIN_S = 0.01
+IMAGE_MOTION_SMOOTH_BINS = 3
+IMAGE_MOTION_RADIUS_PX = 25.0
+
+
+def write_image_motion_scenario(ev: Events, out: str, flux_ph_s: float = 6e9) -> None:
+    """imx636-pointsource with a steady star moved by the measured image motion (docstring)."""
+    import re
+    from importlib.resources import files
+
+    t, x, y, _ = ev
+    sx, sy = star_track(t)
+    near = np.hypot(x - sx, y - sy) < IMAGE_MOTION_RADIUS_PX
+    n = int(np.ceil(t[-1] / IMAGE_MOTION_BIN_S))
+    b = np.minimum((t[near] / IMAGE_MOTION_BIN_S).astype(int), n - 1)
+    count = np.maximum(np.bincount(b, minlength=n), 1)
+    kernel = np.ones(IMAGE_MOTION_SMOOTH_BINS) / IMAGE_MOTION_SMOOTH_BINS
+    pad = IMAGE_MOTION_SMOOTH_BINS // 2
+    offsets = []
+    for d in ((x - sx)[near], (y - sy)[near]):
+        c = np.bincount(b, weights=d, minlength=n) / count
+        c = np.convolve(np.pad(c, pad, mode="edge"), kernel, mode="valid")[:n]
+        offsets.append(c - c[: int(STEADY_END_S / IMAGE_MOTION_BIN_S)].mean())
+    t_mid = (np.arange(n) + 0.5) * IMAGE_MOTION_BIN_S
+    print(f"image motion: RMS {offsets[0].std():.2f} px in x, {offsets[1].std():.2f} px in y")
+    path = "path = {{ t_s = [{}], dx_px = [{}], dy_px = [{}] }}".format(
+        ", ".join(f"{v:.3f}" for v in t_mid), ", ".join(f"{v:.2f}" for v in offsets[0]),
+        ", ".join(f"{v:.2f}" for v in offsets[1]))
+    text = files("evstwin").joinpath("scenarios/imx636-pointsource.toml").read_text()
+    text = re.sub(r"^path = \{.*\}$", lambda _: path, text, flags=re.M)
+    text = re.sub(r"^light_curve = \{.*\}$", f"flux_ph_s = {flux_ph_s:g}", text, count=1, flags=re.M)
+    text = text.replace('name = "imx636-pointsource"', 'name = "imx636-pointsource-image-motion"')
+    with open(out, "w") as f:
+        f.write(text)
+    print(f"wrote {out}")
+
+
 def simulate_dimmed_ghost(k_per_s: float, out: str) -> None:
     """The ghost window of imx636-pointsource with the ghost's flux times exp(-k t) (same
     mean), seed 0, one thread, written as an .npz that ``--twin`` reads."""
@@ -221,10 +263,15 @@ def main() -> None:
     ap.add_argument("--twin", help="a simulated event file of imx636-pointsource (times from 0)")
     ap.add_argument("--dimmed-ghost", nargs=2, metavar=("K", "OUT"),
                     help="first simulate the ghost window with the ghost dimming as exp(-K t) into OUT (.npz)")
+    ap.add_argument("--image-motion-scenario", metavar="OUT",
+                    help="write the scenario with the star's image motion in place of its light curve (TOML)")
     a = ap.parse_args()
     if a.dimmed_ghost:
         simulate_dimmed_ghost(float(a.dimmed_ghost[0]), a.dimmed_ghost[1])
-    report("real " + a.raw, load(a.raw, twin=False))
+    real = load(a.raw, twin=False)
+    if a.image_motion_scenario:
+        write_image_motion_scenario(real, a.image_motion_scenario)
+    report("real " + a.raw, real)
     if a.twin:
         report("twin " + a.twin, load(a.twin, twin=True))
 
