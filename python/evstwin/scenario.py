@@ -34,7 +34,12 @@ The tables mirror the Python objects:
                   below), its geometry, and one brightness: ``flux_ph_s``,
                   ``magnitude`` or ``light_curve = {t_s = [...], flux_ph_s|magnitude = [...]}``;
                   ``frame = "field"`` gives it in field coordinates (it moves with the star
-                  field's drift as well; default ``"sensor"``).
+                  field's drift as well; default ``"sensor"``). ``kind = "ghost"`` mirrors an
+                  earlier target (``of``, ``centre_x_px``, ``centre_y_px``, ``magnification``)
+                  with ``flux_fraction`` of its flux, or of its mean flux, steady, with
+                  ``steady = true`` (``targets.MirroredTarget``). Any target may take its own
+                  defocused PSF: ``defocus_radius_px`` and ``defocus_blur_sigma_px``,
+                  ``defocus_obstruction_ratio``, ``defocus_spider_vanes``.
 ``[star_field]``  a random star field (``n_stars`` or ``density_per_deg2``, magnitudes, seed)
                   and its drift across the sensor, ``drift_px_s = [vx, vy]`` or
                   ``drift_arcsec_s = [wx, wy]`` (through the plate scale): every star moves,
