@@ -255,7 +255,7 @@ STAR_NOTE = """\
 # own scintillation: per 20 ms, ln I rises by 1.3 theta per ON event and falls by 1.3 theta per
 # OFF event of the average pixel within 5 px of the star, less its 1 s running mean (the 1.3
 # makes up for what the pixel's bandwidth and dead time hide; fitted on the 200 x 200 window).
-# Much of it is image motion, not flux: per 20 ms the star's ON and OFF events lie 13-21 px
+# Part of it is image motion, not flux: per 20 ms the star's ON and OFF events lie 13-21 px
 # apart on opposite sides of it (README, "Where the OFF events come from"); a flux flicker
 # stands for it here, which is why the ghost does not share this curve.
 # The companions: the two next brightest sources, (80, -54) and (-91, +66) px from the star
