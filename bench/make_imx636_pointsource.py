@@ -37,8 +37,11 @@ DT_S = 0.02
 GHOST_FRACTION = 0.3
 """The ghost's share of the star's mean flux: set by hand for the ghost window's event count."""
 GHOST_BLUR_SIGMA_PX = 12.0
-"""The ghost disc's edge blur [px]: 4 px (a sharp rim) put 2x the real events per pixel on a
-thin ring (compare --roi 660,320,260,280: worst bin 7.5 % before, 3.3 % at 12 px)."""
+"""The ghost disc's edge blur [px], the best of those tried on its window (`evstwin compare RAW
+SCENARIO --roi 660,320,260,280`, seed 0; blur, share and radius: distance, worst bin): 8 px,
+0.25, 86: 0.711, 3.4 %; 12 px, 0.3, 84: 0.574, 3.3 %; 16 px, 0.3, 80: 0.651, 4.2 %; 20 px,
+0.3, 76: 0.785, 5.6 %; 25 px, 0.35, 70: 0.990, 8.7 %. A sharper rim puts too many events on
+too few pixels, a softer one too few on too many."""
 GHOST_RIM_PX = 4.0
 """Taken off the measured radius (where the events per pixel halve) so the blurred disc's
 half-light radius stays near it."""
