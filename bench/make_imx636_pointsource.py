@@ -34,6 +34,18 @@ import numpy as np
 DT_S = 0.02
 """Light-curve and centroid bin [s]."""
 
+GHOST_FRACTION = 0.3
+"""The ghost's share of the star's mean flux: set by hand for the ghost window's event count."""
+GHOST_BLUR_SIGMA_PX = 12.0
+"""The ghost disc's edge blur [px], the best of those tried on its window (`evstwin compare RAW
+SCENARIO --roi 660,320,260,280`, seed 0; blur, share and radius: distance, worst bin): 8 px,
+0.25, 86: 0.711, 3.4 %; 12 px, 0.3, 84: 0.574, 3.3 %; 16 px, 0.3, 80: 0.651, 4.2 %; 20 px,
+0.3, 76: 0.785, 5.6 %; 25 px, 0.35, 70: 0.990, 8.7 %. A sharper rim puts too many events on
+too few pixels, a softer one too few on too many."""
+GHOST_RIM_PX = 4.0
+"""Taken off the measured radius (where the events per pixel halve) so the blurred disc's
+half-light radius stays near it."""
+
 
 def measure(path: str, gain: float, theta: float) -> dict[str, object]:
     from evstwin.io import read_events
@@ -246,13 +258,16 @@ STAR_NOTE = """\
 # own scintillation: per 20 ms, ln I rises by 1.3 theta per ON event and falls by 1.3 theta per
 # OFF event of the average pixel within 5 px of the star, less its 1 s running mean (the 1.3
 # makes up for what the pixel's bandwidth and dead time hide; fitted on the 200 x 200 window).
+# Part of it is image motion, not flux: per 20 ms the star's ON and OFF events lie 13-21 px
+# apart on opposite sides of it (README, "Where the OFF events come from"); a flux flicker
+# stands for it here, which is why the ghost does not share this curve.
 # The companions: the two next brightest sources, (80, -54) and (-91, +66) px from the star
 # all along the run (both move with it), 3e8 photons/s each (V = -0.2), steady.
 """
 
 
 def to_toml(res: dict[str, object], flux_ph_s: float, companions_ph_s: tuple[float, float],
-            header: str = "", body: str = "", ghost_fraction: float = 0.0055) -> str:
+            header: str = "", body: str = "", ghost_fraction: float = GHOST_FRACTION) -> str:
     """The scenario: ``header`` (comments and tables before the targets) then the measured
     drift, the star with its light curve and the two companions (field frame)."""
     t = res["light_curve_t_s"]
@@ -277,11 +292,12 @@ def to_toml(res: dict[str, object], flux_ph_s: float, companions_ph_s: tuple[flo
                    f"x_px = {cx}\ny_px = {cy}\nflux_ph_s = {f:.4g}\n")
     g = res["ghost"]
     assert isinstance(g, dict)
-    out.append(GHOST_NOTE.format(fraction=ghost_fraction, **g))
+    out.append(GHOST_NOTE.format(fraction=ghost_fraction, blur=GHOST_BLUR_SIGMA_PX, **g))
     out.append("[[targets]]\nkind = \"ghost\"\nlabel = \"ghost\"\nof = \"star\"\n"
                f"centre_x_px = {g['centre_px'][0]}\ncentre_y_px = {g['centre_px'][1]}\n"
-               f"magnification = {g['magnification']}\nflux_fraction = {ghost_fraction:g}\n"
-               f"defocus_radius_px = {g['radius_px']:g}\ndefocus_blur_sigma_px = 4.0\n"
+               f"magnification = {g['magnification']}\nflux_fraction = {ghost_fraction:g}\nsteady = true\n"
+               f"defocus_radius_px = {g['radius_px'] - GHOST_RIM_PX:g}\n"
+               f"defocus_blur_sigma_px = {GHOST_BLUR_SIGMA_PX:g}\n"
                "defocus_obstruction_ratio = 0.0\ndefocus_spider_vanes = 0\n")
     return "\n".join(out)
 
@@ -298,12 +314,18 @@ GHOST_NOTE = """\
 # The ghost: a disc of events about (780, 460) that moves against the star, a reflection of it
 # focused far from the sensor. Measured (measure_ghost): mirrored through ({centre_px[0]}, {centre_px[1]})
 # with magnification {magnification}, radius {radius_px:g} px (half its inner events per pixel),
-# no obstruction or vane shadows, {events_within_110_px} events within 110 px of it. Its share of
-# the star's light, {fraction:g}, is set by hand so that the 260 x 280 window about it
-# (evstwin compare RAW imx636-pointsource --roi 660,320,260,280) gets the real count: 65,833
-# against 65,662 (seed 0). It is a steep threshold (a 92 px disc: 0.005 gave 33,647 events and
-# 0.006 71,815): the pixels there follow the scintillation only once bright enough. The twin
-# gives it ON/OFF 1.2 where the real ghost has 0.66: not reproduced.
+# no obstruction or vane shadows, {events_within_110_px} events within 110 px of it.
+# steady: its events come at a steady ~6,000/s all through the run, ON ahead of its motion and
+# OFF behind it (python bench/imx636_ghost_polarity.py), with no trace of the star's light-curve
+# excursions (x17 at 0.07 s, the slew's rise at 10.6 s). Those excursions are mostly the star's
+# image moving (its ON and OFF events lie 10-35 px apart, on opposite sides), which a wide, dim
+# (slow) ghost does not follow; sharing the curve, the ghost fired 64,000 of its 65,800 events
+# in those two bursts. So the ghost keeps {fraction:g} of the star's mean flux, steady; its
+# events then come from its drift over the pixels. The share is set by hand for the window's
+# count (evstwin compare RAW imx636-pointsource --roi 660,320,260,280: 66,444 against 65,662,
+# seed 0); it is not a reflectance: with the preset's assumed dark current (18,000 e-/s, the
+# DAVIS346's) a disc this wide must bring ~2x the dark current per pixel for its edge to fire.
+# A flat disc (blur {blur:g} px) fires at its rim, where the real ghost also fires inside.
 """
 
 
@@ -316,7 +338,8 @@ def main() -> None:
     ap.add_argument("--toml", help="write the scenario here")
     ap.add_argument("--flux", type=float, default=6e9, help="the star's mean flux [photons/s]")
     ap.add_argument("--companion-flux", type=float, nargs=2, default=(3e8, 3e8))
-    ap.add_argument("--ghost-fraction", type=float, default=0.0055, help="the ghost's share of the star's light")
+    ap.add_argument("--ghost-fraction", type=float, default=GHOST_FRACTION,
+                    help="the ghost's share of the star's mean light")
     a = ap.parse_args()
     res = measure(a.raw, a.gain, a.theta)
     text = json.dumps(res)

@@ -34,7 +34,12 @@ The tables mirror the Python objects:
                   below), its geometry, and one brightness: ``flux_ph_s``,
                   ``magnitude`` or ``light_curve = {t_s = [...], flux_ph_s|magnitude = [...]}``;
                   ``frame = "field"`` gives it in field coordinates (it moves with the star
-                  field's drift as well; default ``"sensor"``).
+                  field's drift as well; default ``"sensor"``). ``kind = "ghost"`` mirrors an
+                  earlier target (``of``, ``centre_x_px``, ``centre_y_px``, ``magnification``)
+                  with ``flux_fraction`` of its flux, or of its mean flux, steady, with
+                  ``steady = true`` (``targets.MirroredTarget``). Any target may take its own
+                  defocused PSF: ``defocus_radius_px`` and ``defocus_blur_sigma_px``,
+                  ``defocus_obstruction_ratio``, ``defocus_spider_vanes``.
 ``[star_field]``  a random star field (``n_stars`` or ``density_per_deg2``, magnitudes, seed)
                   and its drift across the sensor, ``drift_px_s = [vx, vy]`` or
                   ``drift_arcsec_s = [wx, wy]`` (through the plate scale): every star moves,
@@ -136,7 +141,7 @@ _TARGET_KEYS: dict[str, tuple[str, ...]] = {
     "rotating_bar": ("centre_x_px", "centre_y_px", "radii_px", "radii_m", "distance_m", "period_s",
                      "angular_rate_rad_s", "phase_rad"),
     "tabulated": ("t_s", "x_px", "y_px", "outside"),
-    "ghost": ("of", "centre_x_px", "centre_y_px", "magnification", "flux_fraction"),
+    "ghost": ("of", "centre_x_px", "centre_y_px", "magnification", "flux_fraction", "steady"),
     "tle": sky_scene.TLE_KEYS,
 }
 _TARGET_PSF_KEYS = ("defocus_radius_px", "defocus_blur_sigma_px", "defocus_obstruction_ratio", "defocus_spider_vanes")
@@ -346,6 +351,8 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
                                     "and the share of its flux")
         if not isinstance(target["of"], str):
             raise ScenarioError(f"targets[{i}].of must be the label of an earlier target; got {target['of']!r}")
+        if not isinstance(target.get("steady", False), bool):
+            raise ScenarioError(f"targets[{i}].steady must be true or false; got {target['steady']!r}")
         return
     given = [k for k in _BRIGHTNESS_KEYS if k in target]
     if len(given) != 1 and kind != "tle":
@@ -1112,7 +1119,8 @@ def _ghost(table: dict[str, Any], earlier: list[Target], width: int, height: int
                          f"{'found ' + str(len(match)) if match else 'none has that label'} (labels: {labels})")
     return MirroredTarget(match[0], float(table.get("centre_x_px", (width - 1) / 2)),
                           float(table.get("centre_y_px", (height - 1) / 2)), float(table.get("magnification", 1.0)),
-                          float(table["flux_fraction"]), label=str(table.get("label", "ghost")))
+                          float(table["flux_fraction"]), label=str(table.get("label", "ghost")),
+                          steady=table.get("steady", False))
 
 
 def _defocus(table: dict[str, Any], optics: Optics) -> psf.PSFShape:

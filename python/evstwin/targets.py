@@ -557,6 +557,12 @@ class MirroredTarget(Target):
     at every time (a light curve included). A reflection between lens surfaces or the sensor
     window forms an image of a bright star on the far side of the optical axis, moving the
     opposite way, usually defocused (give it its own PSF with :func:`with_psf`).
+
+    ``steady=True``: the ghost keeps ``flux_fraction`` of the source's *mean* flux (a light
+    curve's time average over its table, :func:`mean_flux_ph_s`) and does not follow the light
+    curve. For a source whose light curve stands for more than its flux (a star's curve read
+    from its own events also holds its image's jitter, which a wide defocused ghost does not
+    see: ``imx636-pointsource``).
     """
 
     source: Target
@@ -565,6 +571,7 @@ class MirroredTarget(Target):
     magnification: float = 1.0
     flux_fraction: float = 1.0
     label: str = "ghost"
+    steady: bool = False
     brightness: Brightness = dataclasses.field(init=False)
 
     def __post_init__(self) -> None:
@@ -580,8 +587,13 @@ class MirroredTarget(Target):
             raise ValueError(f"flux_fraction must be in (0, 1]; got flux_fraction={self.flux_fraction!r}")
         # Its own brightness, the source's scaled (not a flux_ph_s override): wrappers that
         # take a target's brightness (drifting, shifted, the atmosphere) then keep the share.
+        if not isinstance(self.steady, bool):
+            raise ValueError(f"steady must be True or False; got steady={self.steady!r}")
         b = self.source.brightness
-        scaled = (dataclasses.replace(b, flux_ph_s=f * b.flux_ph_s) if isinstance(b, LightCurve) else f * float(b))
+        if self.steady:
+            scaled: Brightness = f * mean_flux_ph_s(b)
+        else:
+            scaled = dataclasses.replace(b, flux_ph_s=f * b.flux_ph_s) if isinstance(b, LightCurve) else f * float(b)
         object.__setattr__(self, "brightness", scaled)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -597,7 +609,26 @@ class MirroredTarget(Target):
         return self.magnification * self.source.max_speed_px_s(t0_s, t1_s)
 
     def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
+        if self.steady:
+            return np.full(np.shape(_times(t_s)), mean_flux_ph_s(self.brightness))
         return self.flux_fraction * self.source.flux_ph_s(t_s)
+
+
+def mean_flux_ph_s(brightness: Brightness) -> float:
+    """A brightness's mean flux [photons/s]: a constant itself, a light curve's time average
+    over its table (trapezoids between its points, linear or in ln as it interpolates; a
+    one-point table its value)."""
+    if not isinstance(brightness, LightCurve):
+        return float(brightness)
+    t, flux = brightness.t_s, brightness.flux_ph_s
+    if t.size == 1:
+        return float(flux[0])
+    if brightness.log_interp:  # ln(flux) linear: the mean of an exponential over each step
+        a, b = flux[:-1], flux[1:]
+        ratio = np.log(b / a)
+        step = np.where(np.abs(ratio) > 1e-12, (b - a) / np.where(ratio == 0.0, 1.0, ratio), a)
+        return float(np.sum(step * np.diff(t)) / (t[-1] - t[0]))
+    return float(np.sum(0.5 * (flux[:-1] + flux[1:]) * np.diff(t)) / (t[-1] - t[0]))
 
 
 @dataclass(frozen=True, eq=False)

@@ -149,6 +149,57 @@ def test_a_ghost_keeps_its_share_of_a_light_curve_through_the_wrappers() -> None
         np.testing.assert_allclose(t.flux_ph_s([0.0, 0.5, 1.0]), [1e5, 2e5, 3e5])
 
 
+def test_a_steady_ghost_keeps_its_share_of_the_mean_flux() -> None:
+    from evstwin.targets import LightCurve, mean_flux_ph_s
+
+    # linear between points: (1 + 3) / 2 over the first second, 3 over the next two -> 8/3 e6
+    curve = LightCurve(np.array([0.0, 1.0, 3.0]), np.array([1e6, 3e6, 3e6]))
+    assert mean_flux_ph_s(curve) == pytest.approx(8e6 / 3.0)
+    # linear in ln: the mean of 1e6 exp(t) over [0, 1] is (e - 1) 1e6
+    assert mean_flux_ph_s(LightCurve(np.array([0.0, 1.0]), np.array([1e6, math.e * 1e6]), log_interp=True)) == \
+        pytest.approx((math.e - 1.0) * 1e6)
+    assert mean_flux_ph_s(LightCurve(np.array([2.0]), np.array([5e5]))) == 5e5 and mean_flux_ph_s(7.0) == 7.0
+    star = StaticTarget(10.0, 10.0, curve, label="star")
+    ghost = MirroredTarget(star, 50.0, 50.0, flux_fraction=0.1, steady=True)
+    assert ghost.brightness == pytest.approx(8e5 / 3.0)
+    for t in (ghost, shifted(ghost, -5.0, 7.0), drifting(ghost, 1.0, 1.0)):
+        np.testing.assert_allclose(t.flux_ph_s([0.0, 0.5, 2.0, 9.0]), 8e5 / 3.0)
+    with pytest.raises(ValueError, match="steady must be True or False; got steady=1"):
+        MirroredTarget(star, 0.0, 0.0, steady=1)  # type: ignore[arg-type]
+
+
+def steady_ghost_scenario(steady: bool) -> dict:
+    """A still star whose light triples at 0.2 s and its ghost, noise-free."""
+    s = ghost_scenario()
+    s["targets"][0] = {"kind": "static", "label": "star", "x_px": 20.0, "y_px": 20.0,
+                       "light_curve": {"t_s": [0.0, 0.2, 0.21, 0.4], "flux_ph_s": [1e10, 1e10, 3e10, 3e10]}}
+    s["targets"][1]["steady"] = steady
+    return s
+
+
+def test_a_steady_ghost_stays_dark_where_a_sharing_one_fires() -> None:
+    # Nothing moves: with its light steady, no pixel of the ghost's disc may fire (noise-free).
+    # Sharing the star's x3 step, each pixel of its inside goes from B + G to B + 3 G, with
+    # G = 0.5 x 1e10 / (pi 6^2) = 4.4e7 and the background B = 3.5e7 photons/s: ln(1.68e8 /
+    # 7.9e7) = 0.755 = 3.7 theta_on (0.206), so 3 ON events a pixel (2 to 4 allowed: the
+    # blurred rim and the source follower's lag).
+    gx, gy = 47.5 - 0.8 * (20.0 - 47.5), 31.5 - 0.8 * (20.0 - 31.5)
+    yy, xx = np.mgrid[0:64, 0:96]
+    n_inside = int(np.sum(np.hypot(xx - gx, yy - gy) < 4.0))
+    counts = {}
+    for steady in (False, True):
+        ev = evstwin.simulate(steady_ghost_scenario(steady)).events
+        inside = np.hypot(ev["x"] - gx, ev["y"] - gy) < 4.0
+        counts[steady] = int(np.sum(inside))
+        assert np.all(ev["p"][inside] == 1)  # only a rise, if anything
+    assert counts[True] == 0
+    assert 2 * n_inside <= counts[False] <= 4 * n_inside
+    s = steady_ghost_scenario(True)
+    s["targets"][1]["steady"] = 1
+    with pytest.raises(ScenarioError, match="targets\\[1\\].steady must be true or false; got 1"):
+        build(s)
+
+
 def test_a_ghost_with_image_motion_or_scintillation_is_refused() -> None:
     s = ghost_scenario()
     s["atmosphere"] = {"jitter_rms_arcsec": 1.0, "jitter_tau_s": 0.05}

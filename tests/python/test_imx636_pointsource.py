@@ -61,8 +61,21 @@ def test_the_ghost_mirrors_the_star_through_the_measured_centre(t: float) -> Non
     assert float(gy[0]) == pytest.approx(387.03 - 0.819 * (float(sy[0]) - 387.03), abs=1e-9)
     assert float(gx[0]) == pytest.approx(772.3 + 2.298 * t, abs=1.5)  # the measured line itself
     assert float(gy[0]) == pytest.approx(468.9 - 2.912 * t, abs=1.5)
-    np.testing.assert_allclose(ghost.flux_ph_s(np.array([t])), 0.0055 * star.flux_ph_s(np.array([t])))
-    assert ghost.psf is not None and ghost.psf.params["radius_px"] == 88.0
+    assert ghost.psf is not None and ghost.psf.params["radius_px"] == 84.0
+
+
+def test_the_ghost_is_steady_at_its_share_of_the_stars_mean_light() -> None:
+    # The real ghost fires ~6,000 events/s all through the run and none of the star's light
+    # curve's bursts (bench/imx636_ghost_polarity.py): it keeps 0.3 of the star's mean flux.
+    # The star's curve is scaled to a mean of 6e9 photons/s over its 10 ms points (the mean of
+    # its table, by the trapezoid rule here, is within 1 % of it).
+    scene = build(NAME)
+    star, ghost = scene.targets[0], scene.targets[3]
+    t = np.linspace(0.0, 10.77, 2155)
+    star_flux = star.flux_ph_s(t)
+    assert star_flux.max() / star_flux.min() > 100.0  # the star's curve does vary
+    np.testing.assert_allclose(ghost.flux_ph_s(t), 0.3 * float(np.trapezoid(star_flux, t) / (t[-1] - t[0])), rtol=1e-3)
+    assert float(ghost.flux_ph_s(np.array([5.0]))[0]) == pytest.approx(0.3 * 6e9, rel=0.01)
 
 
 def test_short_window_simulates_and_its_star_drifts() -> None:
