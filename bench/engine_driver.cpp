@@ -3,7 +3,8 @@
 // source on, 400 samples at 1 kHz in 4 calls. CUTOFF_HZ (default 10, the reference load)
 // sets the source follower's cutoff: 200 Hz makes the event-heavy load (the 18,000 e-/s dark
 // current's shot noise then crosses the thresholds ~180 times a pixel a second). THREADS
-// (default 1) is the engine's thread count.
+// (default 1) is the engine's thread count. "pole" is "continuous" with the photoreceptor pole
+// (pr_pole, as the DAVIS346 presets and mcreynolds have it).
 //
 //   g++ -std=c++17 -O3 -DNDEBUG -fopenmp -Icpp/include bench/engine_driver.cpp -o /tmp/engine_driver
 //   valgrind --tool=callgrind /tmp/engine_driver continuous 64          # or: sampled 64
@@ -17,13 +18,16 @@
 #include <vector>
 
 int main(int argc, char** argv) {
-    if (argc < 3 || argc > 5 || (std::strcmp(argv[1], "continuous") != 0 && std::strcmp(argv[1], "sampled") != 0)) {
-        std::fprintf(stderr, "usage: %s continuous|sampled HEIGHT [CUTOFF_HZ [THREADS]]\n", argv[0]);
+    const bool pole = argc >= 2 && std::strcmp(argv[1], "pole") == 0;
+    if (argc < 3 || argc > 5 ||
+        (std::strcmp(argv[1], "continuous") != 0 && std::strcmp(argv[1], "sampled") != 0 && !pole)) {
+        std::fprintf(stderr, "usage: %s continuous|pole|sampled HEIGHT [CUTOFF_HZ [THREADS]]\n", argv[0]);
         return 2;
     }
     evstwin::PixelParams p;
     p.threshold_sigma = 0.03;
     p.noise_model = std::strcmp(argv[1], "sampled") == 0 ? evstwin::NoiseModel::Sampled : evstwin::NoiseModel::Continuous;
+    p.pr_pole = pole;
     const int width = 346, height = std::atoi(argv[2]), samples = 100;
     if (height < 1 || height > 260) {
         std::fprintf(stderr, "HEIGHT must be in [1, 260]; got %s\n", argv[2]);

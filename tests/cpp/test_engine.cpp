@@ -257,7 +257,7 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     q.t0 = 0.010; q.t1 = 0.011; q.bridge_stage = true;
     const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background) {
         BlockSoA::Levels out = h.buf[1];
-        std::vector<std::uint8_t> busy(n, 7);
+        std::vector<std::uint64_t> busy(n, 7);
         QuietPass qq = q;
         qq.next = &out;
         qq.busy = busy.data();
@@ -274,9 +274,9 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
         for (const auto* v : {&out.x, &out.z, &out.y, &out.nz, &out.ny, &out.ref, &out.clock_on, &out.clock_off})
             add(v->data(), n * sizeof(double));
         add(out.n.data(), n * sizeof(std::uint64_t));
-        add(busy.data(), n);
+        add(busy.data(), n * sizeof(std::uint64_t));
         std::size_t classes[3] = {0, 0, 0};
-        for (std::uint8_t b : busy) classes[b < 3 ? b : 0] += b < 3;
+        for (std::uint64_t b : busy) classes[b < 3 ? b : 0] += b < 3;
         return std::make_pair(bytes, classes[0] > 0 && classes[1] > 0 && classes[2] > 0);
     };
     const SimdLevel before = simd_level();

@@ -284,7 +284,10 @@ struct BlockSoA {
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
     std::vector<double> theta_on, theta_off, leak_hz, bg_on_hz, bg_off_hz;  ///< constant in a run
     std::vector<std::uint64_t> spare_words, spare_sample;  ///< changed in place by the word batch
-    std::vector<std::uint8_t> busy;
+    /// The quiet pass's verdict per pixel (0 quiet, 1 bridge, 2 per-pixel path), 64-bit like
+    /// the levels: a byte array would make the vectoriser take 64 pixels an iteration (one
+    /// byte vector), eight zmm registers per level, and spill them to the stack.
+    std::vector<std::uint64_t> busy;
 
     Levels& now() { return buf[cur]; }
     const Levels& now() const { return buf[cur]; }
@@ -341,7 +344,7 @@ struct QuietPass {
     BlockSoA::Levels* next;
     const double *refr_until, *next_hot_t, *theta_on, *theta_off, *leak_hz, *bg_on_hz, *bg_off_hz;
     const double *g1, *g2;
-    std::uint8_t* busy;
+    std::uint64_t* busy;
     std::size_t count;
     double rate;  ///< the common photon rate: the pixels at any other are left busy
     double cx, pole_decay, pole_ramp;                 ///< NoiseCache's x and pole numbers at that rate
@@ -368,6 +371,13 @@ inline std::size_t next_flagged(const std::uint8_t* flag, std::size_t from, std:
         if (eight) break;
     }
     for (; i < n; ++i)
+        if (flag[i]) return i;
+    return n;
+}
+
+/// The first index i in [from, n) with flag[i] != 0 (n if none), for 64-bit flags.
+inline std::size_t next_flagged(const std::uint64_t* flag, std::size_t from, std::size_t n) {
+    for (std::size_t i = from; i < n; ++i)
         if (flag[i]) return i;
     return n;
 }
@@ -417,7 +427,7 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double* __restrict boff = q.bg_off_hz;
     const double* __restrict g1 = q.g1;
     const double* __restrict g2 = q.g2;
-    std::uint8_t* __restrict busy = q.busy;
+    std::uint64_t* __restrict busy = q.busy;
     constexpr bool pole = Chain == QuietChain::PoleSf;
     const double x = q.cx, common = q.rate;
     const double pole_decay = q.pole_decay, pole_ramp = q.pole_ramp, sf_decay = q.sf_decay, sf_ramp = q.sf_ramp;
@@ -476,8 +486,8 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         ooff[j] = off;
         on_[j] = sn[j] + 1u;
         // 0, 1 or 2 as arithmetic: a nested select here becomes a branch and stops the vectoriser.
-        const unsigned not_quiet = !quiet;
-        busy[j] = static_cast<std::uint8_t>(2u * not_quiet - (not_quiet & static_cast<unsigned>(bridge)));
+        const std::uint64_t not_quiet = !quiet;
+        busy[j] = 2u * not_quiet - (not_quiet & static_cast<std::uint64_t>(bridge));
     }
 }
 
@@ -1295,7 +1305,7 @@ struct PixelModel {
         // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling.
         q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
         detail::quiet_pass<Chain>(q, rate, noise, background);
-        std::uint8_t* busy = h.busy.data();
+        std::uint64_t* busy = h.busy.data();
         if (q.bridge_stage) bridge_stage(h, ids, n, common, c, key, scratch);
         // The busy pixels, from their state at c.t0 (now), as step_continuous() does; their new
         // state goes to next, beside the quiet ones'.
@@ -1333,7 +1343,7 @@ struct PixelModel {
                       const SampleConstants& c, Philox4x32Key key, BlockScratch& scratch) const {
         const BlockSoA::Levels& now = h.now();
         const BlockSoA::Levels& next = h.next();
-        std::uint8_t* busy = h.busy.data();
+        std::uint64_t* busy = h.busy.data();
         const double t_start = c.t0;
         const double sigma2 = 4.0 * common.k.bridge_var * c.inv_dt;
         const double span = c.t1 - t_start;
