@@ -66,8 +66,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--budget", type=int, default=40, help="number of trials (default 40)")
     p.add_argument("--runs-per-trial", type=int, default=1, help="seeds averaged per trial (default 1)")
     p.add_argument("--intervals", action="store_true",
-                   help="also give each parameter an interval from the distance's curvature at the best (2 more "
-                        "trials a parameter; needs --runs-per-trial >= 2; default: off)")
+                   help="also give each parameter an interval: with the chi-square (--sampler ls), +- one "
+                        "standard error of the least-squares estimate (2 more trials a parameter and 8 more runs "
+                        "at the best); with compare's distance, from its curvature at the best (2 more trials a "
+                        "parameter; needs --runs-per-trial >= 2). Default: off")
     p.add_argument("--seed", type=int, default=0, help="sampler seed and first simulation seed (default 0)")
     p.add_argument(
         "--sampler",
