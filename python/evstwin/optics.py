@@ -167,6 +167,13 @@ def broadband_zero_point_ph_s_m2(lambda_min_m: float, lambda_max_m: float) -> fl
 
 # ---------------------------------------------------------------------------------------------
 
+PAPER_FOCAL_LENGTH_M = 0.041
+"""The paper's lab lens (sec. 3.1): 41 mm (Fujinon 7-70 mm zoom) [m]; :class:`Optics`'s default,
+and a scenario's when [optics] gives no focal_length_m."""
+PAPER_F_NUMBER = 1.8
+"""The paper's lab lens's focal ratio (sec. 3.1): f/1.8; :class:`Optics`'s default, and a
+scenario's when [optics] gives no f_number."""
+
 
 @dataclass(frozen=True)
 class Optics:
@@ -175,9 +182,9 @@ class Optics:
     Defaults: the paper's lab setup (sec. 3.1), a 41 mm f/1.8 lens on a DAVIS346.
     """
 
-    focal_length_m: float = 0.041
+    focal_length_m: float = PAPER_FOCAL_LENGTH_M
     """Focal length f [m]. Paper sec. 3.1: 41 mm (Fujinon 7-70 mm zoom)."""
-    f_number: float = 1.8
+    f_number: float = PAPER_F_NUMBER
     """Focal ratio N (sets the diffraction PSF, eq. 17). Paper: f/1.8."""
     pixel_pitch_m: float = DAVIS346_PIXEL_PITCH_M
     """Pixel pitch [m]. DAVIS346: 18.5 um."""

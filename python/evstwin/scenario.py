@@ -87,13 +87,18 @@ from typing import Any
 import numpy as np
 
 from . import psf
-from .optics import Optics
+from .optics import PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M, Optics
 from .pixel import PixelParams
 from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
 from .readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S, ReadoutParams
 from .sensor import MAX_MAX_EVENTS
 from .sky import scene as sky_scene
-from .sky.atmosphere import ATMOSPHERE_KEYS, Atmosphere, atmosphere_from_table
+from .sky.atmosphere import (
+    ATMOSPHERE_KEYS,
+    MIN_SAMPLES_PER_SCINTILLATION_TAU,
+    Atmosphere,
+    atmosphere_from_table,
+)
 from .targets import (
     MAX_STARS,
     CircularTarget,
@@ -600,7 +605,8 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
 
     optics_kw = dict(s.get("optics", {}))
     optics = _wrap(
-        "optics", preset.optics, optics_kw.pop("focal_length_m", 0.041), optics_kw.pop("f_number", 1.8), **optics_kw
+        "optics", preset.optics, optics_kw.pop("focal_length_m", PAPER_FOCAL_LENGTH_M),
+        optics_kw.pop("f_number", PAPER_F_NUMBER), **optics_kw
     )
     optics = _wrap(f"optics={s.get('optics', {})}", optics.replace, width_px=width, height_px=height)
 
@@ -688,8 +694,9 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             if density is None:
                 from .sky import stars as sky_stars
 
-                density = _wrap("star_field", sky_stars.density_per_deg2, sf.get("mag_min", 6.0), sf.get("mag_max", 12.0),
-                                sf.get("density_scale", 1.0))
+                density = _wrap("star_field", sky_stars.density_per_deg2,
+                                sf.get("mag_min", sky_stars.STAR_FIELD_MAG_MIN),
+                                sf.get("mag_max", sky_stars.STAR_FIELD_MAG_MAX), sf.get("density_scale", 1.0))
             n_stars = density * width * height * px_deg * px_deg
         if n_stars is not None and n_stars > 0 and not n_stars * swept <= MAX_STARS:
             which = "star_field.n_stars" if "n_stars" in sf else "star_field.density_per_deg2"
@@ -763,11 +770,12 @@ def _atmosphere(s: dict[str, Any], optics: Optics, elevation_deg: float | None =
     if atmosphere.scintillation is not None:
         tau = float(atmosphere.scintillation_tau_s(optics))  # type: ignore[arg-type]
         rate = float(s["sampling"]["rate_hz"])
-        if rate * tau < 2.0:
+        if rate * tau < MIN_SAMPLES_PER_SCINTILLATION_TAU:
             raise ScenarioError(
                 f"atmosphere.scintillation: its correlation time is {tau:.3g} s (the aperture's D_eff / wind_speed_m_s, "
                 f"or scintillation_tau_s) and sampling.rate_hz={s['sampling']['rate_hz']!r} samples it {rate * tau:.3g} "
-                f"times: raise sampling.rate_hz to at least {math.ceil(2.0 / tau)} (2 samples per correlation time)"
+                f"times: raise sampling.rate_hz to at least {math.ceil(MIN_SAMPLES_PER_SCINTILLATION_TAU / tau)} "
+                f"({MIN_SAMPLES_PER_SCINTILLATION_TAU} samples per correlation time)"
             )
     return atmosphere
 

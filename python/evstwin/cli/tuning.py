@@ -66,8 +66,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--budget", type=int, default=40, help="number of trials (default 40)")
     p.add_argument("--runs-per-trial", type=int, default=1, help="seeds averaged per trial (default 1)")
     p.add_argument("--intervals", action="store_true",
-                   help="also give each parameter an interval from the distance's curvature at the best (2 more "
-                        "trials a parameter; needs --runs-per-trial >= 2; default: off)")
+                   help="also give each parameter an interval: with the chi-square (--sampler ls), +- one "
+                        "standard error of the least-squares estimate (2 more trials a parameter and 8 more runs "
+                        "at the best); with compare's distance, from its curvature at the best (2 more trials a "
+                        "parameter; needs --runs-per-trial >= 2). Default: off")
     p.add_argument("--seed", type=int, default=0, help="sampler seed and first simulation seed (default 0)")
     p.add_argument(
         "--sampler",
@@ -392,14 +394,15 @@ def _setup(args: argparse.Namespace) -> Setup | None:
         except ValueError as exc:
             raise ValueError(f"--bias-set: {exc}") from None
     if args.scintillation:
-        from ..sky.atmosphere import Scintillation
+        from ..sky.atmosphere import MIN_SAMPLES_PER_SCINTILLATION_TAU, Scintillation
 
         d_m = args.aperture_mm * 1e-3 if args.aperture_mm is not None else args.focal_length_mm * 1e-3 / args.f_number
         tau = Scintillation().correlation_time_s(d_m)
-        if args.rate_hz * tau < 2.0:
+        if args.rate_hz * tau < MIN_SAMPLES_PER_SCINTILLATION_TAU:
             raise ValueError(f"--scintillation: its correlation time is {tau * 1e3:.3g} ms with this aperture, and "
                              f"--rate-hz {args.rate_hz:g} samples it {args.rate_hz * tau:.2g} times: give --rate-hz "
-                             f"{math.ceil(2.0 / tau)} or more (2 samples per correlation time)")
+                             f"{math.ceil(MIN_SAMPLES_PER_SCINTILLATION_TAU / tau)} or more "
+                             f"({MIN_SAMPLES_PER_SCINTILLATION_TAU} samples per correlation time)")
     return Setup(
         preset=args.preset, bias_set=args.bias_set, focal_length_m=args.focal_length_mm * 1e-3,
         f_number=args.f_number, aperture_diameter_m=None if args.aperture_mm is None else args.aperture_mm * 1e-3,

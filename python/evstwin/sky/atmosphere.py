@@ -75,7 +75,8 @@ equal to sigma_Y^2(t) (both fall as 1/t) fixes ``s^2`` by ``G(s^2) = sigma_Y^2(1
 tau_c)``; the instantaneous scintillation index (variance of m) is then ``exp(s^2) - 1``. The
 process is drawn on a grid of step ``tau_c / 8`` and interpolated linearly (a source's
 ``LightCurve``). The event sensor has no exposure: it sees m(t) itself, so the simulation's
-sample rate must resolve tau_c (``build`` asks for at least 2 samples per tau_c).
+sample rate must resolve tau_c (``build`` asks for at least
+:data:`MIN_SAMPLES_PER_SCINTILLATION_TAU` samples per tau_c).
 """
 
 from __future__ import annotations
@@ -112,6 +113,10 @@ JITTER_STEPS_PER_TAU = 16
 """Grid points per correlation time of the image-motion process."""
 SCINTILLATION_STEPS_PER_TAU = 8
 """Grid points per correlation time of the scintillation process."""
+MIN_SAMPLES_PER_SCINTILLATION_TAU = 2
+"""The fewest simulation samples (sampling.rate_hz x tau_c) per correlation time of the
+scintillation that a scene (and ``limiting-magnitude --scintillation``) accepts: the event
+sensor sees m(t) itself, so a slower sampling would step over its fluctuations."""
 MAX_PROCESS_SAMPLES = 50_000_000
 """Most grid values of the atmosphere's random processes in one scene (400 MB of float64):
 the image motion's two axes plus every source's scintillation, over the run."""

@@ -50,6 +50,7 @@ from ..optics import Optics
 from ..targets import LightCurve, LinearTarget, StaticTarget, TabulatedTarget, Target
 from . import earth, orbit, photometry
 from .pointing import MODES, UPS, Attitude, project, unproject
+from .stars import STAR_FIELD_COUNTS_SLOPE, STAR_FIELD_MAG_MAX, STAR_FIELD_MAG_MIN
 
 DEFAULT_EXTINCTION = 0.2
 """Default V-band extinction [mag/airmass]: between a good mountain site (0.11-0.15) and sea
@@ -510,10 +511,11 @@ def build_sky(s: dict[str, Any], optics: Optics, width: int, height: int, t_end:
             density = float(sf["n_stars"]) / sensor_deg2
         if not density >= 0.0:
             raise ValueError(f"star_field density must be >= 0; got {density!r}")
-        lo, hi = float(sf.get("mag_min", 6.0)), float(sf.get("mag_max", 12.0))
+        lo, hi = float(sf.get("mag_min", STAR_FIELD_MAG_MIN)), float(sf.get("mag_max", STAR_FIELD_MAG_MAX))
         if not lo <= hi:
             raise ValueError(f"need star_field.mag_min <= mag_max; got {lo!r}, {hi!r}")
-        directions, mag_v = draw_sky_stars(ctx, coarse_att, density, lo, hi, float(sf.get("counts_slope", 0.4)),
+        directions, mag_v = draw_sky_stars(ctx, coarse_att, density, lo, hi,
+                                           float(sf.get("counts_slope", STAR_FIELD_COUNTS_SLOPE)),
                                            int(sf.get("seed", 0)))
     probe = directions
     if probe.shape[0] > _ERROR_PROBE_STARS:

@@ -50,6 +50,16 @@ _LOG10_N_PER_DEG2 = np.log10(ALL_SKY_COUNT / SPHERE_DEG2)
 MAG_RANGE = (float(ALL_SKY_V_MAG[0]), float(ALL_SKY_V_MAG[-1]))
 """The magnitudes the law covers, [0, 16]: no extrapolation beyond the table."""
 
+STAR_FIELD_MAG_MIN = 6.0
+STAR_FIELD_MAG_MAX = 12.0
+"""A random star field's magnitudes [V] when [star_field] gives no mag_min / mag_max (and the
+defaults of ``evstwin.targets.random_star_field``): from the faintest naked-eye stars to
+what a small lens on an event sensor can still see."""
+STAR_FIELD_COUNTS_SLOPE = 0.4
+"""A random star field's slope of the magnitude counts, d log10 N / dm [dex per magnitude],
+when [star_field] gives no counts_slope (and ``random_star_field``'s default): all-sky counts
+grow by 0.44-0.49 for V 3-12 (the table above), flattening towards faint magnitudes."""
+
 
 def _check_mags(name: str, mag: npt.ArrayLike) -> np.ndarray:
     m = np.asarray(mag, dtype=np.float64)

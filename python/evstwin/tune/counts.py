@@ -30,7 +30,8 @@ a chi-square of S independent terms), and it sees a 10 % change of the weakly co
 better than ``compare``'s distance does with the same seeds (2.7-6.3 against 0.2-4.4 times
 the change's own standard deviation); both see the strongly constrained one clearly. Its main
 use is as residuals: S standardised differences that a Gauss-Newton search
-(``sampler='ls'``) reads parameter by parameter.
+(``sampler='ls'``) reads parameter by parameter; at the best, the same weighted least squares
+gives the fit's standard errors (:func:`chi2_covariance`, ``fit(intervals=True)``).
 """
 
 from __future__ import annotations
@@ -199,3 +200,72 @@ class CountsObjective(MatchObjective):
     def trial_distance(self, sims: Sequence[np.ndarray]) -> float:
         """The trial's distance: :func:`chi2_distance` against the mean of its seeds' vectors."""
         return chi2_distance(self.real_stats, sims)
+
+
+def chi2_covariance(real: np.ndarray, mean_best: np.ndarray, slopes: np.ndarray, seed_stats: np.ndarray,
+                    runs_per_trial: int) -> np.ndarray:
+    """(n, n): the covariance of the chi-square fit's estimate of n parameters, the least-squares
+    "sandwich" ``H^-1 B H^-1`` of the weighted fit ``min (r - m(u))^T W (r - m(u))``, linearised
+    at the best: H = A^T W A, B = A^T W C W A.
+
+    real: the S statistics r of the recording. mean_best: m, the mean of the fit's K
+    (``runs_per_trial``) seeds' statistics at the best; W = diag(1 / (m + r/K + 1)), the
+    chi-square's own weights. slopes: A (S, n), dm/du at the best. seed_stats: (M, S), the
+    statistics of M >= 2 single seeds at the best (independent draws).
+
+    C, the covariance of r - m at the best, is (1 + 1/K) Sigma: the recording is one draw of
+    the statistics (Sigma, if the twin matches it) and the mean of the K seeds is another
+    (Sigma / K; with common seeds the whole fit sees it as a fixed offset). Sigma is the
+    sample covariance of ``seed_stats``, used only through its projections A^T W (s - s_bar),
+    so that M needs to exceed neither S nor n. The statistics share events (ON and OFF
+    histograms of the same pixels, a group's histogram and its total), so Sigma is not
+    diagonal: the per-statistic Pearson weights alone (H^-1, "a rise of 1 in the sum") do not
+    give the estimate's spread.
+
+    A parameter whose column of A is zero (no statistic moves with it), or a set of them that
+    H cannot separate, gets an infinite variance."""
+    wa, moved, h = _weighted_slopes("chi2_covariance", real, mean_best, slopes, runs_per_trial)
+    s = np.asarray(seed_stats, np.float64)
+    if s.ndim != 2 or s.shape[1] != wa.shape[0] or s.shape[0] < 2:
+        raise ValueError(f"chi2_covariance: seed_stats must be (M >= 2, {wa.shape[0]}); got {s.shape}")
+    n = wa.shape[1]
+    g = (s - s.mean(axis=0)) @ wa  # (M, n): A^T W (s_k - s_bar)
+    b = (1.0 + 1.0 / runs_per_trial) * (g.T @ g) / (s.shape[0] - 1)
+    cov = np.full((n, n), math.inf)
+    if h is not None:
+        h_inv = np.linalg.inv(h)
+        cov[np.ix_(moved, moved)] = h_inv @ b[np.ix_(moved, moved)] @ h_inv
+    return cov
+
+
+def chi2_gauss_newton_step(real: np.ndarray, mean_best: np.ndarray, slopes: np.ndarray,
+                           runs_per_trial: int) -> np.ndarray:
+    """(n,): the Gauss-Newton step du = H^-1 A^T W (r - m) from the best to the minimum of the
+    chi-square's linear model there (arguments and H, W as :func:`chi2_covariance`'s): how far
+    the point a search ended at lies from the least-squares estimate that the covariance
+    describes. Zero for a parameter no statistic moves with; nan where H cannot separate them."""
+    wa, moved, h = _weighted_slopes("chi2_gauss_newton_step", real, mean_best, slopes, runs_per_trial)
+    step = np.zeros(wa.shape[1])
+    if moved.size:
+        residual = np.asarray(real, np.float64) - np.asarray(mean_best, np.float64)
+        step[moved] = math.nan if h is None else np.linalg.solve(h, wa[:, moved].T @ residual)
+    return step
+
+
+def _weighted_slopes(who: str, real: np.ndarray, mean_best: np.ndarray, slopes: np.ndarray,
+                     runs_per_trial: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Checked arguments of :func:`chi2_covariance` and :func:`chi2_gauss_newton_step` ->
+    (W A, the columns some statistic moves with, H = A^T W A over those columns or None where
+    H cannot separate them: a condition number of 1e12 or more)."""
+    real = np.asarray(real, np.float64)
+    mean_best = np.asarray(mean_best, np.float64)
+    a = np.asarray(slopes, np.float64)
+    if a.ndim != 2 or a.shape[0] != real.size or mean_best.shape != real.shape:
+        raise ValueError(f"{who}: slopes must be (S, n) and mean_best (S,) with S = {real.size}; "
+                         f"got {a.shape} and {mean_best.shape}")
+    if isinstance(runs_per_trial, bool) or not isinstance(runs_per_trial, int) or runs_per_trial < 1:
+        raise ValueError(f"{who}: runs_per_trial must be an integer >= 1; got {runs_per_trial!r}")
+    wa = a / (mean_best + real / runs_per_trial + 1.0)[:, None]
+    moved = np.flatnonzero(np.any(a != 0.0, axis=0))
+    h = a[:, moved].T @ wa[:, moved] if moved.size else None
+    return wa, moved, h if h is not None and np.linalg.cond(h) < 1e12 else None

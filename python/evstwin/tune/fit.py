@@ -80,9 +80,10 @@ class FitResult:
     """The distance minimised: 'compare' (:func:`evstwin.validation.compare`'s, mean over the
     seeds) or 'chi2' (:mod:`evstwin.tune.counts`, from the mean of the seeds' statistics)."""
     intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
-    """Each parameter's interval from the distance's curvature at the best (``intervals=True``):
-    the values that raise the mean distance by its own seed-to-seed standard error (see
-    :func:`fit`); empty when not asked for."""
+    """Each parameter's interval (``intervals=True``; see :func:`fit`): with the chi-square, the
+    best +- one standard error of the least-squares estimate; with compare's distance, the
+    values that raise the mean distance by its own seed-to-seed standard error. Empty when not
+    asked for."""
 
     @property
     def best_trial(self) -> int:
@@ -373,14 +374,32 @@ def fit(
         None (the middle of the bounds).
     scheduler, workers: where jobs run (see :func:`make_executor`). progress: a tqdm bar on
         stderr.
-    intervals: after the search, probe each parameter at the best +- 0.05 of its (log) bound
-        width with the same seeds (2 trials a parameter beyond the budget) and give it the
-        interval over which a parabola through those distances rises by the best trial's
-        standard error over its seeds: an uncertainty from the curvature of the distance,
-        in the sense "changes the simulator cannot tell from its own noise". Needs
-        runs_per_trial >= 2 (the noise is measured, not assumed). A flat or concave profile
-        gives the whole bound. With ``distance='chi2'`` the seeds' distances are each seed's
-        own chi-square against the recording.
+    intervals: after the search, give each parameter an interval (beyond the budget; the
+        probes are not in the history). Both are taken in the [0, 1] coordinates of the
+        bounds (log-scaled where the bound is), so a log parameter's interval is wider above.
+
+        With ``distance='chi2'`` (the default 'ls'): the best +- one standard error of the
+        least-squares estimate, the square root of the diagonal of
+        :func:`evstwin.tune.counts.chi2_covariance`'s sandwich covariance
+        ``(1 + 1/K) H^-1 A^T W Sigma W A H^-1`` (A = dm/du, the slopes of the seeds' mean
+        statistics over the best +- :data:`CHI2_INTERVAL_STEP` of each bound with the fit's
+        seeds, 2 trials a parameter; W the chi-square's weights; Sigma the covariance of one
+        seed's statistics, measured at the best from the fit's K seeds and
+        :data:`INTERVAL_NOISE_SEEDS` fresh ones, one trial of 8 runs). The factor 1 + 1/K
+        counts the recording's noise and the K seeds'; Sigma carries the statistics'
+        correlations (they share events); the diagonal of the covariance marginalises over the
+        other fitted parameters. Added in quadrature: how far the search stopped from the
+        least-squares minimum, estimated by the Gauss-Newton step
+        (:func:`evstwin.tune.counts.chi2_gauss_newton_step`) to the fresh seeds' minimum in
+        excess of the noise that step carries. Left out: a bias of the estimator and any model
+        error. Works with runs_per_trial = 1.
+
+        With ``distance='compare'``: probe each parameter at the best +- 0.05 of its bound
+        width with the same seeds (2 trials a parameter) and give it the interval over which
+        a parabola through those distances rises by the best trial's standard error over its
+        seeds (the mean distance's own noise): "changes the simulator cannot tell from its
+        own noise", a heuristic scale rather than a standard error. Needs runs_per_trial >= 2.
+        A flat or concave profile gives the whole bound.
     distance: 'compare' (compare's distance of each seed, averaged over the seeds; the
         default of every sampler but 'ls') or 'chi2' (:mod:`evstwin.tune.counts`: per-pixel
         count histograms of pixel groups set by the scenario's source light, the seeds'
@@ -406,9 +425,6 @@ def fit(
             raise ValueError(f"{name} must be an integer >= {low}; got {value!r}")
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
-    if intervals and runs_per_trial < 2:
-        raise ValueError("intervals=True needs runs_per_trial >= 2 (the distance's noise is measured over the "
-                         f"seeds); got runs_per_trial={runs_per_trial}")
     if not (isinstance(nm_step, (int, float)) and 0 < nm_step <= 0.5):
         raise ValueError(f"nm_step must be in (0, 0.5]; got {nm_step!r}")
     step_ls = LS_STEP if ls_step is None else ls_step
@@ -421,6 +437,9 @@ def fit(
     if sampler == "ls" and distance != "chi2":
         raise ValueError("sampler 'ls' fits the chi-square's residuals: it needs distance='chi2'; "
                          f"got distance={distance!r}")
+    if intervals and distance == "compare" and runs_per_trial < 2:
+        raise ValueError("intervals=True with distance='compare' needs runs_per_trial >= 2 (the distance's noise "
+                         f"is measured over the seeds); got runs_per_trial={runs_per_trial}")
     objective = MatchObjective(
         real_events, real_meta, bin_width=bin_width, roi=roi, mask_pixels=mask_pixels, mask_hot=mask_hot
     )
@@ -477,9 +496,12 @@ def fit(
     best = [math.inf]
     residuals: dict[int, np.ndarray] = {}  # trial number -> chi-square residuals ('ls' reads them)
 
-    def run_trials(points: list[dict[str, float]], phase: str) -> list[TrialRecord]:
+    seed_stats: dict[int, np.ndarray] = {}  # trial number -> its seeds' statistics, (K, S) (the intervals')
+
+    def run_trials(points: list[dict[str, float]], phase: str, seeds: Sequence[int] = sim_seeds
+                   ) -> list[TrialRecord]:
         first = len(history)
-        jobs = [_Job((first + n, s), p, s) for n, p in enumerate(points) for s in sim_seeds]
+        jobs = [_Job((first + n, s), p, s) for n, p in enumerate(points) for s in seeds]
         values: dict[tuple[int, int], float] = {}
         stats: dict[tuple[int, int], np.ndarray] = {}
         errors: dict[int, str] = {}
@@ -495,13 +517,14 @@ def fit(
         records = []
         for n, p in enumerate(points):  # in trial order: deterministic whatever finished first
             number = first + n
-            runs = [values[(number, s)] for s in sim_seeds if (number, s) in values]
-            mean = float(np.mean(runs)) if len(runs) == len(sim_seeds) else math.nan
+            runs = [values[(number, s)] for s in seeds if (number, s) in values]
+            mean = float(np.mean(runs)) if len(runs) == len(seeds) else math.nan
             if counts is not None and math.isfinite(mean):
                 # The seeds' statistics averaged first: a chi-square of the mean, not a mean
                 # of chi-squares (each seed's alone carries its full noise).
-                vectors = [stats[(number, s)] for s in sim_seeds]
+                vectors = [stats[(number, s)] for s in seeds]
                 residuals[number] = counts.residuals(vectors)
+                seed_stats[number] = np.vstack(vectors)
                 mean = counts.trial_distance(vectors)
             error = errors.get(number, "")
             if not math.isfinite(mean):
@@ -576,7 +599,11 @@ def fit(
         # The probes run like trials but stay out of the history (they are not the search's).
         executor, bar, n_searched = make_executor(scheduler, workers), None, len(history)
         try:
-            found = _curvature_intervals(run_trials, scaler, best_rec)
+            if counts is not None:
+                found = _chi2_intervals(run_trials, scaler, best_rec, counts, seed_stats,
+                                        [seed + runs_per_trial + k for k in range(INTERVAL_NOISE_SEEDS)])
+            else:
+                found = _curvature_intervals(run_trials, scaler, best_rec)
         finally:
             executor.close()
             del history[n_searched:]
@@ -613,15 +640,17 @@ def fit(
 
 
 INTERVAL_STEP = 0.05
-"""The probe step of fit's intervals, as a share of each parameter's (log) bound width."""
+"""The probe step of fit's intervals with compare's distance, as a share of each parameter's
+(log) bound width (the chi-square's slopes use :data:`CHI2_INTERVAL_STEP`)."""
 
 
 def _curvature_intervals(
     run_trials: Callable[[list[dict[str, float]], str], list[TrialRecord]], scaler: _Scaler, best: TrialRecord
 ) -> dict[str, tuple[float, float]]:
-    """fit(intervals=True): per parameter, d(u) ~ d0 + c (u - u0)^2 / 2 from the best and two
-    probes (the stencil kept inside [0, 1]); the interval is u0 +- sqrt(2 sigma / c) with sigma
-    the standard error of the best's mean distance over its seeds."""
+    """fit(intervals=True) with compare's distance: per parameter, d(u) ~ d0 + c (u - u0)^2 / 2
+    from the best and two probes (the stencil kept inside [0, 1]); the interval is
+    u0 +- sqrt(2 sigma / c) with sigma the standard error of the best's mean distance over its
+    seeds (the same quantity whose curvature c is)."""
     sigma = float(np.std(best.run_distances, ddof=1) / math.sqrt(len(best.run_distances)))
     u0 = scaler.to_unit(best.params)
     h = INTERVAL_STEP
@@ -654,6 +683,82 @@ def _curvature_intervals(
         lo[i] = lo_u
         hi = u0.copy()
         hi[i] = hi_u
+        out[key] = (scaler.from_unit(lo)[key], scaler.from_unit(hi)[key])
+    return out
+
+
+CHI2_INTERVAL_STEP = 0.01
+"""The half-span of the secants that give the chi-square intervals' slopes dm/du, as a share of
+each parameter's (log) bound width (3.3 % of a threshold with the default bounds): half the
+search's :data:`LS_STEP`. Measured with bench/bench_intervals.py (20 refits, 1 seed a trial):
+with LS_STEP the statistics' curvature over the wider span left the reported standard errors
+1.1 and 1.7 times narrower than the refits' spread; with this step 1.1 and 1.1; with a quarter
+of LS_STEP the slopes' own noise made the least-squares estimates scatter 15-17 % more."""
+
+INTERVAL_NOISE_SEEDS = 8
+"""fit(intervals=True) with the chi-square: the fresh seeds simulated at the best (beyond the fit's
+K) whose statistics measure the noise; with the K, M = K + 8 single-seed vectors, so the
+standard errors carry about 1 / sqrt(2 (M - 1)) <= 25 % of relative noise of their own."""
+
+
+def _chi2_intervals(
+    run_trials: Callable[..., list[TrialRecord]],
+    scaler: _Scaler,
+    best: TrialRecord,
+    counts: CountsObjective,
+    seed_stats: Mapping[int, np.ndarray],
+    noise_seeds: Sequence[int],
+) -> dict[str, tuple[float, float]]:
+    """fit(intervals=True) with the chi-square: per parameter, u0 +- its standard error in the
+    [0, 1] coordinates (log-scaled where the bound is), clipped to the bounds. The standard
+    errors are the square roots of :func:`evstwin.tune.counts.chi2_covariance`'s diagonal:
+    the slopes dm/du are secants of the mean statistics over u0 +- :data:`CHI2_INTERVAL_STEP`
+    (kept inside [0, 1]) with the fit's seeds (2 trials a parameter), the noise the statistics
+    of the fit's seeds at the best and of ``noise_seeds`` there (one more trial). Added in
+    quadrature: how far the search stopped from the least-squares minimum, estimated from the
+    Gauss-Newton step to the fresh seeds' minimum in excess of the noise that step carries. A
+    parameter whose probes failed, or that the statistics cannot separate, gets its whole
+    bound."""
+    from .counts import chi2_covariance, chi2_gauss_newton_step
+
+    keys = scaler.keys
+    u0 = scaler.to_unit(best.params)
+    h = CHI2_INTERVAL_STEP
+    points, spans = [], []
+    for i in range(len(keys)):
+        lo, hi = u0.copy(), u0.copy()
+        lo[i], hi[i] = max(0.0, float(u0[i]) - h), min(1.0, float(u0[i]) + h)
+        points += [scaler.from_unit(lo), scaler.from_unit(hi)]
+        spans.append(hi[i] - lo[i])
+    recs = run_trials(points, "interval")
+    noise = run_trials([dict(best.params)], "interval", seeds=noise_seeds)[0]
+    mean_best = seed_stats[best.trial].mean(axis=0)
+    slopes = np.zeros((mean_best.size, len(keys)))
+    for i in range(len(keys)):
+        r_lo, r_hi = recs[2 * i], recs[2 * i + 1]
+        if r_lo.trial in seed_stats and r_hi.trial in seed_stats:
+            slopes[:, i] = (seed_stats[r_hi.trial].mean(axis=0) - seed_stats[r_lo.trial].mean(axis=0)) / spans[i]
+    sd = np.full(len(keys), math.inf)
+    k = len(best.run_distances)
+    if noise.trial in seed_stats:
+        fresh = seed_stats[noise.trial]
+        cov = chi2_covariance(counts.real_stats, mean_best, slopes, np.vstack([seed_stats[best.trial], fresh]), k)
+        per_draw = np.diag(cov) / (1.0 + 1.0 / k)  # one seed's (and the recording's) share
+        # The fresh seeds' own least-squares minimum, u0 + step: it differs from the best by
+        # their noise and the fit's seeds' (expected variance (1/M + 1/K) per_draw, the
+        # recording's cancels) and by how far the search stopped from the minimum; the excess
+        # over that noise estimates the latter. (The fit's own seeds cannot: the search ends
+        # where their noise happens to fit the recording best.)
+        step = chi2_gauss_newton_step(counts.real_stats, fresh.mean(axis=0), slopes, fresh.shape[0])
+        search = np.maximum(0.0, step * step - (1.0 / fresh.shape[0] + 1.0 / k) * per_draw)
+        sd = np.sqrt(np.diag(cov) + search)
+    out: dict[str, tuple[float, float]] = {}
+    for i, key in enumerate(keys):
+        lo, hi = u0.copy(), u0.copy()
+        if math.isfinite(sd[i]):
+            lo[i], hi[i] = max(0.0, float(u0[i]) - sd[i]), min(1.0, float(u0[i]) + sd[i])
+        else:
+            lo[i], hi[i] = 0.0, 1.0
         out[key] = (scaler.from_unit(lo)[key], scaler.from_unit(hi)[key])
     return out
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ..optics import ARCSEC_PER_RAD
+from ..optics import ARCSEC_PER_RAD, PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M
 from ..scenario import ARCSEC_RAD, build, load, parse_assignment, set_value
 from ..sky.earth import EARTH_ROTATION_RAD_S
 from ._types import PathLike
@@ -330,7 +330,7 @@ def _plate_arcsec(scenario: Mapping[str, Any]) -> float:
 
     preset = get_preset(scenario["sensor"]["preset"])
     kw = dict(scenario.get("optics", {}))
-    optics = preset.optics(kw.pop("focal_length_m", 0.041), kw.pop("f_number", 1.8), **kw)
+    optics = preset.optics(kw.pop("focal_length_m", PAPER_FOCAL_LENGTH_M), kw.pop("f_number", PAPER_F_NUMBER), **kw)
     return float(optics.plate_scale_arcsec_per_px)
 
 
