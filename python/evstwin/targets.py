@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .optics import Optics, _array, _finite, _non_negative, _positive
+from .sky.stars import STAR_FIELD_COUNTS_SLOPE, STAR_FIELD_MAG_MAX, STAR_FIELD_MAG_MIN
 
 if TYPE_CHECKING:
     from .psf import PSFShape
@@ -735,9 +736,9 @@ def random_star_field(
     optics: Optics,
     n_stars: int | None = None,
     density_per_deg2: float | None = None,
-    mag_min: float = 6.0,
-    mag_max: float = 12.0,
-    counts_slope: float = 0.4,
+    mag_min: float = STAR_FIELD_MAG_MIN,
+    mag_max: float = STAR_FIELD_MAG_MAX,
+    counts_slope: float = STAR_FIELD_COUNTS_SLOPE,
     seed: int = 0,
     drift_px_s: Sequence[float] = (0.0, 0.0),
     duration_s: float = 0.0,
