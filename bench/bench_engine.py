@@ -13,7 +13,9 @@ for --period seconds and replayed (the full frame's 2 s would need 7 GB of rates
 Prints pixel-updates/s, events/s, events per pixel per second and CPU time per event
 (process CPU time, all threads) of the C++ engine for each thread count, and, for the
 reference load, of the vectorised NumPy implementation of the same model
-(bench/numpy_reference.py) run in the same process on a shorter stretch, and the ratio.
+(bench/numpy_reference.py) run in the same process on a shorter stretch, and the ratio; and of
+a vectorised NumPy ideal log-difference pixel (no noise, no filter: numpy_ideal) on the same
+frames, the comparison the issue asks for.
 Only the engine's run() calls are timed; the input is rendered beforehand per chunk.
 
     python bench/bench_engine.py [--load reference|event-heavy|imx636] [--duration 10]
@@ -76,6 +78,26 @@ def bench_engine(params: PixelParams, threads: int, chunks: list[tuple[np.ndarra
         elapsed += time.perf_counter() - start
         cpu += time.process_time() - start_cpu
     return elapsed, cpu, n_events
+
+
+def numpy_ideal(frames: np.ndarray, theta_on: float, theta_off: float) -> tuple[float, int]:
+    """Wall seconds and event count of the ideal pixel as simulators such as ESIM model it,
+    vectorised with NumPy over the (n, H, W) float32 frames: the log of each frame against a
+    per-pixel reference, as many ON (OFF) events as whole theta_on (theta_off) steps the log
+    has risen (fallen) past it, the reference moved by those steps. No noise, no filter, no
+    timestamps: the floor under any physical model, which the issue compares the engine with."""
+    inv_on, inv_off = np.float32(1.0 / theta_on), np.float32(1.0 / theta_off)
+    on_step, off_step = np.float32(theta_on), np.float32(theta_off)
+    start = time.perf_counter()
+    ref = np.log(frames[0])
+    n_ev = 0
+    for frame in frames[1:]:
+        d = np.log(frame) - ref
+        n_on = np.floor(np.maximum(d, 0) * inv_on)
+        n_off = np.floor(np.maximum(-d, 0) * inv_off)
+        ref += n_on * on_step - n_off * off_step
+        n_ev += int(n_on.sum()) + int(n_off.sum())
+    return time.perf_counter() - start, n_ev
 
 
 def main() -> None:
@@ -141,6 +163,14 @@ def main() -> None:
           f"{n_ev / elapsed / 1e6:6.2f} M events/s  ({n_ev} events)")
     for threads, rate in results.items():
         print(f"speed-up over NumPy, {threads} thread(s): {rate / np_rate:6.1f}x")
+    # The ideal pixel on the engine's own input (the first 2 s, replayed as the engine saw it).
+    ideal_frames = frames[: min(period, n)]
+    ideal_s, ideal_ev = numpy_ideal(ideal_frames, params.theta_on, params.theta_off)
+    ideal_rate = (len(ideal_frames) - 1) * WIDTH * HEIGHT / ideal_s
+    print(f"NumPy ideal log-difference model ({(len(ideal_frames) - 1) / RATE_HZ:g} s): {ideal_s:7.2f} s  "
+          f"{ideal_rate / 1e6:8.1f} M pixel-updates/s  ({ideal_ev} events)")
+    for threads, rate in results.items():
+        print(f"engine / NumPy ideal model, {threads} thread(s): {rate / ideal_rate:6.2f}")
 
 
 if __name__ == "__main__":
