@@ -38,19 +38,30 @@
 
 // No fused multiply-adds in the engine: a compiler may contract a * b + c into one FMA
 // (rounded once instead of twice) wherever the target has FMA, which GCC does by default for
-// the AVX2 / AVX-512 kernels that simd.hpp and the block kernels compile alongside the
-// portable baseline, and for a consumer who builds with -march=native. The events would then
-// depend on the instruction set. Every engine header turns contraction off between these two
-// markers, so the events are the same bit for bit at every SIMD level and for any -march.
+// the AVX-512 kernels that simd.hpp and the block kernels compile alongside the portable
+// baseline, and for a consumer who builds with -march=native. The events would then depend
+// on the instruction set. Every engine header turns contraction off between these two
+// markers, so Sensor's events are the same bit for bit at every SIMD level and for any -march.
+// What this covers: the functions compiled inside the markers. GCC decides per function and
+// an always_inline engine function inlined into a consumer's own function (e.g. calling
+// PixelModel::advance directly) takes the consumer's options; Sensor::run / run_pixels and
+// Readout, which are not always_inline, keep them. -ffast-math (or clang's -ffp-contract=fast,
+// which overrides its pragma) breaks bit-identity in other ways too, hence the warning.
 #if defined(__clang__)
-#define EVSTWIN_FP_STRICT_BEGIN _Pragma("STDC FP_CONTRACT OFF")
-#define EVSTWIN_FP_STRICT_END _Pragma("STDC FP_CONTRACT DEFAULT")
+#define EVSTWIN_FP_STRICT_BEGIN _Pragma("float_control(push)") _Pragma("clang fp contract(off)")
+#define EVSTWIN_FP_STRICT_END _Pragma("float_control(pop)")
 #elif defined(__GNUC__)
 #define EVSTWIN_FP_STRICT_BEGIN _Pragma("GCC push_options") _Pragma("GCC optimize(\"fp-contract=off\")")
 #define EVSTWIN_FP_STRICT_END _Pragma("GCC pop_options")
+#elif defined(_MSC_VER)
+#define EVSTWIN_FP_STRICT_BEGIN __pragma(fp_contract(off))
+#define EVSTWIN_FP_STRICT_END __pragma(fp_contract(on))
 #else
 #define EVSTWIN_FP_STRICT_BEGIN
 #define EVSTWIN_FP_STRICT_END
+#endif
+#if defined(__FAST_MATH__) && !defined(EVSTWIN_ALLOW_FAST_MATH)
+#warning "evstwin compiled with -ffast-math: events may differ between SIMD levels, thread counts and builds (define EVSTWIN_ALLOW_FAST_MATH to silence)"
 #endif
 
 namespace evstwin {

@@ -25,8 +25,9 @@
 #include "config.hpp"
 #include "rng.hpp"
 
-#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__)) && \
-    !defined(EVSTWIN_NO_MULTIVERSION)
+// x86-64 only: on 32-bit x86 the scalar code may use the x87 unit's 80-bit intermediates
+// while the dispatched loops use SSE doubles, and the two would round differently.
+#if (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__) && !defined(EVSTWIN_NO_MULTIVERSION)
 #define EVSTWIN_MULTIVERSION 1
 #define EVSTWIN_TARGET_AVX2 __attribute__((target("avx2")))
 #define EVSTWIN_TARGET_AVX512 __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq")))
