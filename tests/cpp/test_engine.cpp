@@ -241,7 +241,7 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
         h.theta_on[j] = 0.15 + 0.1 * unit(); h.theta_off[j] = 0.1 + 0.1 * unit();
         l.y[j] = l.ref[j] + (unit() - 0.4) * 0.5;  // some past a threshold, most between
         l.clock_on[j] = 3.0 * unit(); l.clock_off[j] = 0.002 * unit(); l.n[j] = j * 3;
-        h.leak_hz[j] = 0.1 * unit(); h.bg_on_hz[j] = 5.0 * unit(); h.bg_off_hz[j] = 5.0 * unit();
+        h.leak_spread[j] = 0.5 + unit(); h.bg_on_hz[j] = 5.0 * unit(); h.bg_off_hz[j] = 5.0 * unit();
         h.refr_until[j] = unit() < 0.1 ? 0.0105 : 0.0;
         h.next_hot_t[j] = unit() < 0.05 ? 0.0101 : 1e300;
         rate[j] = unit() < 0.9 ? 2e6f : 3e6f;
@@ -249,7 +249,7 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     }
     QuietPass q{};
     q.now = &h.now(); q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
-    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_hz = h.leak_hz.data();
+    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_spread = h.leak_spread.data();
     q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data(); q.g1 = g1.data(); q.g2 = g2.data();
     q.count = n; q.rate = 2e6; q.cx = -29.7; q.pole_decay = 0.93; q.pole_ramp = 0.97;
     q.phi_zz = 0.91; q.phi_yz = 0.05; q.phi_yy = 0.94; q.l_zz = 0.013; q.l_yz = 0.004; q.l_yy = 0.011;
