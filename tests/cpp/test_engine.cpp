@@ -255,10 +255,13 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     q.phi_zz = 0.91; q.phi_yz = 0.05; q.phi_yy = 0.94; q.l_zz = 0.013; q.l_yz = 0.004; q.l_yy = 0.011;
     q.bg_factor = 0.77; q.bridge_bound = 2e-3; q.sf_decay = 0.939; q.sf_ramp = 0.969; q.dt = 1e-3; q.inv_dt = 1e3;
     q.t0 = 0.010; q.t1 = 0.011; q.bridge_stage = true;
-    const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background) {
+    q.leak_hz = 0.07;  // a fast leak (70 thresholds a second x spread) moves d by up to 0.1 per sample
+    const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background, bool leak_off) {
         BlockSoA::Levels out = h.buf[1];
         std::vector<std::uint8_t> busy(n, 7);
         QuietPass qq = q;
+        qq.leak_on_w = leak_off ? 0.0 : 1.0;
+        qq.leak_off_w = leak_off ? 1.0 : 0.0;
         qq.next = &out;
         qq.busy = busy.data();
         set_simd_level(l);
@@ -283,15 +286,18 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     int compared = 0;
     for (QuietChain chain : {QuietChain::SfOnly, QuietChain::PoleSf})
         for (bool noise : {false, true})
-            for (bool background : {false, true}) {
-                const auto ref = pass(SimdLevel::Baseline, chain, noise, background);
-                CHECK(ref.second);  // quiet, bridge and busy pixels all occur
-                for (SimdLevel l : {SimdLevel::AVX2, SimdLevel::AVX512}) {
-                    if (!simd_level_supported(l)) continue;
-                    CHECK(pass(l, chain, noise, background).first == ref.first);
-                    ++compared;
+            for (bool background : {false, true})
+                for (bool leak_off : {false, true}) {
+                    const auto ref = pass(SimdLevel::Baseline, chain, noise, background, leak_off);
+                    CHECK(ref.second);  // quiet, bridge and busy pixels all occur
+                    // The leak's direction reaches the levels: the references differ.
+                    if (!leak_off) CHECK(pass(SimdLevel::Baseline, chain, noise, background, true).first != ref.first);
+                    for (SimdLevel l : {SimdLevel::AVX2, SimdLevel::AVX512}) {
+                        if (!simd_level_supported(l)) continue;
+                        CHECK(pass(l, chain, noise, background, leak_off).first == ref.first);
+                        ++compared;
+                    }
                 }
-            }
     set_simd_level(before);
     std::printf("  quiet pass: %d level comparisons\n", compared);
 }
