@@ -15,6 +15,7 @@ import pytest
 
 import evstwin
 from evstwin import EVENT_DTYPE, PixelParams, Sensor
+from evstwin.pixel import LeakPolarity
 from evstwin.sensor import EVENT_LABELS
 
 E = evstwin._core.ELEMENTARY_CHARGE_C
@@ -40,7 +41,7 @@ def photo_current_a(params: PixelParams, rate_ph_s: float) -> float:
 
 
 @pytest.mark.parametrize("polarity", ["on", "off"])
-def test_static_pixel_fires_at_the_hand_computed_leak_rate(polarity: str) -> None:
+def test_static_pixel_fires_at_the_hand_computed_leak_rate(polarity: LeakPolarity) -> None:
     rate_ph_s = 2e7
     params = NOISE_FREE.replace(leak_rate_hz=0.7, leak_photocurrent_hz_per_a=1e15, leak_polarity=polarity)
     f_hz = 0.7 + 1e15 * photo_current_a(params, rate_ph_s)
@@ -91,14 +92,14 @@ def test_unset_fields_change_nothing() -> None:
     rng = np.random.default_rng(1)
     rate = rng.uniform(1e4, 1e8, (5, 7))
     a = static_run(PixelParams(**base), rate, 2.0, dt_s=0.003, seed=4)  # type: ignore[arg-type]
-    b = static_run(PixelParams(**base, leak_photocurrent_hz_per_a=0.0, leak_polarity="on"),  # type: ignore[arg-type]
-                   rate, 2.0, dt_s=0.003, seed=4)
+    explicit = PixelParams(**base).replace(leak_photocurrent_hz_per_a=0.0, leak_polarity="on")  # type: ignore[arg-type]
+    b = static_run(explicit, rate, 2.0, dt_s=0.003, seed=4)
     assert len(a[0]) > 100
     assert a[0].tobytes() == b[0].tobytes() and a[1].tobytes() == b[1].tobytes()
 
 
 @pytest.mark.parametrize("polarity", ["on", "off"])
-def test_noisy_leak_is_stationary_from_the_start(polarity: str) -> None:
+def test_noisy_leak_is_stationary_from_the_start(polarity: LeakPolarity) -> None:
     # Shot noise on, the leak's phase drawn at random (mirrored for an OFF leak): the leak's
     # events come at its rate from t = 0 (a phase drawn on the wrong side would hold the
     # first 1 / f back), and the leak's polarity dominates.
