@@ -302,6 +302,34 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     std::printf("  quiet pass: %d level comparisons\n", compared);
 }
 
+TEST(a_leak_grows_with_the_photocurrent_and_fires_its_own_polarity) {
+    // A noise-free static pixel: the reference drifts one threshold per leak period, so it
+    // fires floor(f T) events in T, f = leak_rate_hz + k e electrons_per_photon rate (the
+    // photocurrent part 6x the dark part here), ON or OFF as leak_polarity says.
+    for (LeakPolarity pol : {LeakPolarity::On, LeakPolarity::Off})
+        for (NoiseModel model : {NoiseModel::Continuous, NoiseModel::Sampled}) {
+            PixelParams p = ideal();
+            p.leak_random_phase = false;
+            p.leak_rate_hz = 0.5;
+            p.leak_photocurrent_hz_per_a = 1e15;
+            p.leak_polarity = pol;
+            p.noise_model = model;
+            const double rate = 3.6e7;
+            const double f = 0.5 + 1e15 * ELEMENTARY_CHARGE_C * p.electrons_per_photon() * rate;
+            CHECK(f > 3.0 && f < 4.0);
+            Sensor s(2, 1, p);
+            std::vector<double> rates, t;
+            for (int k = 0; k <= 1015; ++k) {
+                t.push_back(k * 0.01);
+                rates.push_back(rate);
+                rates.push_back(rate);
+            }
+            const auto ev = s.run(rates.data(), t.data(), t.size());
+            CHECK(ev.size() == 2 * static_cast<std::size_t>(std::floor(f * 10.15)));
+            for (const auto& e : ev) CHECK(e.p == (pol == LeakPolarity::On ? ON : OFF));
+        }
+}
+
 TEST(step_gives_floor_ln_r_over_theta_events) {
     for (double R : {1.5, 3.0, 10.0, 0.1}) {
         Sensor s(1, 1, ideal());

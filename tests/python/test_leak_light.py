@@ -40,10 +40,12 @@ def photo_current_a(params: PixelParams, rate_ph_s: float) -> float:
     return E * params.electrons_per_photon * rate_ph_s
 
 
+@pytest.mark.parametrize("noise_model", ["continuous", "sampled"])
 @pytest.mark.parametrize("polarity", ["on", "off"])
-def test_static_pixel_fires_at_the_hand_computed_leak_rate(polarity: LeakPolarity) -> None:
+def test_static_pixel_fires_at_the_hand_computed_leak_rate(polarity: LeakPolarity, noise_model: str) -> None:
     rate_ph_s = 2e7
-    params = NOISE_FREE.replace(leak_rate_hz=0.7, leak_photocurrent_hz_per_a=1e15, leak_polarity=polarity)
+    params = NOISE_FREE.replace(leak_rate_hz=0.7, leak_photocurrent_hz_per_a=1e15, leak_polarity=polarity,
+                                noise_model=noise_model)
     f_hz = 0.7 + 1e15 * photo_current_a(params, rate_ph_s)
     assert 2.0 < f_hz < 20.0  # the photocurrent part dominates: a test of it, not of the dark leak
     duration_s = 10.15
