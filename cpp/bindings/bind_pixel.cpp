@@ -3,6 +3,7 @@
 #include <pybind11/stl.h>
 
 using evstwin::DarkModel;
+using evstwin::LeakPolarity;
 using evstwin::LowPass;
 using evstwin::PixelParams;
 
@@ -40,6 +41,7 @@ void register_pixel(py::module_& m) {
         EVSTWIN_FIELD(depletion_width_m) EVSTWIN_FIELD(pr_pole) EVSTWIN_FIELD(pr_cutoff_ref_hz)
         EVSTWIN_FIELD(pr_ref_current_a) EVSTWIN_FIELD(shot_noise_on_rate_hz) EVSTWIN_FIELD(shot_noise_off_rate_hz)
         EVSTWIN_FIELD(background_rate_sigma) EVSTWIN_FIELD(leak_rate_sigma) EVSTWIN_FIELD(leak_random_phase)
+        EVSTWIN_FIELD(leak_photocurrent_hz_per_a)
         EVSTWIN_FIELD(hot_pixel_fraction) EVSTWIN_FIELD(hot_pixel_rate_hz) EVSTWIN_FIELD(hot_pixel_rate_sigma)
         EVSTWIN_FIELD(hot_pixel_duty) EVSTWIN_FIELD(hot_pixel_burst_s) EVSTWIN_FIELD(hot_pixel_on_share) EVSTWIN_FIELD(hot_pixel_alternation)
         .def_property(
@@ -58,6 +60,17 @@ void register_pixel(py::module_& m) {
         .def_property(
             "dark_model", [](const PixelParams& p) { return dark_model_name(p.dark_model); },
             [](PixelParams& p, const std::string& s) { p.dark_model = dark_model_from(s); })
+        .def_property(
+            "leak_polarity",
+            [](const PixelParams& p) { return std::string(p.leak_polarity == LeakPolarity::On ? "on" : "off"); },
+            [](PixelParams& p, const std::string& s) {
+                if (s == "on")
+                    p.leak_polarity = LeakPolarity::On;
+                else if (s == "off")
+                    p.leak_polarity = LeakPolarity::Off;
+                else
+                    throw py::value_error("leak_polarity must be one of 'on', 'off'; got leak_polarity='" + s + "'");
+            })
         .def_property(
             "lowpass", [](const PixelParams& p) { return std::string(p.lowpass == LowPass::Exact ? "exact" : "euler"); },
             [](PixelParams& p, const std::string& s) { p.lowpass = lowpass_from(s); })

@@ -44,6 +44,8 @@ class PixelParams:
     background_rate_sigma: float
     leak_rate_sigma: float
     leak_random_phase: bool
+    leak_photocurrent_hz_per_a: float
+    leak_polarity: str
     hot_pixel_fraction: float
     hot_pixel_rate_hz: float
     hot_pixel_rate_sigma: float

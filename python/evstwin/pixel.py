@@ -18,8 +18,9 @@ _DEFAULT = _core.PixelParams()
 DarkModel = Literal["poisson", "paper", "none"]
 LowPass = Literal["exact", "euler"]
 NoiseModel = Literal["continuous", "sampled"]
+LeakPolarity = Literal["on", "off"]
 _ENUMS = {"dark_model": ("poisson", "paper", "none"), "lowpass": ("exact", "euler"),
-          "noise_model": ("continuous", "sampled")}
+          "noise_model": ("continuous", "sampled"), "leak_polarity": ("on", "off")}
 _OPTIONAL = ("cutoff_hz", "shot_noise_on_rate_hz", "shot_noise_off_rate_hz")
 
 
@@ -57,6 +58,16 @@ class PixelParams:
     leak_random_phase: bool = _DEFAULT.leak_random_phase
     """Start every pixel at a random phase of its leak cycle, so the leak is stationary from
     t = 0 (True); False reproduces the paper, where every pixel leaks in lockstep."""
+    leak_photocurrent_hz_per_a: float = _DEFAULT.leak_photocurrent_hz_per_a
+    """Rise of the leak rate with the photocurrent [Hz/A], >= 0 (Nozaki & Delbruck 2017:
+    parasitic photocurrent in the reset switch's junction). A pixel leaks at
+    (leak_rate_hz + leak_photocurrent_hz_per_a * I_photo) * s, I_photo = e *
+    electrons_per_photon * photon rate (the mean photocurrent, not the dark current), s its
+    log-normal factor (leak_rate_sigma), which scales both parts (one junction, one capacitor).
+    0 (default): a leak that ignores the light (the paper's)."""
+    leak_polarity: LeakPolarity = _DEFAULT.leak_polarity  # type: ignore[assignment]
+    """Direction of the leak's drift: 'on' (default, the paper's: the reference falls and the
+    leak fires ON events) or 'off' (it rises and the leak fires OFF events, as on the IMX636)."""
     hot_pixel_fraction: float = _DEFAULT.hot_pixel_fraction
     """Share of hot (flickering) pixels, drawn per seed, in [0, 1]."""
     hot_pixel_rate_hz: float = _DEFAULT.hot_pixel_rate_hz

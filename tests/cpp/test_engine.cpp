@@ -241,7 +241,7 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
         h.theta_on[j] = 0.15 + 0.1 * unit(); h.theta_off[j] = 0.1 + 0.1 * unit();
         l.y[j] = l.ref[j] + (unit() - 0.4) * 0.5;  // some past a threshold, most between
         l.clock_on[j] = 3.0 * unit(); l.clock_off[j] = 0.002 * unit(); l.n[j] = j * 3;
-        h.leak_hz[j] = 0.1 * unit(); h.bg_on_hz[j] = 5.0 * unit(); h.bg_off_hz[j] = 5.0 * unit();
+        h.leak_spread[j] = 0.5 + unit(); h.bg_on_hz[j] = 5.0 * unit(); h.bg_off_hz[j] = 5.0 * unit();
         h.refr_until[j] = unit() < 0.1 ? 0.0105 : 0.0;
         h.next_hot_t[j] = unit() < 0.05 ? 0.0101 : 1e300;
         rate[j] = unit() < 0.9 ? 2e6f : 3e6f;
@@ -249,16 +249,19 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     }
     QuietPass q{};
     q.now = &h.now(); q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
-    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_hz = h.leak_hz.data();
+    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_spread = h.leak_spread.data();
     q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data(); q.g1 = g1.data(); q.g2 = g2.data();
     q.count = n; q.rate = 2e6; q.cx = -29.7; q.pole_decay = 0.93; q.pole_ramp = 0.97;
     q.phi_zz = 0.91; q.phi_yz = 0.05; q.phi_yy = 0.94; q.l_zz = 0.013; q.l_yz = 0.004; q.l_yy = 0.011;
     q.bg_factor = 0.77; q.bridge_bound = 2e-3; q.sf_decay = 0.939; q.sf_ramp = 0.969; q.dt = 1e-3; q.inv_dt = 1e3;
     q.t0 = 0.010; q.t1 = 0.011; q.bridge_stage = true;
-    const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background) {
+    q.leak_hz = 0.07;  // a fast leak (70 thresholds a second x spread) moves d by up to 0.1 per sample
+    const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background, bool leak_off) {
         BlockSoA::Levels out = h.buf[1];
         std::vector<std::uint64_t> busy(n, 7);
         QuietPass qq = q;
+        qq.leak_on_w = leak_off ? 0.0 : 1.0;
+        qq.leak_off_w = leak_off ? 1.0 : 0.0;
         qq.next = &out;
         qq.busy = busy.data();
         set_simd_level(l);
@@ -283,17 +286,48 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     int compared = 0;
     for (QuietChain chain : {QuietChain::SfOnly, QuietChain::PoleSf})
         for (bool noise : {false, true})
-            for (bool background : {false, true}) {
-                const auto ref = pass(SimdLevel::Baseline, chain, noise, background);
-                CHECK(ref.second);  // quiet, bridge and busy pixels all occur
-                for (SimdLevel l : {SimdLevel::AVX2, SimdLevel::AVX512}) {
-                    if (!simd_level_supported(l)) continue;
-                    CHECK(pass(l, chain, noise, background).first == ref.first);
-                    ++compared;
+            for (bool background : {false, true})
+                for (bool leak_off : {false, true}) {
+                    const auto ref = pass(SimdLevel::Baseline, chain, noise, background, leak_off);
+                    CHECK(ref.second);  // quiet, bridge and busy pixels all occur
+                    // The leak's direction reaches the levels: the references differ.
+                    if (!leak_off) CHECK(pass(SimdLevel::Baseline, chain, noise, background, true).first != ref.first);
+                    for (SimdLevel l : {SimdLevel::AVX2, SimdLevel::AVX512}) {
+                        if (!simd_level_supported(l)) continue;
+                        CHECK(pass(l, chain, noise, background, leak_off).first == ref.first);
+                        ++compared;
+                    }
                 }
-            }
     set_simd_level(before);
     std::printf("  quiet pass: %d level comparisons\n", compared);
+}
+
+TEST(a_leak_grows_with_the_photocurrent_and_fires_its_own_polarity) {
+    // A noise-free static pixel: the reference drifts one threshold per leak period, so it
+    // fires floor(f T) events in T, f = leak_rate_hz + k e electrons_per_photon rate (the
+    // photocurrent part 6x the dark part here), ON or OFF as leak_polarity says.
+    for (LeakPolarity pol : {LeakPolarity::On, LeakPolarity::Off})
+        for (NoiseModel model : {NoiseModel::Continuous, NoiseModel::Sampled}) {
+            PixelParams p = ideal();
+            p.leak_random_phase = false;
+            p.leak_rate_hz = 0.5;
+            p.leak_photocurrent_hz_per_a = 1e15;
+            p.leak_polarity = pol;
+            p.noise_model = model;
+            const double rate = 3.6e7;
+            const double f = 0.5 + 1e15 * ELEMENTARY_CHARGE_C * p.electrons_per_photon() * rate;
+            CHECK(f > 3.0 && f < 4.0);
+            Sensor s(2, 1, p);
+            std::vector<double> rates, t;
+            for (int k = 0; k <= 1015; ++k) {
+                t.push_back(k * 0.01);
+                rates.push_back(rate);
+                rates.push_back(rate);
+            }
+            const auto ev = s.run(rates.data(), t.data(), t.size());
+            CHECK(ev.size() == 2 * static_cast<std::size_t>(std::floor(f * 10.15)));
+            for (const auto& e : ev) CHECK(e.p == (pol == LeakPolarity::On ? ON : OFF));
+        }
 }
 
 TEST(step_gives_floor_ln_r_over_theta_events) {

@@ -26,6 +26,16 @@ CONFIGS: dict[str, dict[str, object]] = {
     "background_strong": {"shot_noise_rate_hz": 300.0, "background_rate_sigma": 1.0, "refractory_s": 0.0},
     "no_background": {"shot_noise_rate_hz": 0.0},
     "leak": {"leak_rate_hz": 5.0, "leak_rate_sigma": 0.4, "leak_random_phase": True},
+    # A leak that grows with the photocurrent (3e15 Hz/A: ~5 Hz at the spot's 1.6 fA, 5e-3 Hz on
+    # its background), ON and OFF, and an OFF leak that ignores the light.
+    "leak_light": {"leak_rate_hz": 0.5, "leak_photocurrent_hz_per_a": 3e15, "leak_rate_sigma": 0.4},
+    "leak_off": {"leak_rate_hz": 5.0, "leak_rate_sigma": 0.4, "leak_polarity": "off"},
+    "leak_light_off": {"leak_rate_hz": 0.5, "leak_photocurrent_hz_per_a": 3e15, "leak_polarity": "off",
+                       "shot_noise_rate_hz": 3.0},
+    "leak_light_off_pole": {"pr_pole": True, "leak_rate_hz": 1.0, "leak_photocurrent_hz_per_a": 3e15,
+                            "leak_polarity": "off", "leak_rate_sigma": 0.4},
+    "leak_light_off_sampled": {"noise_model": "sampled", "leak_rate_hz": 0.5, "leak_photocurrent_hz_per_a": 3e15,
+                               "leak_polarity": "off"},
     "hot": {"hot_pixel_fraction": 0.05, "hot_pixel_rate_hz": 80.0, "hot_pixel_rate_sigma": 0.5},
     "noiseless": {"photon_shot_noise": False, "dark_model": "none"},
     "dark_only": {"photon_shot_noise": False},
@@ -95,7 +105,8 @@ def test_block_kernel_gives_the_per_pixel_events(name: str, kind: str) -> None:
     assert same(kernel, per_pixel), f"{name}/{kind}: {len(kernel[0])} events (kernel), {len(per_pixel[0])} (per pixel)"
 
 
-@pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "leak", "sampled"])
+@pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "leak", "leak_light_off", "sampled",
+                                  "leak_light_off_sampled"])
 def test_block_kernel_with_sparse_calls_threads_and_chunks(name: str) -> None:
     params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
     ref = run_calls(params, "spot", per_pixel=True, threads=1, chunks=[50, 3, 107], sparse=True)
@@ -106,7 +117,8 @@ def test_block_kernel_with_sparse_calls_threads_and_chunks(name: str) -> None:
         assert same(run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=False), plain)
 
 
-@pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "fast", "sampled"])
+@pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "fast", "sampled", "leak_light_off",
+                                  "leak_light_off_pole"])
 def test_every_simd_level_gives_the_scalar_events(name: str) -> None:
     """The batched Philox and ziggurat (simd.hpp) at every level this processor runs, against
     the per-pixel path's scalar ones: the same events and labels, byte for byte."""

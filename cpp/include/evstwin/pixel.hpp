@@ -41,12 +41,17 @@ enum class LowPass { Exact, Euler };
 /// paper's model, a Poisson electron count per sample interval (eq. 4), whose noise grows as
 /// the samples get shorter; kept to reproduce the paper.
 enum class NoiseModel { Continuous, Sampled };
+/// Which way the comparator's reference drifts (eq. 10-11's leak): On, the paper's, lowers the
+/// reference so d = y - ref climbs to theta_on and the leak fires ON events; Off raises it, so d
+/// falls to -theta_off and the leak fires OFF events (Nozaki & Delbruck 2017: the direction is a
+/// property of the pixel design; the IMX636's leak fires OFF).
+enum class LeakPolarity { On, Off };
 
 /// Why an event fired (the optional label column of the output).
 enum EventLabel : std::uint8_t {
     LABEL_SIGNAL = 0,      ///< the mean photocurrent changed (the scene)
     LABEL_SHOT_NOISE = 1,  ///< photon and dark-current shot noise crossed a threshold
-    LABEL_LEAK = 2,        ///< the reference leaked down to the ON threshold (eq. 10-11)
+    LABEL_LEAK = 2,        ///< the reference leaked to a threshold (eq. 10-11; ON or OFF, leak_polarity)
     LABEL_BACKGROUND = 3,  ///< a background-activity event of eq. 12 (statistical shot noise)
     LABEL_HOT_PIXEL = 4,   ///< a hot or flickering pixel
 };
@@ -79,6 +84,17 @@ struct PixelParams {
     /// theta_on below the signal), so leak events are stationary from t = 0 instead of all
     /// pixels firing together at 1 / f_leak. Off reproduces the paper's lockstep.
     bool leak_random_phase = true;
+    /// The leak's rise with light [Hz/A]: parasitic photocurrent in the reset switch's junction
+    /// adds to its dark leakage, so the leak rate grows linearly with the photocurrent (Nozaki &
+    /// Delbruck 2017, IEEE TED 64(8)). A pixel's leak rate over a sample is
+    ///   (leak_rate_hz + leak_photocurrent_hz_per_a * I_photo) * s,
+    /// I_photo = e * electrons_per_photon * photon rate the mean photocurrent of the sample
+    /// (the dark current is not in it: its leak is leak_rate_hz), s the pixel's log-normal
+    /// factor (leak_rate_sigma). s multiplies both parts: they flow through the same junction
+    /// into the same capacitor, so a pixel whose junction or capacitor makes it leak faster in
+    /// the dark does so in the light too. 0 = a leak independent of the light (the paper's).
+    double leak_photocurrent_hz_per_a = 0.0;
+    LeakPolarity leak_polarity = LeakPolarity::On;  ///< direction of the leak's drift
     /// Hot (flickering) pixels: a share of the pixels, chosen per seed, fires alternating ON and
     /// OFF events whatever the light: after each event the pixel is dead for refractory_s, then
     /// fires after an exponential wait of rate r, so it fires r / (1 + r refractory_s) times a
@@ -161,6 +177,7 @@ inline void validate(const PixelParams& p) {
         require_range("shot_noise_off_rate_hz", *p.shot_noise_off_rate_hz, 0.0, 1e6, " Hz (or None)");
     require_range("background_rate_sigma", p.background_rate_sigma, 0.0, 3.0, " (natural-log units)");
     require_range("leak_rate_sigma", p.leak_rate_sigma, 0.0, 3.0, " (natural-log units)");
+    require_range("leak_photocurrent_hz_per_a", p.leak_photocurrent_hz_per_a, 0.0, 1e30, " Hz/A");
     require_range("hot_pixel_fraction", p.hot_pixel_fraction, 0.0, 1.0, "");
     require_range("hot_pixel_rate_hz", p.hot_pixel_rate_hz, 0.0, 1e6, " Hz");
     require_range("hot_pixel_rate_sigma", p.hot_pixel_rate_sigma, 0.0, 3.0, " (natural-log units)");
@@ -214,9 +231,10 @@ struct PixelState {
     // Where the last event left the pixel, to tell why the next one fires: the level set as
     // the reference then (before any leak) and the noise part of the signal then.
     double level_at_event = 0.0, noise_at_event = 0.0;
-    // This pixel's background: leak and eq. 12 rates with their spread, and a hot pixel's
-    // exponential rate (0: not hot), next event time, polarity and event counter.
-    double leak_hz = 0.0, bg_on_hz = 0.0, bg_off_hz = 0.0;
+    // This pixel's background: its leak rate's log-normal factor (mean 1; the rate itself
+    // follows the light, PixelModel::leak_rate_hz), eq. 12 rates with their spread, and a hot
+    // pixel's exponential rate (0: not hot), next event time, polarity and event counter.
+    double leak_spread = 1.0, bg_on_hz = 0.0, bg_off_hz = 0.0;
     double hot_hz = 0.0;
     double next_hot_t = std::numeric_limits<double>::infinity();  ///< min(next event, next switch)
     double hot_event_t = std::numeric_limits<double>::infinity();  ///< next event (inf while quiet)
@@ -246,6 +264,7 @@ struct NoiseCache {
     double pole_decay = 0, pole_ramp = 0;
     NoiseCoeffs k;
     double bg_factor = 0;  ///< eq. 12's illumination factor at current_a (background_factor)
+    double leak_hz = 0;    ///< the leak rate at this photon rate before a pixel's spread (leak_rate_hz)
     /// For the block kernel's quiet test: a pixel whose line stays inside both thresholds over
     /// the whole interval cannot cross by the bridge when (theta - d0)(theta - d1) exceeds this
     /// for both levels. Then both exponents of bridge_crossing_probability exceed 24, so
@@ -282,7 +301,7 @@ struct BlockSoA {
     Levels buf[2];
     int cur = 0;
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
-    std::vector<double> theta_on, theta_off, leak_hz, bg_on_hz, bg_off_hz;  ///< constant in a run
+    std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
     std::vector<std::uint64_t> spare_words, spare_sample;  ///< changed in place by the word batch
     /// The quiet pass's verdict per pixel (0 quiet, 1 bridge, 2 per-pixel path), 64-bit like
     /// the levels: a byte array would make the vectoriser take 64 pixels an iteration (one
@@ -300,7 +319,7 @@ struct BlockSoA {
             for (auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off}) v->resize(m);
             l.n.resize(m);
         }
-        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_hz, &bg_on_hz, &bg_off_hz}) v->resize(m);
+        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz}) v->resize(m);
         spare_words.resize(m);
         spare_sample.resize(m);
         busy.resize(m);
@@ -324,7 +343,7 @@ struct BlockSoA {
         resize(m);
         for (std::size_t j = 0; j < m; ++j) {
             take(st[j], j, now());
-            theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_hz[j] = st[j].leak_hz;
+            theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_spread[j] = st[j].leak_spread;
             bg_on_hz[j] = st[j].bg_on_hz; bg_off_hz[j] = st[j].bg_off_hz;
         }
     }
@@ -342,7 +361,7 @@ struct BlockSoA {
 struct QuietPass {
     const BlockSoA::Levels* now;
     BlockSoA::Levels* next;
-    const double *refr_until, *next_hot_t, *theta_on, *theta_off, *leak_hz, *bg_on_hz, *bg_off_hz;
+    const double *refr_until, *next_hot_t, *theta_on, *theta_off, *leak_spread, *bg_on_hz, *bg_off_hz;
     const double *g1, *g2;
     std::uint64_t* busy;
     std::size_t count;
@@ -350,6 +369,10 @@ struct QuietPass {
     double cx, pole_decay, pole_ramp;                 ///< NoiseCache's x and pole numbers at that rate
     double phi_zz, phi_yz, phi_yy, l_zz, l_yz, l_yy;  ///< its noise transition and innovation
     double bg_factor, bridge_bound;
+    /// The leak at that rate: its rate before the pixel's spread (NoiseCache::leak_hz) and its
+    /// direction as weights of the thresholds, leak_on_w theta_on - leak_off_w theta_off (1, 0
+    /// for ON, 0, 1 for OFF), which is exactly PixelModel::leak_theta(), without a select.
+    double leak_hz, leak_on_w, leak_off_w;
     double sf_decay, sf_ramp, dt, inv_dt, t0, t1;
     /// Whether a pixel that only the bridge keeps from quiet may be settled by the bridge stage
     /// (step_block_soa_impl): the bridge has a variance and continuous_finish() would not refine.
@@ -422,7 +445,7 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double* __restrict hot = q.next_hot_t;
     const double* __restrict th_on_a = q.theta_on;
     const double* __restrict th_off_a = q.theta_off;
-    const double* __restrict leak = q.leak_hz;
+    const double* __restrict leak_spread = q.leak_spread;
     const double* __restrict bon = q.bg_on_hz;
     const double* __restrict boff = q.bg_off_hz;
     const double* __restrict g1 = q.g1;
@@ -433,6 +456,7 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double pole_decay = q.pole_decay, pole_ramp = q.pole_ramp, sf_decay = q.sf_decay, sf_ramp = q.sf_ramp;
     const double phi_zz = q.phi_zz, phi_yz = q.phi_yz, phi_yy = q.phi_yy, l_zz = q.l_zz, l_yz = q.l_yz, l_yy = q.l_yy;
     const double bg_factor = q.bg_factor, bridge_bound = q.bridge_bound, dt = q.dt, inv_dt = q.inv_dt;
+    const double leak_hz = q.leak_hz, leak_on_w = q.leak_on_w, leak_off_w = q.leak_off_w;
     const double t0 = q.t0, t1 = q.t1;
     const bool bridge_stage = q.bridge_stage;
     const std::size_t count = q.count;
@@ -466,7 +490,7 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         }
         // The quiet test (step_block_continuous()).
         const double th_on = th_on_a[j], th_off = th_off_a[j];
-        const double g = (y - s_y) * inv_dt + leak[j] * th_on;
+        const double g = (y - s_y) * inv_dt + (leak_hz * leak_spread[j]) * (leak_on_w * th_on - leak_off_w * th_off);
         const double db = s_y - sref[j];
         const double d1 = db + g * dt;
         const double on0 = th_on - db, off0 = th_off + db;
@@ -543,6 +567,7 @@ struct PixelModel {
     /// strict alternation (both 1) takes no random number.
     double hot_switch[2] = {1.0, 1.0};
     bool hot_strict = true;
+    bool leak_off = false;  ///< LeakPolarity::Off: the leak drifts d = y - ref down, to OFF
 
     explicit PixelModel(const PixelParams& params) : p(params) {
         validate(p);
@@ -557,6 +582,25 @@ struct PixelModel {
         hot_switch[1] = std::min(1.0, p.hot_pixel_alternation / (2.0 * p.hot_pixel_on_share));
         hot_switch[0] = std::min(1.0, p.hot_pixel_alternation / (2.0 * (1.0 - p.hot_pixel_on_share)));
         hot_strict = hot_switch[0] >= 1.0 && hot_switch[1] >= 1.0;
+        leak_off = p.leak_polarity == LeakPolarity::Off;
+    }
+
+    /// The mean photocurrent of a pixel at a photon rate without the dark current [A]: what
+    /// the leak's parasitic part follows (leak_photocurrent_hz_per_a).
+    EVSTWIN_ALWAYS_INLINE double photo_current_a(double photon_rate) const {
+        return ELEMENTARY_CHARGE_C * (e_per_photon * photon_rate);
+    }
+    /// The leak rate at a photon rate before the pixel's log-normal factor [Hz].
+    EVSTWIN_ALWAYS_INLINE double leak_rate_hz(double photon_rate) const {
+        return p.leak_rate_hz + p.leak_photocurrent_hz_per_a * photo_current_a(photon_rate);
+    }
+    /// The level the leak drifts d = y - ref to: theta_on (ON leak) or -theta_off (OFF leak).
+    EVSTWIN_ALWAYS_INLINE double leak_theta(const PixelState& s) const { return leak_off ? -s.theta_off : s.theta_on; }
+    /// The leak's part of the slope of d = y - ref [1/s] for a leak rate leak_hz (leak_rate_hz()):
+    /// the reference drifts one threshold per leak period. detail::quiet_pass_body() computes
+    /// it with the same operations in the same order.
+    EVSTWIN_ALWAYS_INLINE double leak_slope(const PixelState& s, double leak_hz) const {
+        return (leak_hz * s.leak_spread) * leak_theta(s);
     }
 
     /// Whether eq. 12's background is on for any pixel.
@@ -602,7 +646,7 @@ struct PixelModel {
         };
         s.bg_on_hz = bg_on_hz * spread(p.background_rate_sigma, a[0], a[1]);
         s.bg_off_hz = bg_off_hz * spread(p.background_rate_sigma, a[2], a[3]);
-        s.leak_hz = p.leak_rate_hz * spread(p.leak_rate_sigma, b[0], b[1]);
+        s.leak_spread = spread(p.leak_rate_sigma, b[0], b[1]);
         if (hot_rate_hz >= 0.0) {
             s.hot_hz = hot_rate_hz;
         } else {
@@ -658,34 +702,39 @@ struct PixelModel {
         }
         s.level_at_event = s.ref;
         s.noise_at_event = s.ny;
-        if (p.leak_random_phase && s.leak_hz > 0.0) {
+        const double leak0_hz = leak_rate_hz(photon_rate) * s.leak_spread;
+        if (p.leak_random_phase && leak0_hz > 0.0) {
             // The leak's phase as it stands in the steady state: the difference d = y - ref
-            // climbs at f_leak theta_on and restarts from 0 at every event. With eq. 12's
-            // background resetting it at rate rho, its density is exp(-lambda d) on
-            // [0, theta_on), lambda = rho / (f_leak theta_on) (uniform without a background).
+            // drifts towards the leak's level (theta_on for an ON leak, -theta_off for an OFF
+            // one) at f_leak theta and restarts from 0 at every event; its distance d0 from 0
+            // is what follows (an OFF leak mirrors an ON one). With eq. 12's background
+            // resetting it at rate rho, the density of d0 is exp(-lambda d0) on [0, theta),
+            // lambda = rho / (f_leak theta) (uniform without a background).
             // With shot noise, the reference was set at the last event's noise, not at the
             // current one: an independent stationary draw, kept where the whole difference lies
             // between the levels (so nothing fires at once). The noise also ends a leak cycle
-            // early: once the leak has brought the level L = theta_on + n_then - d0 that the
-            // noise must reach down to a few sigma, the noise crosses it. A cycle survives to
-            // d0 with probability exp(-int h(L) dL / (f_leak theta_on)), h the noise's rate of
-            // reaching L (leak_noise_hazard); the phase is drawn with that weight too, so a
-            // pixel does not start where, in the steady state, the noise would already have
-            // fired it (without it a 3e-3 Hz leak fired 4x its rate in the first second).
+            // early: once the leak has brought the level L = theta +- n_then - d0 that the
+            // noise must reach (up for ON, down for OFF; the noise is symmetric) down to a few
+            // sigma, the noise crosses it. A cycle survives to d0 with probability
+            // exp(-int h(L) dL / (f_leak theta)), h the noise's rate of reaching L
+            // (leak_noise_hazard); the phase is drawn with that weight too, so a pixel does not
+            // start where, in the steady state, the noise would already have fired it (without
+            // it a 3e-3 Hz leak fired 4x its rate in the first second).
+            const double theta = leak_off ? s.theta_off : s.theta_on;
             const double rho = (s.bg_on_hz + s.bg_off_hz) * background_factor(ELEMENTARY_CHARGE_C * mean_e);
-            const double lambda = rho / (s.leak_hz * s.theta_on);
+            const double lambda = rho / (leak0_hz * theta);
             const double sd = std::sqrt(noise_var_y);
             CounterStream more(key, pixel, 0, PURPOSE_INIT + 1u);
             for (int attempt = 0; attempt < 64; ++attempt) {
                 const double u = attempt == 0 ? uniform_open(w[2]) : more.uniform();
-                const double d0 = lambda * s.theta_on > 1e-9 ? -std::log1p(u * std::expm1(-lambda * s.theta_on)) / lambda
-                                                             : u * s.theta_on;
+                const double d0 = lambda * theta > 1e-9 ? -std::log1p(u * std::expm1(-lambda * theta)) / lambda
+                                                        : u * theta;
                 const double n_then = sd > 0.0 ? sd * normal_from_uniforms(more.uniform(), more.uniform()) : s.ny;
-                const double d = d0 + s.ny - n_then;
+                const double d = (leak_off ? -d0 : d0) + s.ny - n_then;
                 if (sd > 0.0) {
-                    const double level0 = s.theta_on + n_then;
+                    const double level0 = leak_off ? theta - n_then : theta + n_then;
                     const double reach = leak_noise_hazard_integral(level0 - d0, level0, sd, pole_a, pole_b);
-                    if (!(more.uniform() < std::exp(-reach / (s.leak_hz * s.theta_on)))) continue;
+                    if (!(more.uniform() < std::exp(-reach / (leak0_hz * theta)))) continue;
                 }
                 if (d < s.theta_on && d > -s.theta_off) {
                     s.ref = s.y - d;
@@ -935,6 +984,7 @@ struct PixelModel {
         // The continuous model's: the sample's second word, the noise, the bridge's variance.
         std::vector<std::uint32_t> word1, busy_at;
         std::vector<double> nz, ny, bridge_var, noise_d;
+        std::vector<double> leak;  ///< the busy pixels' leak rates (continuous), or slopes (sampled)
         // block_sample_words' Philox batch: counters, the pixels that need a call, the words;
         // and the ziggurat batch's flags of the normals left to the slow path.
         std::vector<std::uint32_t> ctr0, ctr1, ctr2, need_at, r0, r1, r2, r3;
@@ -954,6 +1004,7 @@ struct PixelModel {
                 z.resize(n); count.resize(n);
                 word1.resize(n); busy_at.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
                 noise_d.resize(n);
+                leak.resize(n);
                 ctr0.resize(n); ctr1.resize(n); ctr2.resize(n); need_at.resize(n);
                 r0.resize(n); r1.resize(n); r2.resize(n); r3.resize(n); slow1.resize(n); slow2.resize(n);
             }
@@ -1157,6 +1208,7 @@ struct PixelModel {
         double* cur = scratch.current.data();
         double* bvar = scratch.bridge_var.data();
         double* noise_d = scratch.noise_d.data();
+        double* leak = scratch.leak.data();
         PixelState* st = v.state;
         const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
         block_sample_words<AllActive>(v, key, scratch, w0, w1);
@@ -1191,7 +1243,7 @@ struct PixelModel {
             // first factor positive also says that the second one is; std::min returns its first
             // argument where a NaN is involved, and a NaN in the second one makes the first NaN).
             const double th_on = s.theta_on, th_off = s.theta_off;
-            const double g = (yj - s.y) * c.inv_dt + s.leak_hz * th_on;
+            const double g = (yj - s.y) * c.inv_dt + leak_slope(s, cache.leak_hz);
             const double db = s.y - s.ref;
             const double d1 = db + g * c.dt;
             const double on0 = th_on - db, off0 = th_off + db;
@@ -1213,6 +1265,7 @@ struct PixelModel {
                 cur[n_busy] = cache.current_a;
                 bvar[n_busy] = cache.k.bridge_var;
                 noise_d[n_busy] = cache.D;
+                leak[n_busy] = cache.leak_hz;
                 z[n_busy] = zj;
                 y[n_busy] = yj;
                 nz[n_busy] = nzj;
@@ -1223,8 +1276,8 @@ struct PixelModel {
         for (std::size_t b = 0; b < n_busy; ++b) {
             PixelState& s = st[busy_at[b]];
             pixel = v.ids[busy_at[b]];
-            continuous_finish(s, x[b], z[b], y[b], nz[b], ny[b], cur[b], bvar[b], noise_d[b], c, key, pixel, emit,
-                              nullptr);
+            continuous_finish(s, x[b], z[b], y[b], nz[b], ny[b], cur[b], leak[b], bvar[b], noise_d[b], c, key, pixel,
+                              emit, nullptr);
             if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
             s.t = c.t1;
             ++s.n;
@@ -1290,7 +1343,7 @@ struct PixelModel {
         q.now = &now;
         q.next = &next;
         q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
-        q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_hz = h.leak_hz.data();
+        q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_spread = h.leak_spread.data();
         q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data();
         q.g1 = g1s; q.g2 = g2s; q.busy = h.busy.data(); q.count = n;
         // The pass takes the two-pole noise wherever there is noise behind the pole, which holds
@@ -1301,6 +1354,7 @@ struct PixelModel {
         q.phi_zz = common.k.phi_zz; q.phi_yz = common.k.phi_yz; q.phi_yy = common.k.phi_yy;
         q.l_zz = common.k.l_zz; q.l_yz = common.k.l_yz; q.l_yy = common.k.l_yy;
         q.bg_factor = common.bg_factor; q.bridge_bound = common.bridge_bound;
+        q.leak_hz = common.leak_hz; q.leak_on_w = leak_off ? 0.0 : 1.0; q.leak_off_w = leak_off ? 1.0 : 0.0;
         q.sf_decay = c.sf_decay; q.sf_ramp = c.sf_ramp; q.dt = c.dt; q.inv_dt = c.inv_dt; q.t0 = c.t0; q.t1 = c.t1;
         // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling.
         q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
@@ -1323,8 +1377,8 @@ struct PixelModel {
             continuous_levels<sf_only>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
             if (background) background_spend(s, cache.bg_factor, c);
             pixel = ids[j];
-            continuous_finish(s, cache.x, zj, yj, nzj, nyj, cache.current_a, cache.k.bridge_var, cache.D, c, key, pixel,
-                              emit, nullptr);
+            continuous_finish(s, cache.x, zj, yj, nzj, nyj, cache.current_a, cache.leak_hz, cache.k.bridge_var, cache.D,
+                              c, key, pixel, emit, nullptr);
             if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
             ++s.n;
             h.take(s, j, next);
@@ -1355,7 +1409,8 @@ struct PixelModel {
         for (std::size_t j = next_flagged(busy, 0, n); j < n; j = next_flagged(busy, j + 1, n)) {
             if (busy[j] != 1) continue;
             const double s_y = now.y[j], ref = now.ref[j], th_on = h.theta_on[j], th_off = h.theta_off[j];
-            const double g = (next.y[j] - s_y) * c.inv_dt + h.leak_hz[j] * th_on;
+            const double g = (next.y[j] - s_y) * c.inv_dt +
+                             (common.leak_hz * h.leak_spread[j]) * (leak_off ? -th_off : th_on);  // leak_slope()
             const double d_start = (s_y - ref) + g * (t_start - c.t0);
             const double d_end = (s_y - ref) + g * c.dt;
             const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
@@ -1389,6 +1444,7 @@ struct PixelModel {
         double* x = scratch.x.data();
         double* cur = scratch.current.data();
         double* y = scratch.y.data();
+        double* leak = scratch.leak.data();
         std::uint8_t* busy = scratch.busy.data();
         PixelState* st = v.state;
         // at(j): the local index of the j-th active pixel.
@@ -1478,7 +1534,9 @@ struct PixelModel {
             }
             noise |= si.next_hot_t <= c.t1;
             const double th_on = si.theta_on, th_off = si.theta_off;
-            const double g = (yi - si.y) * c.inv_dt + si.leak_hz * th_on;
+            const double lg = leak_slope(si, leak_rate_hz(static_cast<double>(rate[at(j)])));
+            leak[j] = lg;
+            const double g = (yi - si.y) * c.inv_dt + lg;
             const double db = si.y - si.ref;
             const double d1 = db + g * c.dt;
             const bool quiet = !noise & (si.refr_until <= c.t0) & (db < th_on) & (db > -th_off) & (d1 < th_on) &
@@ -1492,7 +1550,7 @@ struct PixelModel {
                 pixel = v.ids[at(j)];
                 double t_noise = 0.0;
                 const int pol = shot ? shot_noise(si, u_noise[j], cur[j], c, t_noise) : -1;
-                compare(si, y[j], 0.0, c, pol, t_noise, emit);
+                compare(si, y[j], 0.0, c, leak[j], pol, t_noise, emit);
                 if (si.next_hot_t <= c.t1) hot_events(si, c.t1, key, pixel, emit);
             }
             si.x = x[j];
@@ -1573,7 +1631,7 @@ struct PixelModel {
         double t_noise = 0.0;
         const int noise_pol = has_background() ? shot_noise(s, uniform_open(w[1]), current_a, c, t_noise) : -1;
 
-        compare(s, y, 0.0, c, noise_pol, t_noise, emit);
+        compare(s, y, 0.0, c, leak_slope(s, leak_rate_hz(photon_rate)), noise_pol, t_noise, emit);
         if (trace) *trace = {current_a, x, y, s.ref};
         s.x = x;
         s.z = z;
@@ -1622,6 +1680,7 @@ struct PixelModel {
         // The bridge's middle variance over the whole interval, as step_continuous computes it.
         cache.bridge_bound = 48.0 * (1.0 + 1e-8) * (0.25 * (4.0 * cache.k.bridge_var * c.inv_dt) * c.dt);
         cache.bg_factor = background_factor(cache.current_a);
+        cache.leak_hz = leak_rate_hz(photon_rate);
     }
 
     /// Advance one pixel over (c.t0, c.t1] with the continuous noise model (noise.hpp): the
@@ -1643,8 +1702,8 @@ struct PixelModel {
         if (cache.D > 0.0) sample_normals(w[0], w[1], key, pixel, s.n, g1, g2);
         continuous_levels(s, cache, c, g1, g2, z, y, nz, ny);
         if (has_background()) background_spend(s, cache.bg_factor, c);
-        continuous_finish(s, cache.x, z, y, nz, ny, cache.current_a, cache.k.bridge_var, cache.D, c, key, pixel, emit,
-                          trace);
+        continuous_finish(s, cache.x, z, y, nz, ny, cache.current_a, cache.leak_hz, cache.k.bridge_var, cache.D, c, key,
+                          pixel, emit, trace);
     }
 
     /// The continuous model's new levels over (c.t0, c.t1] from the sample's two normals
@@ -1683,12 +1742,13 @@ struct PixelModel {
 
     /// The rest of step_continuous once the levels are known and the background clocks spent
     /// (background_spend): eq. 12's event, the bridge, the comparator and the new state
-    /// (x, z, y, nz, ny; advance() keeps s.t and s.n).
+    /// (x, z, y, nz, ny; advance() keeps s.t and s.n). leak_hz: leak_rate_hz() of the sample.
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void continuous_finish(PixelState& s, double x, double z, double y, double nz, double ny,
-                                                 double current_a, double bridge_var, double D, const SampleConstants& c,
-                                                 Philox4x32Key key, std::uint32_t pixel, Emit& emit,
-                                                 TraceSample* trace) const {
+                                                 double current_a, double leak_hz, double bridge_var, double D,
+                                                 const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
+                                                 Emit& emit, TraceSample* trace) const {
+        const double leak_g = leak_slope(s, leak_hz);
         double t_noise = 0.0;
         const int noise_pol = has_background() ? background_fire(s, current_a, c, key, pixel, t_noise) : -1;
 
@@ -1698,10 +1758,10 @@ struct PixelModel {
         // interval is refined exactly (below). Elsewhere the line and the bridge do.
         const double a = pole_rate(current_a);
         const bool two_poles = D > 0.0 && a > 0.0 && has_filter;
-        if (two_poles && a * c.dt > 1.0 && crossing_plausible(s, y, c, bridge_var)) {
-            refine_and_compare(s, x, z, y - ny, nz, ny, c, a, D, noise_pol, t_noise, key, pixel, emit);
+        if (two_poles && a * c.dt > 1.0 && crossing_plausible(s, y, c, leak_g, bridge_var)) {
+            refine_and_compare(s, x, z, y - ny, nz, ny, c, leak_g, a, D, noise_pol, t_noise, key, pixel, emit);
         } else {
-            compare_bridged(s, y, ny, c, bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit);
+            compare_bridged(s, y, ny, c, leak_g, bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit);
         }
         if (trace) *trace = {current_a, x, y, s.ref};
         s.x = x;
@@ -1713,10 +1773,10 @@ struct PixelModel {
 
     /// Whether the comparator could fire in (c.t0, c.t1] toward y1: the line crosses a level,
     /// or a Brownian bridge of the interval's middle variance would cross one with a
-    /// probability above 1e-6 (exp(-13.8)).
+    /// probability above 1e-6 (exp(-13.8)). leak_g: leak_slope() of the sample.
     EVSTWIN_ALWAYS_INLINE bool crossing_plausible(const PixelState& s, double y1, const SampleConstants& c,
-                                                  double bridge_var) const {
-        const double g = (y1 - s.y) * c.inv_dt + s.leak_hz * s.theta_on;
+                                                  double leak_g, double bridge_var) const {
+        const double g = (y1 - s.y) * c.inv_dt + leak_g;
         const double d0 = s.y - s.ref, d1 = d0 + g * c.dt;
         const double th_on = s.theta_on, th_off = s.theta_off;
         if (!(d0 < th_on && d0 > -th_off && d1 < th_on && d1 > -th_off)) return true;
@@ -1727,15 +1787,16 @@ struct PixelModel {
     /// The comparator over (c.t0, c.t1] toward y1 (noise part ny1), with the crossings of a
     /// Brownian bridge of middle variance bridge_var that the line misses: only while the line
     /// itself crosses nothing after the refractory period (a crossing of the line fires
-    /// anyway; the excursions around it are second order). `purpose` keys the bridge's draws.
+    /// anyway; the excursions around it are second order). `purpose` keys the bridge's draws;
+    /// leak_g: leak_slope() of the sample.
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void compare_bridged(PixelState& s, double y, double ny, const SampleConstants& c,
-                                               double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
+                                               double leak_g, double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
                                                std::uint32_t pixel, std::uint32_t purpose, Emit& emit) const {
         if (bridge_var > 0.0) {
             const double t_start = std::max(c.t0, s.refr_until);
             if (t_start < c.t1) {
-                const double g = (y - s.y) * c.inv_dt + s.leak_hz * s.theta_on;
+                const double g = (y - s.y) * c.inv_dt + leak_g;
                 const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
                 const double d_end = (s.y - s.ref) + g * c.dt;
                 const double th_on = s.theta_on, th_off = s.theta_off;
@@ -1774,17 +1835,17 @@ struct PixelModel {
                             second.dt = c.t1 - tc;
                             second.inv_dt = 1.0 / second.dt;
                             const bool noise_first = noise_pol >= 0 && t_noise <= tc;
-                            compare(s, y_c, ny_c, first, noise_first ? noise_pol : -1, t_noise, emit);
+                            compare(s, y_c, ny_c, first, leak_g, noise_first ? noise_pol : -1, t_noise, emit);
                             s.y = y_c;
                             s.ny = ny_c;
-                            compare(s, y, ny, second, noise_first ? -1 : noise_pol, t_noise, emit);
+                            compare(s, y, ny, second, leak_g, noise_first ? -1 : noise_pol, t_noise, emit);
                             return;
                         }
                     }
                 }
             }
         }
-        compare(s, y, ny, c, noise_pol, t_noise, emit);
+        compare(s, y, ny, c, leak_g, noise_pol, t_noise, emit);
     }
 
     /// The interval (c.t0, c.t1] cut into m = 2^L pieces with a h <= 1 (h = dt / m), the noise
@@ -1795,7 +1856,7 @@ struct PixelModel {
     /// the sample's values at c.t1 (already drawn); s still holds those at c.t0.
     template <class Emit>
     void refine_and_compare(PixelState& s, double x1, double z1, double yd1, double nz1, double ny1,
-                            const SampleConstants& c, double a, double D, int noise_pol, double t_noise,
+                            const SampleConstants& c, double leak_g, double a, double D, int noise_pol, double t_noise,
                             Philox4x32Key key, std::uint32_t pixel, Emit& emit) const {
         constexpr int MAX_LEVELS = 10;
         int levels = 1;
@@ -1865,7 +1926,7 @@ struct PixelModel {
             piece.dt = piece.t1 - piece.t0;
             piece.inv_dt = 1.0 / piece.dt;
             const bool here = noise_pol >= 0 && t_noise > piece.t0 - (i == 1 ? 1.0 : 0.0) && t_noise <= piece.t1;
-            compare_bridged(s, ydi + nys[i], nys[i], piece, piece_bridge, here ? noise_pol : -1, t_noise, key, pixel,
+            compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, here ? noise_pol : -1, t_noise, key, pixel,
                             PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
             s.y = ydi + nys[i];
             s.ny = nys[i];
@@ -1877,7 +1938,8 @@ struct PixelModel {
 
     /// Why a threshold crossing of the line fired, at a point a share f into the interval:
     /// the largest of the changes since the last event in the crossing's direction, of the
-    /// noise-free level (signal), of the noise and (for ON) of the leak.
+    /// noise-free level (signal), of the noise and of the leak (which only ever moves d towards
+    /// its own polarity's level, so it never wins for the other one).
     EVSTWIN_ALWAYS_INLINE std::uint8_t crossing_label(const PixelState& s, int pol, double d, double y_t,
                                                       double ny_t) const {
         const double dn = ny_t - s.noise_at_event;
@@ -1887,12 +1949,13 @@ struct PixelModel {
             if (dl >= ds && dl >= dn) return LABEL_LEAK;
             return dn > ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
         }
+        if (-dl >= -ds && -dl >= -dn) return LABEL_LEAK;
         return -dn > -ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
     }
 
     /// The comparator over (t0, t1]: the level difference d(t) = y(t) - ref(t) is linear in
-    /// t, since y is interpolated linearly (eq. 16) and the leak lowers ref at a constant
-    /// rate f_leak theta_on (eq. 10-11). Each crossing fires at its interpolated time and
+    /// t, since y is interpolated linearly (eq. 16) and the leak moves ref at a constant
+    /// rate, leak_g = f_leak theta_on down (ON leak) or f_leak theta_off up (OFF; eq. 10-11). Each crossing fires at its interpolated time and
     /// sets ref to the level there; during the refractory period nothing fires and ref keeps
     /// the last event's level (it still leaks). If, when the refractory period ends, the
     /// difference has passed n >= 1 thresholds, one event fires then and ref moves by n
@@ -1900,10 +1963,10 @@ struct PixelModel {
     /// single event, as a real pixel cannot report them separately. ny1 is the noise part of
     /// y1 (0 in the sampled model), for the events' labels.
     template <class Emit>
-    EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, double ny1, const SampleConstants& c, int noise_pol,
-                                       double t_noise, Emit& emit) const {
+    EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, double ny1, const SampleConstants& c, double leak_g,
+                                       int noise_pol, double t_noise, Emit& emit) const {
         const double th_on = s.theta_on, th_off = s.theta_off, refr = p.refractory_s;
-        const double g = (y1 - s.y) * c.inv_dt + s.leak_hz * th_on;  // d(d)/dt
+        const double g = (y1 - s.y) * c.inv_dt + leak_g;  // d(d)/dt
         double tb = c.t0;
         double db = s.y - s.ref;  // d(tb)
         // Fast path: no noise event, not refractory, and the line stays inside both thresholds.
