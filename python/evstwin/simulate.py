@@ -304,9 +304,17 @@ class _LinearColumns:
         f[:, self.cols] = self.flux
 
 
-SUB_SAMPLED_UNIT_SAMPLES = 50
+SUB_SAMPLED_UNIT_SAMPLES = 150
 """Fine samples in a unit of the fine-sampling decision (see ``_Runner._engine_chunks``): a
-fixed figure, not ``chunk_samples``, so that the chunking does not change the events."""
+fixed figure, not ``chunk_samples``, so that the chunking does not change the events. A unit
+samples finely every pixel a fast source comes near during it, so a longer unit samples more
+pixels finely (never fewer: only more accurate) but makes fewer, longer engine calls; each
+call has a fixed cost (its parallel region, each block's copy into the kernel's arrays, the
+events' collection). 4 s of ``mcreynolds`` (13 fine samples a base interval, so 3, 7, 11,
+15 and 19 base intervals a unit for 50 to 250): 2.19-2.35 s at 50, 1.90-1.99 at 100,
+1.88-1.90 at 150, 2.01-2.03 at 200, 2.15-2.17 at 250, with 144, 151, 160, 182 and 203 M
+pixel-updates; the events 133,326, 133,339, 133,556, 133,553 and 133,505 (quiet 2-core
+machine, two runs each)."""
 
 _Chunk = tuple[np.ndarray, "np.ndarray | None"]
 """A chunk of events (sorted by t) and their labels (None when the runner keeps none)."""

@@ -255,15 +255,17 @@ def test_a_fast_drifting_field_sub_samples_sparsely_with_the_dense_events() -> N
 
     def run(sparse: bool):  # type: ignore[no-untyped-def]
         return simulate({
-            "name": "drift", "duration_s": 0.2, "sensor": {"preset": "davis346", "width": 64, "height": 48},
+            # 128 x 96 with 12 stars: a unit of the fine-sampling decision (150 fine samples, the
+            # whole run here) leaves most pixels coarse; on 64 x 48, 30 stars' paths cover it all.
+            "name": "drift", "duration_s": 0.2, "sensor": {"preset": "davis346", "width": 128, "height": 96},
             "pixel": noise_free, "background": {"photon_rate_ph_s": 1e5}, "optics": {"extra_blur_sigma_px": 0.6},
             "sampling": {"rate_hz": 250.0, "sparse": sparse, "chunk_samples": 20},
-            "star_field": {"n_stars": 30, "mag_min": -2.0, "mag_max": 2.0, "drift_px_s": [150.0, -100.0]},
+            "star_field": {"n_stars": 12, "mag_min": -2.0, "mag_max": 2.0, "drift_px_s": [150.0, -100.0]},
         }, num_threads=1)
 
     sparse, dense = run(True), run(False)
     assert sparse.sub_sampled_chunks > 0 and sparse.n_events > 1000
-    assert sparse.pixel_updates < dense.pixel_updates
+    assert sparse.pixel_updates < 0.8 * dense.pixel_updates
     np.testing.assert_array_equal(sparse.events, dense.events)
 
 
