@@ -62,24 +62,19 @@ def rings(name: str, path: str, offset: tuple[float, float]) -> None:
 
 def currents() -> None:
     """The twin's photo-electron rate per pixel at t = 5 s in the same rings."""
-    from evstwin import psf, scenario
+    from evstwin import scenario
+    from evstwin.presets import ELEMENTARY_CHARGE_C
     from evstwin.simulate import _Runner
 
     sc = scenario.build("imx636-pointsource")
     run = _Runner(sc, 1, lambda *a: None)
     t = np.array([5.0])
-    x, y, f = run._sources(t)
-    shape, cols = run._groups[0]
-    frame = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
-                              background_ph_s=run.static_map)
-    if len(run._groups) > 1:
-        idx, val = run._contributions(x, y, f, run._groups[1:])
-        np.add.at(frame.reshape(-1), idx, val)
+    frame = run.frames(t)
     photo = frame[0] * sc.params.electrons_per_photon
     sx, sy, gx, gy = tracks(t)
     yy, xx = np.mgrid[0 : sc.height, 0 : sc.width]
     print(f"=== twin photocurrent at t = 5 s [e-/s; dark current {sc.params.dark_rate_e_per_s:g} e-/s, "
-          f"1 e-/s = {1.602176634e-19:.4g} A]")
+          f"1 e-/s = {ELEMENTARY_CHARGE_C:.4g} A]")
     for label, (ox, oy), table in (("star", (sx[0], sy[0]), STAR_RINGS_PX), ("ghost", (gx[0], gy[0]), GHOST_RINGS_PX)):
         r = np.hypot(xx - ox, yy - oy)
         for r0, r1 in table:

@@ -468,26 +468,30 @@ class _Runner:
                                         "flux_ph_s": f[keep, j]})
         return x, y, f
 
+    def frames(self, t: np.ndarray) -> np.ndarray:
+        """The photon rates on every pixel at the times t_s: (len(t), height, width) photons/s."""
+        sc = self.scene
+        if not self.moving:
+            return np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
+        x, y, f = self._sources(t)
+        shape, cols = self._groups[0]
+        frames = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
+                                   background_ph_s=self.static_map)
+        if len(self._groups) > 1:
+            idx, val = self._contributions(x, y, f, self._groups[1:])
+            np.add.at(frames.reshape(-1), idx, val)
+        return frames
+
     def _dense(self, t: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
-        sc = self.scene
-        if self.moving:
-            x, y, f = self._sources(t)
-            shape, cols = self._groups[0]
-            frames = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
-                                       background_ph_s=self.static_map)
-            if len(self._groups) > 1:
-                idx, val = self._contributions(x, y, f, self._groups[1:])
-                np.add.at(frames.reshape(-1), idx, val)
-        else:
-            frames = np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
+        frames = self.frames(t)
         s1 = time.perf_counter()
         events = self.sensor.run(frames, t)
         codes = self.sensor.last_labels() if self.labels else None
         s2 = time.perf_counter()
         self.scene_s += s1 - s0
         self.engine_s += s2 - s1
-        self.pixel_updates += t.size * sc.width * sc.height
+        self.pixel_updates += t.size * self.scene.width * self.scene.height
         return events, codes
 
     def _contributions(self, x: np.ndarray, y: np.ndarray, f: np.ndarray,
