@@ -90,6 +90,27 @@ TEST(noise_coefficients_compose_and_reach_the_stationary_law) {
     CHECK_NEAR(far.l_yz * far.l_yz + far.l_yy * far.l_yy, syy, 1e-9 * syy);
 }
 
+TEST(noise_coeffs_with_kept_source_follower_terms_are_the_same_bits) {
+    // NoiseCache keeps sf_terms(b, T) per interval; the coefficients must not change by a bit,
+    // for two poles (near-equal rates included), the source follower alone, and the pole alone.
+    const auto same = [](const NoiseCoeffs& x, const NoiseCoeffs& y) {
+        return std::memcmp(&x, &y, sizeof(NoiseCoeffs)) == 0;
+    };
+    int checked = 0;
+    for (double T : {1e-5, 3.1e-4, 1e-3, 4e-3, 0.5})
+        for (double b : {0.0, 62.83, 1256.6})
+            for (double a : {0.0, 3.7, 62.83 * (1 + 1e-6), 2e4})
+                for (double D : {1e-3, 55.0}) {
+                    if (!(a > 0) && !(b > 0)) continue;
+                    const SfTerms sf = sf_terms(b, T);
+                    CHECK(same(noise_coeffs(a, b, D, T, &sf), noise_coeffs(a, b, D, T)));
+                    const SfTerms other = sf_terms(b, 2 * T);  // for another interval: not used
+                    CHECK(same(noise_coeffs(a, b, D, T, &other), noise_coeffs(a, b, D, T)));
+                    ++checked;
+                }
+    CHECK(checked == 5 * 2 * 4 * 2 + 5 * 1 * 3 * 2);
+}
+
 TEST(leak_noise_hazard_integral_against_quadrature_of_its_rate) {
     // The closed forms (E1 by A&S 5.1.56, erfc) against a fine Simpson rule over the rate the
     // header documents, for one pole, two comparable poles and a << b, and additivity.

@@ -48,12 +48,38 @@ struct NoiseCoeffs {
     double bridge_var = 0;
 };
 
+/// What noise_coeffs() computes from the source follower's rate b and the interval T alone:
+/// the same for every pixel, so a NoiseCache keeps it per T and the coefficients of a new
+/// photon rate cost the pole's terms only (with the default single low-pass, no exp at all).
+/// Each value is the expression noise_coeffs() and ou2_covariance() would evaluate: the same bits.
+struct SfTerms {
+    double b = -1.0, T = -1.0;
+    double exp_bT = 0, exp_bh = 0;      ///< exp(-b T), exp(-b (T / 2))
+    double ome_2bT = 0, ome_2bh = 0;    ///< one_minus_exp_over(2 b T), (2 b (T / 2))
+    double ome_bT = 0, exp_half_bT = 0; ///< the single low-pass's: one_minus_exp_over(b T), exp(-0.5 b T)
+};
+inline SfTerms sf_terms(double b, double T) {
+    SfTerms s;
+    s.b = b;
+    s.T = T;
+    const double h = 0.5 * T;
+    s.exp_bT = std::exp(-b * T);
+    s.exp_bh = std::exp(-b * h);
+    s.ome_2bT = one_minus_exp_over(2 * b * T);
+    s.ome_2bh = one_minus_exp_over(2 * b * h);
+    s.ome_bT = one_minus_exp_over(b * T);
+    s.exp_half_bT = std::exp(-0.5 * b * T);
+    return s;
+}
+
 /// The innovation covariance of the two-pole system over T: (zz, zy, yy). a, b > 0.
-inline void ou2_covariance(double a, double b, double D, double T, double& qzz, double& qzy, double& qyy) {
+/// ome_2bT: one_minus_exp_over(2 b T) if the caller has it (SfTerms), else NaN.
+inline void ou2_covariance(double a, double b, double D, double T, double& qzz, double& qzy, double& qyy,
+                           double ome_2bT = std::numeric_limits<double>::quiet_NaN()) {
     // v(s) = Phi(s) e_z = (e^{-as}, b (e^{-as} - e^{-bs}) / (b - a)); Q = D a^2 int_0^T v v^T.
     const double h2a = T * one_minus_exp_over(2 * a * T);      // int e^{-2as}
     const double hab = T * one_minus_exp_over((a + b) * T);    // int e^{-(a+b)s}
-    const double h2b = T * one_minus_exp_over(2 * b * T);      // int e^{-2bs}
+    const double h2b = T * (ome_2bT == ome_2bT ? ome_2bT : one_minus_exp_over(2 * b * T));  // int e^{-2bs}
     const double c = b / (b - a);
     const double g = D * a * a;
     qzz = g * h2a;
@@ -65,17 +91,20 @@ inline void ou2_covariance(double a, double b, double D, double T, double& qzz, 
 ///   pole_rate_per_s: a = 2 pi f_pr (0 = no photoreceptor pole)
 ///   sf_rate_per_s:   b = 2 pi f_sf (0 = no source follower)
 ///   D: white-noise intensity of ln I [1/s]. At least one of a, b must be > 0.
-inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T) {
+///   sf: sf_terms(b, T), if the caller keeps them (the same coefficients, faster).
+inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const SfTerms* sf = nullptr) {
     NoiseCoeffs k;
+    const bool kept = sf != nullptr && sf->b == b && sf->T == T;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
     if (a > 0 && b > 0) {
         // Equal rates make the closed form 0/0: move the pole by 1e-4 (far below what the
         // bias currents are known to), which keeps every cancellation above 1e-8 relative.
         if (std::fabs(b - a) < 1e-4 * (a + b)) a = b * (1.0 - 2e-4);
         k.phi_zz = std::exp(-a * T);
-        k.phi_yy = std::exp(-b * T);
+        k.phi_yy = kept ? sf->exp_bT : std::exp(-b * T);
         k.phi_yz = b * T * k.phi_zz * one_minus_exp_over((b - a) * T);
         double qzz, qzy, qyy;
-        ou2_covariance(a, b, D, T, qzz, qzy, qyy);
+        ou2_covariance(a, b, D, T, qzz, qzy, qyy, kept ? sf->ome_2bT : nan);
         if (qzz > 0) {
             k.l_zz = std::sqrt(qzz);
             k.l_yz = qzy / k.l_zz;
@@ -84,8 +113,9 @@ inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T) {
         // Cov(mid | ends) = Qh - Qh Ph^T (Ph Qh Ph^T + Qh)^-1 Ph Qh, half-interval Ph, Qh.
         const double h = 0.5 * T;
         double hzz, hzy, hyy;
-        ou2_covariance(a, b, D, h, hzz, hzy, hyy);
-        const double pzz = std::exp(-a * h), pyy = std::exp(-b * h), pyz = b * h * pzz * one_minus_exp_over((b - a) * h);
+        ou2_covariance(a, b, D, h, hzz, hzy, hyy, kept ? sf->ome_2bh : nan);
+        const double pzz = std::exp(-a * h), pyy = kept ? sf->exp_bh : std::exp(-b * h);
+        const double pyz = b * h * pzz * one_minus_exp_over((b - a) * h);
         // P = Ph Qh (rows of Ph times Qh): [[pzz, 0], [pyz, pyy]] [[hzz, hzy], [hzy, hyy]]
         const double Pzz = pzz * hzz, Pzy = pzz * hzy;
         const double Pyz = pyz * hzz + pyy * hzy, Pyy = pyz * hzy + pyy * hyy;
@@ -102,10 +132,11 @@ inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T) {
         }
     } else {
         const double r = a > 0 ? a : b;  // one low-pass: a 1-D OU process of rate r
-        k.phi_yy = std::exp(-r * T);
-        k.l_yy = std::sqrt(D * r * r * T * one_minus_exp_over(2 * r * T));
-        const double qh = D * r * r * 0.5 * T * one_minus_exp_over(r * T);
-        const double ph = std::exp(-0.5 * r * T);
+        const bool sf_only = kept && !(a > 0);  // r is b: its terms are kept
+        k.phi_yy = sf_only ? sf->exp_bT : std::exp(-r * T);
+        k.l_yy = std::sqrt(D * r * r * T * (sf_only ? sf->ome_2bT : one_minus_exp_over(2 * r * T)));
+        const double qh = D * r * r * 0.5 * T * (sf_only ? sf->ome_bT : one_minus_exp_over(r * T));
+        const double ph = sf_only ? sf->exp_half_bT : std::exp(-0.5 * r * T);
         k.bridge_var = qh / (1.0 + ph * ph);
     }
     return k;

@@ -263,6 +263,7 @@ struct NoiseCache {
     double current_a = 0, x = 0, a = 0, D = 0;
     double pole_decay = 0, pole_ramp = 0;
     NoiseCoeffs k;
+    SfTerms sf;  ///< the source follower's part of k for this dt (sf_terms)
     double bg_factor = 0;  ///< eq. 12's illumination factor at current_a (background_factor)
     double leak_hz = 0;    ///< the leak rate at this photon rate before a pixel's spread (leak_rate_hz)
     /// For the block kernel's quiet test: a pixel whose line stays inside both thresholds over
@@ -1676,7 +1677,8 @@ struct PixelModel {
         const double u = cache.a * c.dt;
         cache.pole_decay = std::exp(-u);
         cache.pole_ramp = one_minus_exp_over(u);
-        cache.k = cache.D > 0.0 ? noise_coeffs(cache.a, sf_rate(), cache.D, c.dt) : NoiseCoeffs{};
+        if (cache.sf.T != c.dt || cache.sf.b != sf_rate()) cache.sf = sf_terms(sf_rate(), c.dt);
+        cache.k = cache.D > 0.0 ? noise_coeffs(cache.a, sf_rate(), cache.D, c.dt, &cache.sf) : NoiseCoeffs{};
         // The bridge's middle variance over the whole interval, as step_continuous computes it.
         cache.bridge_bound = 48.0 * (1.0 + 1e-8) * (0.25 * (4.0 * cache.k.bridge_var * c.inv_dt) * c.dt);
         cache.bg_factor = background_factor(cache.current_a);
