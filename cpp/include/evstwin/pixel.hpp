@@ -1185,6 +1185,25 @@ struct PixelModel {
         }
     }
 
+    /// The block kernels' quiet test for a pixel whose new level is y1 (its state still at c.t0,
+    /// its clocks spent): the line (compare()'s fast path) and, around it, the bridge's
+    /// exponents. The difference d inside both thresholds at both ends, and (th_on - d0)(th_on -
+    /// d1) and (th_off + d0)(th_off + d1) above the bound (a product above a bound >= 0 with
+    /// its first factor positive also says that the second one is; std::min returns its first
+    /// argument where a NaN is involved, and a NaN in the second one makes the first NaN). d1:
+    /// the difference at c.t1 (a quiet pixel's reference becomes y1 - d1). detail::quiet_pass_body
+    /// is the same test, vectorised.
+    EVSTWIN_ALWAYS_INLINE bool quiet_in_interval(const PixelState& s, double y1, const NoiseCache& cache,
+                                                 const SampleConstants& c, bool clock_ran_out, double& d1) const {
+        const double th_on = s.theta_on, th_off = s.theta_off;
+        const double g = (y1 - s.y) * c.inv_dt + leak_slope(s, cache.leak_hz);
+        const double db = s.y - s.ref;
+        d1 = db + g * c.dt;
+        const double on0 = th_on - db, off0 = th_off + db;
+        return !clock_ran_out & (s.next_hot_t > c.t1) & (s.refr_until <= c.t0) & (std::min(on0, off0) > 0.0) &
+               (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > cache.bridge_bound);
+    }
+
     /// step_continuous() for a block, as passes: the random words; the levels, the background
     /// clocks' spending and a branch-free test of whether anything can happen in the interval
     /// (a clock ran out, a hot pixel's event is due, refractory, the line reaches a threshold,
@@ -1238,19 +1257,8 @@ struct PixelModel {
             double zj, yj, nzj, nyj;
             continuous_levels<SfOnly>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
-            // The line (compare()'s fast path) and, around it, the bridge's exponents: the
-            // difference d inside both thresholds at both ends, and (th_on - d0)(th_on - d1) and
-            // (th_off + d0)(th_off + d1) above the bound (a product above a bound >= 0 with its
-            // first factor positive also says that the second one is; std::min returns its first
-            // argument where a NaN is involved, and a NaN in the second one makes the first NaN).
-            const double th_on = s.theta_on, th_off = s.theta_off;
-            const double g = (yj - s.y) * c.inv_dt + leak_slope(s, cache.leak_hz);
-            const double db = s.y - s.ref;
-            const double d1 = db + g * c.dt;
-            const double on0 = th_on - db, off0 = th_off + db;
-            const bool quiet = !clock_ran_out & (s.next_hot_t > c.t1) & (s.refr_until <= c.t0) &
-                               (std::min(on0, off0) > 0.0) &
-                               (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > cache.bridge_bound);
+            double d1;
+            const bool quiet = quiet_in_interval(s, yj, cache, c, clock_ran_out, d1);
             if (quiet) {
                 s.ref = yj - d1;
                 s.x = cache.x;
@@ -1376,11 +1384,23 @@ struct PixelModel {
             if (r != cache.photon_rate) fill_noise_cache(cache, r, c);
             double zj, yj, nzj, nyj;
             continuous_levels<sf_only>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
-            if (background) background_spend(s, cache.bg_factor, c);
-            pixel = ids[j];
-            continuous_finish(s, cache.x, zj, yj, nzj, nyj, cache.current_a, cache.leak_hz, cache.k.bridge_var, cache.D,
-                              c, key, pixel, emit, nullptr);
-            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
+            const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
+            // A pixel at another rate was not tested by the pass: it may be quiet at its own (as
+            // step_block_continuous() settles it), which saves continuous_finish()'s bridge.
+            double d1;
+            if (&cache == &other && quiet_in_interval(s, yj, cache, c, clock_ran_out, d1)) {
+                s.ref = yj - d1;
+                s.x = cache.x;
+                s.z = zj;
+                s.y = yj;
+                s.nz = nzj;
+                s.ny = nyj;
+            } else {
+                pixel = ids[j];
+                continuous_finish(s, cache.x, zj, yj, nzj, nyj, cache.current_a, cache.leak_hz, cache.k.bridge_var,
+                                  cache.D, c, key, pixel, emit, nullptr);
+                if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
+            }
             ++s.n;
             h.take(s, j, next);
         }
