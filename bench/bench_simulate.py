@@ -4,11 +4,16 @@ Prints wall time, peak memory, events/s, and the split between the Python scene 
 (trajectories, PSF rendering, hot-pixel bookkeeping) and the C++ engine.
 
     python bench/bench_simulate.py [--scenario mcreynolds] [--duration 10] [--threads 2]
+                                   [--unit-samples N]
+
+--unit-samples sets simulate.SUB_SAMPLED_UNIT_SAMPLES for the run (the figures in its
+docstring: `--duration 4 --threads 2 --unit-samples 50`, 100, ... 250).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import resource
 import tempfile
@@ -18,6 +23,8 @@ from pathlib import Path
 from evstwin.io import write_events
 from evstwin.simulate import simulate
 
+simulate_module = importlib.import_module("evstwin.simulate")  # the package exports simulate() under that name
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -25,7 +32,13 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--set", dest="sets", action="append", default=[])
+    ap.add_argument("--unit-samples", type=int, default=None,
+                    help="fine samples in a unit of the fine-sampling decision (default: the package's)")
     args = ap.parse_args()
+    if args.unit_samples is not None:
+        if args.unit_samples < 1:
+            ap.error(f"--unit-samples must be >= 1; got {args.unit_samples}")
+        simulate_module.SUB_SAMPLED_UNIT_SAMPLES = args.unit_samples
     start = time.perf_counter()
     result = simulate(args.scenario, duration_s=args.duration, num_threads=args.threads, sets=args.sets)
     with tempfile.TemporaryDirectory() as tmp:

@@ -314,7 +314,8 @@ events' collection). 4 s of ``mcreynolds`` (13 fine samples a base interval, so 
 15 and 19 base intervals a unit for 50 to 250): 2.19-2.35 s at 50, 1.90-1.99 at 100,
 1.88-1.90 at 150, 2.01-2.03 at 200, 2.15-2.17 at 250, with 144, 151, 160, 182 and 203 M
 pixel-updates; the events 133,326, 133,339, 133,556, 133,553 and 133,505 (quiet 2-core
-machine, two runs each)."""
+machine, two runs each; ``python bench/bench_simulate.py --duration 4 --threads 2
+--unit-samples N``)."""
 
 _Chunk = tuple[np.ndarray, "np.ndarray | None"]
 """A chunk of events (sorted by t) and their labels (None when the runner keeps none)."""

@@ -610,8 +610,8 @@ class MirroredTarget(Target):
         return self.magnification * self.source.max_speed_px_s(t0_s, t1_s)
 
     def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
-        if self.steady:
-            return np.full(np.shape(_times(t_s)), mean_flux_ph_s(self.brightness))
+        if self.steady:  # brightness is then the share of the source's mean flux, a number
+            return np.full(np.shape(_times(t_s)), float(self.brightness))  # type: ignore[arg-type]
         return self.flux_fraction * self.source.flux_ph_s(t_s)
 
 

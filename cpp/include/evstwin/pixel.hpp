@@ -601,7 +601,18 @@ struct PixelModel {
     /// the reference drifts one threshold per leak period. detail::quiet_pass_body() computes
     /// it with the same operations in the same order.
     EVSTWIN_ALWAYS_INLINE double leak_slope(const PixelState& s, double leak_hz) const {
-        return (leak_hz * s.leak_spread) * leak_theta(s);
+        return leak_slope(s.leak_spread, s.theta_on, s.theta_off, leak_hz);
+    }
+    /// leak_slope() from a pixel's fields (as the structure-of-arrays kernel holds them).
+    EVSTWIN_ALWAYS_INLINE double leak_slope(double leak_spread, double theta_on, double theta_off,
+                                            double leak_hz) const {
+        return (leak_hz * leak_spread) * (leak_off ? -theta_off : theta_on);
+    }
+
+    /// Whether the continuous model's noise can be on at any photon rate (shot noise of the
+    /// photons or of a Poisson dark current): the block kernels draw the sample's normals then.
+    bool draws_normals() const {
+        return p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
     }
 
     /// Whether eq. 12's background is on for any pixel.
@@ -1204,6 +1215,18 @@ struct PixelModel {
                (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > cache.bridge_bound);
     }
 
+    /// What continuous_finish() leaves of a pixel that quiet_in_interval() found quiet: the new
+    /// levels, and the reference leaked to y1 - d1 (the time and counter are the caller's).
+    EVSTWIN_ALWAYS_INLINE static void settle_quiet(PixelState& s, const NoiseCache& cache, double z1, double y1,
+                                                   double nz1, double ny1, double d1) {
+        s.ref = y1 - d1;
+        s.x = cache.x;
+        s.z = z1;
+        s.y = y1;
+        s.nz = nz1;
+        s.ny = ny1;
+    }
+
     /// step_continuous() for a block, as passes: the random words; the levels, the background
     /// clocks' spending and a branch-free test of whether anything can happen in the interval
     /// (a clock ran out, a hot pixel's event is due, refractory, the line reaches a threshold,
@@ -1238,7 +1261,7 @@ struct PixelModel {
         // must this: a pixel's rate enters only through the cache, below).
         double* g1s = scratch.u_noise.data();
         double* g2s = scratch.count.data();
-        const bool noisy = p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
+        const bool noisy = draws_normals();
         if (noisy) {
             // The second normal only drives the two-pole system (continuous_levels).
             const bool two_poles = !SfOnly && p.pr_pole && has_filter;
@@ -1260,12 +1283,7 @@ struct PixelModel {
             double d1;
             const bool quiet = quiet_in_interval(s, yj, cache, c, clock_ran_out, d1);
             if (quiet) {
-                s.ref = yj - d1;
-                s.x = cache.x;
-                s.z = zj;
-                s.y = yj;
-                s.nz = nzj;
-                s.ny = nyj;
+                settle_quiet(s, cache, zj, yj, nzj, nyj, d1);
                 s.t = c.t1;
                 ++s.n;
             } else {
@@ -1329,7 +1347,7 @@ struct PixelModel {
         soa_sample_words(h, ids, n, key, scratch, w0, w1);
         double* g1s = scratch.u_noise.data();
         double* g2s = scratch.count.data();
-        const bool noisy = p.photon_shot_noise || (p.dark_model == DarkModel::Poisson && dark_mean_e_per_s > 0.0);
+        const bool noisy = draws_normals();
         if (noisy) {
             // The second normal only drives the two-pole system (continuous_levels).
             batch_sample_normals(n, count, id, key, scratch, w0, w1, g1s, g2s, !sf_only);
@@ -1373,15 +1391,14 @@ struct PixelModel {
         // The busy pixels, from their state at c.t0 (now), as step_continuous() does; their new
         // state goes to next, beside the quiet ones'.
         NoiseCache& other = scratch.noise_other;
-        if (other.dt != c.dt) other.photon_rate = std::numeric_limits<double>::quiet_NaN();
         std::size_t n_busy = 0;
         for (std::size_t j = next_flagged(busy, 0, n); j < n; j = next_flagged(busy, j + 1, n)) {
             ++n_busy;
             PixelState& s = st[j];
             h.give(s, j, now);
             const double r = static_cast<double>(rate[j]);
-            NoiseCache& cache = r == common.photon_rate ? common : other;
-            if (r != cache.photon_rate) fill_noise_cache(cache, r, c);
+            NoiseCache& cache = r == common.photon_rate ? common : other;  // common is for c.dt
+            noise_cache_for(cache, r, c);
             double zj, yj, nzj, nyj;
             continuous_levels<sf_only>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
@@ -1389,12 +1406,7 @@ struct PixelModel {
             // step_block_continuous() settles it), which saves continuous_finish()'s bridge.
             double d1;
             if (&cache == &other && quiet_in_interval(s, yj, cache, c, clock_ran_out, d1)) {
-                s.ref = yj - d1;
-                s.x = cache.x;
-                s.z = zj;
-                s.y = yj;
-                s.nz = nzj;
-                s.ny = nyj;
+                settle_quiet(s, cache, zj, yj, nzj, nyj, d1);
             } else {
                 pixel = ids[j];
                 continuous_finish(s, cache.x, zj, yj, nzj, nyj, cache.current_a, cache.leak_hz, cache.k.bridge_var,
@@ -1430,8 +1442,7 @@ struct PixelModel {
         for (std::size_t j = next_flagged(busy, 0, n); j < n; j = next_flagged(busy, j + 1, n)) {
             if (busy[j] != 1) continue;
             const double s_y = now.y[j], ref = now.ref[j], th_on = h.theta_on[j], th_off = h.theta_off[j];
-            const double g = (next.y[j] - s_y) * c.inv_dt +
-                             (common.leak_hz * h.leak_spread[j]) * (leak_off ? -th_off : th_on);  // leak_slope()
+            const double g = (next.y[j] - s_y) * c.inv_dt + leak_slope(h.leak_spread[j], th_on, th_off, common.leak_hz);
             const double d_start = (s_y - ref) + g * (t_start - c.t0);
             const double d_end = (s_y - ref) + g * c.dt;
             const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);

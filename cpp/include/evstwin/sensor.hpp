@@ -590,17 +590,18 @@ private:
             }
         }
         ends[0] = static_cast<std::uint32_t>(out.size());
+        std::size_t k = 1;
         if (kernel && model_.has_soa_kernel() && n_samples > 1) {
             // Every pixel now stands at t_s[0]: the rest of the samples on the block's arrays.
             scratch.soa.load(local.data(), m);
-            for (std::size_t k = 1; k < n_samples; ++k) {
+            for (; k < n_samples; ++k) {
                 model_.step_block_soa(scratch.soa, local.data(), pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
                                       scratch, emit, pixel);
                 ends[k] = static_cast<std::uint32_t>(out.size());
             }
             scratch.soa.store(local.data(), m, t_s[n_samples - 1]);
         }
-        for (std::size_t k = 1; k < n_samples && !(kernel && model_.has_soa_kernel()); ++k) {
+        for (; k < n_samples; ++k) {
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
                 model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
