@@ -239,6 +239,20 @@ class Optics:
     psf_half_width_px: int | None = None
     """Half width of a tabulated PSF's window [px] (2 h + 1 a side), 1..256; None = the radius
     holding 99 % of the flux (Airy, Moffat) or the image's extent, in [2, 128]."""
+    halo_fraction: float = 0.0
+    """Share of every source's flux scattered into a wide halo, in [0, 1): the rest keeps the
+    ``psf`` shape. Light scattered by dust and micro-roughness on the optics, and a sensor
+    window's reflections, spreads a point source's light over hundreds of pixels as a power
+    law (an aureole); an event camera turns a faint halo into events wherever it moves across
+    pixels near the dark-current level. 0 (the default) = no halo."""
+    halo_fwhm_px: float | None = None
+    """FWHM [px] of the halo, a Moffat profile, in [2, 200] (needed when halo_fraction > 0)."""
+    halo_beta: float = 1.5
+    """Moffat exponent of the halo, in (1, 10]: far from its core the halo falls as
+    r^(-2 beta) (1.5: r^-3, the usual slope of scattered light in telescopes)."""
+    halo_half_width_px: int = 256
+    """Half width of the halo's window [px], 8..256 (the cost of rendering a source grows with
+    its square: ~4 ms a source and sample at 256 here)."""
 
     def __post_init__(self) -> None:
         f = _positive("focal_length_m", self.focal_length_m)
@@ -317,6 +331,22 @@ class Optics:
         if self.psf == "moffat" and (self.moffat_fwhm_px is None) == (self.moffat_fwhm_arcsec is None):
             raise ValueError("psf='moffat' needs one of moffat_fwhm_px or moffat_fwhm_arcsec; got "
                              f"moffat_fwhm_px={self.moffat_fwhm_px!r}, moffat_fwhm_arcsec={self.moffat_fwhm_arcsec!r}")
+        hf = _finite("halo_fraction", self.halo_fraction)
+        if not 0.0 <= hf < 1.0:
+            raise ValueError(f"halo_fraction must be in [0, 1); got halo_fraction={self.halo_fraction!r}")
+        hb = _finite("halo_beta", self.halo_beta)
+        if not 1.0 < hb <= 10.0:
+            raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={self.halo_beta!r}")
+        hh = self.halo_half_width_px
+        if isinstance(hh, bool) or not isinstance(hh, (int, np.integer)) or not 8 <= hh <= 256:
+            raise ValueError(f"halo_half_width_px must be an integer in [8, 256]; got halo_half_width_px={hh!r}")
+        if self.halo_fwhm_px is not None:
+            w = _finite("halo_fwhm_px", self.halo_fwhm_px)
+            if not 2.0 <= w <= 200.0:
+                raise ValueError(f"halo_fwhm_px must be in [2, 200]; got halo_fwhm_px={self.halo_fwhm_px!r}")
+        if (hf > 0.0) != (self.halo_fwhm_px is not None):
+            raise ValueError("halo_fraction > 0 and halo_fwhm_px go together (a halo needs its width, a width its "
+                             f"share); got halo_fraction={self.halo_fraction!r}, halo_fwhm_px={self.halo_fwhm_px!r}")
         if self.psf == "image" and (self.psf_file is None or self.psf_file_oversampling is None):
             raise ValueError("psf='image' needs psf_file and psf_file_oversampling (image pixels per sensor pixel); "
                              f"got psf_file={self.psf_file!r}, psf_file_oversampling={self.psf_file_oversampling!r}")

@@ -15,10 +15,12 @@ from test_simulate import spinning
 
 from evstwin.optics import Optics
 from evstwin.psf import (
+    CompositePSF,
     GaussianPSF,
     KernelPSF,
     airy_psf,
     from_optics,
+    halo_psf,
     image_psf,
     load_psf_image,
     moffat_enclosed_energy,
@@ -67,6 +69,7 @@ SHAPES = {
     "airy-obstructed-spider-blur": lambda: airy_psf(1.1, 0.35, 4, 0.02, 30.0, 0.7),
     "moffat": lambda: moffat_psf(3.0, 2.5),
     "image": lambda: image_psf(gaussian_image(1.0, 4, 40), 4),
+    "airy+halo": lambda: CompositePSF(airy_psf(1.5), halo_psf(6.0, 1.5, 32), 0.2),
 }
 
 
@@ -202,6 +205,44 @@ def test_moffat_fwhm_and_enclosed_energy() -> None:
     assert ee[0] < heavy.captured_fraction < ee[1] < 0.9  # 0.82 within 128 px: far from 99 %
 
 
+def test_halo_is_a_moffat_of_its_share_added_to_the_core() -> None:
+    # Optics' scattered-light halo: the core keeps 1 - f of the flux, a Moffat of FWHM 12 px,
+    # beta 1.5 holds f; far from the core the halo's pixels follow the Moffat density
+    # (beta - 1) / (pi alpha^2) (1 + r^2 / alpha^2)^-beta, divided by what its window keeps.
+    f, fwhm, beta = 0.1, 12.0, 1.5
+    optics = Optics(psf="airy", halo_fraction=f, halo_fwhm_px=fwhm, halo_beta=beta, halo_half_width_px=128)
+    shape = from_optics(optics)
+    assert isinstance(shape, CompositePSF) and shape.half_width_px == 128
+    core = from_optics(optics.replace(halo_fraction=0.0, halo_fwhm_px=None))
+    assert isinstance(core, KernelPSF) and core.kind == "airy"
+    x, y, flux = 150.3, 140.6, 1e6
+    img = render_points(300, 280, x, y, flux, shape)
+    assert img.sum() == pytest.approx(flux, rel=1e-12)
+    halo = render_points(300, 280, x, y, flux, halo_psf(fwhm, beta, 128))
+    np.testing.assert_allclose(img, render_points(300, 280, x, y, (1.0 - f) * flux, core) + f * halo,
+                               rtol=1e-12, atol=1e-12 * flux)
+    alpha = fwhm / (2.0 * math.sqrt(2.0 ** (1.0 / beta) - 1.0))
+    kept = shape.halo.captured_fraction
+    assert 1.0 - (1.0 + 112.0**2 / alpha**2) ** (1.0 - beta) < kept < 1.0 - (1.0 + 128.0**2 / alpha**2) ** (1.0 - beta)
+    for dx in (20, 40, 70, 100):
+        r2 = (150 + dx - x) ** 2 + (141 - y) ** 2
+        density = (beta - 1.0) / (math.pi * alpha**2) * (1.0 + r2 / alpha**2) ** (-beta)
+        assert img[141, 150 + dx] == pytest.approx(f * flux * density / kept, rel=2e-3), dx
+    # Far out the halo is the light: the core (an Airy pattern of lambda N = 0.07 px) has none.
+    assert img[141, 250] > 0.99 * f * halo[141, 250]
+
+
+def test_seeing_blurs_the_core_and_keeps_the_halo() -> None:
+    from evstwin.sky.atmosphere import seeing_psf
+
+    optics = Optics(psf="airy", focal_length_m=2.0, f_number=8.0, halo_fraction=0.05, halo_fwhm_px=10.0,
+                    halo_half_width_px=64)
+    both = seeing_psf(optics, 3.0)
+    plain = seeing_psf(optics.replace(halo_fraction=0.0, halo_fwhm_px=None), 3.0)
+    assert isinstance(both, CompositePSF) and both.core is plain and both.halo is halo_psf(10.0, 1.5, 64)
+    assert both.halo_fraction == 0.05
+
+
 def test_image_psf_of_a_gaussian_reproduces_the_gaussian_render(tmp_path: Path) -> None:
     sigma = 1.0
     path = tmp_path / "psf.npy"
@@ -237,7 +278,7 @@ def test_image_psf_of_a_gaussian_reproduces_the_gaussian_render(tmp_path: Path) 
         np.testing.assert_allclose(got, expect, atol=1e-9)
 
 
-@pytest.mark.parametrize("name", ["airy", "moffat", "image"])
+@pytest.mark.parametrize("name", ["airy", "moffat", "image", "airy+halo"])
 def test_a_moving_source_moves_the_light_continuously(name: str) -> None:
     # Bilinear interpolation between phases, and a tapered PSF that every phase's window holds
     # whole: the light moves with the source without steps for the pixels to turn into events,
@@ -273,6 +314,9 @@ def test_scenario_keys_select_the_shape_and_gaussian_stays_the_default(tmp_path:
                                                       "psf_file_oversampling": 2}})
     assert measured.psf.kind == "image" and measured.psf.params["oversampling"] == 2.0
     assert from_optics(Optics(psf="moffat", moffat_fwhm_px=2.0)) is from_optics(Optics(psf="moffat", moffat_fwhm_px=2.0))
+    haloed = build({"base": "geo-stare", "optics": {"halo_fraction": 0.02, "halo_fwhm_px": 8.0, "halo_half_width_px": 40}})
+    assert isinstance(haloed.psf, CompositePSF) and isinstance(haloed.psf.core, GaussianPSF)
+    assert haloed.psf.halo.params["fwhm_px"] == 8.0 and haloed.psf.half_width_px == 40
 
 
 def test_sparse_rendering_gives_the_dense_events_for_a_tabulated_shape() -> None:
@@ -313,6 +357,14 @@ def test_sparse_rendering_gives_the_dense_events_for_a_tabulated_shape() -> None
         (lambda: airy_psf(0.05, half_width_px=256), r"psf_half_width_px=256 at psf_subpixel=8 needs a grid of \d+ samples a side \(> 3072\)"),
         (lambda: airy_psf(0.2, half_width_px=60), r"needs 5.15e\+09 multiply-adds \(> 2e\+09\): lower psf_half_width_px"),
         (lambda: render_points(9, 9, 4.0, 4.0, 1.0, GaussianPSF(1.0), window_sigmas=3.0), r"window_sigmas and normalize"),
+        (lambda: Optics(halo_fraction=1.0, halo_fwhm_px=5.0), r"halo_fraction must be in \[0, 1\); got halo_fraction=1.0"),
+        (lambda: Optics(halo_fraction=-0.1, halo_fwhm_px=5.0), r"halo_fraction=-0.1"),
+        (lambda: Optics(halo_fraction=0.1), r"halo_fraction > 0 and halo_fwhm_px go together.*halo_fwhm_px=None"),
+        (lambda: Optics(halo_fwhm_px=5.0), r"go together.*got halo_fraction=0.0, halo_fwhm_px=5.0"),
+        (lambda: Optics(halo_fraction=0.1, halo_fwhm_px=1.0), r"halo_fwhm_px must be in \[2, 200\]; got halo_fwhm_px=1.0"),
+        (lambda: Optics(halo_fraction=0.1, halo_fwhm_px=5.0, halo_beta=1.0), r"halo_beta must be in \(1, 10\].*halo_beta=1.0"),
+        (lambda: Optics(halo_half_width_px=300), r"halo_half_width_px must be an integer in \[8, 256\]; got halo_half_width_px=300"),
+        (lambda: CompositePSF(GaussianPSF(1.0), halo_psf(6.0, 1.5, 32), 0.0), r"halo_fraction must be in \(0, 1\)"),
     ],
 )
 def test_bad_input_is_one_value_error_naming_the_key(call, match: str) -> None:  # type: ignore[no-untyped-def]
@@ -351,6 +403,7 @@ def test_bad_psf_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
         ({"psf": "moffat", "moffat_fwhm_arcsec": 1e4}, r"optics \(psf='moffat'.*moffat_fwhm_arcsec=10000.0 is 5.24e\+03 px at 1.91 arcsec/px"),
         ({"psf": "airy", "mean_wavelength_m": 1e-9}, r"optics \(psf='airy'.*lambda N\) must be in \[0.02, 50\] px"),
         ({"psf": "moffat", "moffat_fwhm_px": "wide"}, r"optics: moffat_fwhm_px must be a real number; got moffat_fwhm_px='wide'"),
+        ({"halo_fraction": 0.2}, r"optics: halo_fraction > 0 and halo_fwhm_px go together"),
     ],
 )
 def test_scenario_psf_errors_name_the_key(optics: dict, match: str) -> None:

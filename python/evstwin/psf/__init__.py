@@ -34,7 +34,8 @@ an obstructed pupil with spider vanes), ``moffat_psf`` (a seeing halo) or ``imag
 PSF image); ``from_optics`` builds the one an ``Optics`` names (its ``psf`` field). All
 renderers, and ``simulate``'s sparse chunks, go through ``contributions``. ``KernelPSF``
 states the sub-pixel accuracy, the taper that cuts a shape at its window and what the
-window keeps (``captured_fraction``).
+window keeps (``captured_fraction``). ``Optics.halo_fraction`` adds a wide Moffat halo of
+scattered light to any shape (``CompositePSF``: the two rendered apart and summed).
 """
 
 
@@ -56,13 +57,16 @@ from .shapes import (
     DEFAULT_MAX_HALF_PX,
     DEFAULT_SUBPIXEL,
     DEFAULT_TAIL_FRACTION,
+    HALO_SUBPIXEL,
     MAX_KERNEL_HALF_PX,
     MOFFAT_DEFAULT_BETA,
+    CompositePSF,
     KernelPSF,
     airy_psf,
     check_psf_image,
     defocus_psf,
     from_optics,
+    halo_psf,
     image_psf,
     load_psf_image,
     moffat_alpha_px,
@@ -71,6 +75,7 @@ from .shapes import (
     pupil,
     taper,
     taper_width_px,
+    with_halo,
 )
 
 __all__ = [
@@ -90,6 +95,10 @@ __all__ = [
     "MAX_KERNEL_HALF_PX",
     "MOFFAT_DEFAULT_BETA",
     "KernelPSF",
+    "CompositePSF",
+    "HALO_SUBPIXEL",
+    "halo_psf",
+    "with_halo",
     "taper_width_px",
     "taper",
     "pupil",

@@ -504,6 +504,66 @@ def image_psf(
     return KernelPSF(mass, k, 1, h, "image", params)
 
 
+# -- scattered-light halo -------------------------------------------------------------------------
+
+HALO_SUBPIXEL = 2
+"""Sub-pixel phases of a halo's table: a halo at least 2 px wide (``Optics.halo_fwhm_px``)
+varies so slowly within a pixel that bilinear interpolation between half-pixel phases is off
+by at most (1/2)^2 / 8 of its second derivative, 0.3 % of its peak at the narrowest (and the
+table is 16 times smaller than at 8 phases)."""
+
+
+class CompositePSF(PSFShape):
+    """A core shape holding ``1 - halo_fraction`` of each source's flux plus a wide Moffat
+    halo holding the rest (``Optics.halo_fraction``): the two are rendered apart and add up,
+    each with its own window, so the halo's 2 h + 1 = 513 px window does not make the core's
+    fine sub-pixel table 4x larger. Flux is conserved by each part, hence by the sum."""
+
+    def __init__(self, core: PSFShape, halo: KernelPSF, halo_fraction: float) -> None:
+        f = float(halo_fraction)
+        if not 0.0 < f < 1.0:
+            raise ValueError(f"halo_fraction must be in (0, 1); got halo_fraction={halo_fraction!r}")
+        self.core = core
+        self.halo = halo
+        self.halo_fraction = f
+        self.kind = f"{getattr(core, 'kind', 'gaussian')}+halo"
+        self.half_width_px = max(core.half_width_px, halo.half_width_px)
+
+    def __repr__(self) -> str:
+        return f"CompositePSF(core={self.core!r}, halo={self.halo!r}, halo_fraction={self.halo_fraction:g})"
+
+    @property
+    def max_pixel_share(self) -> float:
+        return (1.0 - self.halo_fraction) * self.core.max_pixel_share + self.halo_fraction * self.halo.max_pixel_share
+
+    def contributions(
+        self, width: int, height: int, x: np.ndarray, y: np.ndarray, flux: np.ndarray,
+        offset: np.ndarray | None = None,
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        f = self.halo_fraction
+        return (self.core.contributions(width, height, x, y, flux * (1.0 - f), offset)
+                + self.halo.contributions(width, height, x, y, flux * f, offset))
+
+
+@functools.lru_cache(maxsize=4)
+def halo_psf(fwhm_px: float, beta: float, half_width_px: int) -> KernelPSF:
+    """The halo of ``CompositePSF``: a Moffat of this FWHM [px] and beta, tabulated at
+    ``HALO_SUBPIXEL`` phases on a (2 h + 1)^2 window (``moffat_psf``; its taper and
+    ``captured_fraction`` apply). Cached."""
+    shape = moffat_psf(fwhm_px, beta, 0.0, HALO_SUBPIXEL, half_width_px)
+    shape.kind = "halo"
+    return shape
+
+
+def with_halo(core: PSFShape, optics: Optics) -> PSFShape:
+    """``core`` as it is without a halo (``optics.halo_fraction == 0``), else a
+    ``CompositePSF`` of it and the optics' halo."""
+    if optics.halo_fraction == 0.0:
+        return core
+    halo = halo_psf(float(optics.halo_fwhm_px), float(optics.halo_beta), int(optics.halo_half_width_px))  # type: ignore[arg-type]
+    return CompositePSF(core, halo, optics.halo_fraction)
+
+
 # -- from an Optics ----------------------------------------------------------------------------
 
 
@@ -518,9 +578,10 @@ def from_optics(optics: Optics) -> PSFShape:
             stamp = p.stat().st_mtime_ns
         except OSError:
             stamp = -1  # load_psf_image names the missing file
-        return _image_from_file(str(p), stamp, float(optics.psf_file_oversampling),  # type: ignore[arg-type]
+        core = _image_from_file(str(p), stamp, float(optics.psf_file_oversampling),  # type: ignore[arg-type]
                                 float(optics.extra_blur_sigma_px), optics.psf_subpixel, optics.psf_half_width_px)
-    return _from_optics(optics)
+        return with_halo(core, optics)
+    return with_halo(_from_optics(optics), optics)
 
 
 @functools.lru_cache(maxsize=4)

@@ -91,7 +91,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..optics import ARCSEC_PER_RAD, Optics, _finite, _non_negative, _positive
-from ..psf import KernelPSF, PSFShape, from_optics, moffat_alpha_px, moffat_psf
+from ..psf import KernelPSF, PSFShape, from_optics, moffat_alpha_px, moffat_psf, with_halo
 from ..psf.shapes import DEFAULT_TAIL_FRACTION, _default_half, _grid
 from ..targets import LightCurve, Target, _interval, _times, adopt
 
@@ -134,11 +134,13 @@ def seeing_fwhm_px(seeing_fwhm_arcsec: float, optics: Optics) -> float:
     return seeing / optics.plate_scale_arcsec_per_px
 
 
-def seeing_psf(optics: Optics, seeing_fwhm_arcsec: float, beta: float = KOLMOGOROV_MOFFAT_BETA) -> KernelPSF:
+def seeing_psf(optics: Optics, seeing_fwhm_arcsec: float, beta: float = KOLMOGOROV_MOFFAT_BETA) -> PSFShape:
     """The PSF of a star seen through this seeing with these optics: a Moffat of FWHM
     ``seeing_fwhm_px`` and exponent ``beta`` convolved with the optics' own PSF (module
     docstring). Uses the optics' ``psf_subpixel`` and, for a Gaussian optics,
-    ``psf_half_width_px``. Cached (the last 8 combinations)."""
+    ``psf_half_width_px``. Cached (the last 8 combinations). The seeing blurs the core: an
+    optics' scattered-light halo (``halo_fraction``), far wider than any seeing, is added
+    to it unchanged (a ``CompositePSF``)."""
     if not isinstance(optics, Optics):
         raise TypeError(f"optics must be an Optics; got {optics!r}")
     seeing = _positive("seeing_fwhm_arcsec", seeing_fwhm_arcsec)
@@ -154,6 +156,9 @@ def seeing_psf(optics: Optics, seeing_fwhm_arcsec: float, beta: float = KOLMOGOR
         raise ValueError(f"seeing_fwhm_arcsec={seeing_fwhm_arcsec!r} is {fwhm:.3g} px at "
                          f"{optics.plate_scale_arcsec_per_px:.4g} arcsec/px; it must be in [0.05, 100] px (a seeing "
                          "far inside a pixel changes nothing: leave it out)")
+    if optics.halo_fraction > 0.0:
+        core = _seeing_psf(optics.replace(halo_fraction=0.0, halo_fwhm_px=None), seeing, b)
+        return with_halo(core, optics)
     return _seeing_psf(optics, seeing, b)
 
 
