@@ -33,10 +33,15 @@ def main() -> None:
         "moffat, FWHM 3 px, beta 2.5": lambda: psf.moffat_psf(3.0, 2.5),
         "airy, lambda N 1.5 px": lambda: psf.airy_psf(1.5),
         "airy, lambda N 4 px": lambda: psf.airy_psf(4.0),
+        "gaussian + halo (FWHM 15 px, beta 1.5), h 128": lambda: psf.from_optics(
+            geo.replace(halo_fraction=0.5, halo_fwhm_px=15.0, halo_half_width_px=128)),
+        "gaussian + halo (FWHM 15 px, beta 1.5), h 256": lambda: psf.from_optics(
+            geo.replace(halo_fraction=0.5, halo_fwhm_px=15.0, halo_half_width_px=256)),
     }
     print(f"{'shape':58s} {'h':>4s} {'build s':>8s} {'us per source-sample':>21s}")
     for name, make in cases.items():
         psf._from_optics.cache_clear()
+        psf.halo_psf.cache_clear()
         t0 = time.perf_counter()
         shape = make()
         built = time.perf_counter() - t0

@@ -346,6 +346,17 @@ class _Runner:
         # The moving targets by PSF: the scene's first (all of them, most often), then each
         # target's own (a defocused ghost).
         self._groups = psf_groups(self.moving, self.psf)
+        # A scattered-light halo (psf.CompositePSF) changes slowly wherever it falls: the
+        # sub-sampled path samples it at the base rate (_sparse), and only the cores decide
+        # which pixels are sampled finely.
+        self._fine_groups: list[tuple[psf.PSFShape, np.ndarray]] = []
+        self._halo_groups: list[tuple[psf.PSFShape, np.ndarray]] = []
+        for shape, cols in self._groups:
+            if isinstance(shape, psf.CompositePSF):
+                self._fine_groups.append((shape.core_part, cols))
+                self._halo_groups.append((shape.halo_part, cols))
+            else:
+                self._fine_groups.append((shape, cols))
         self.static_map = np.full((scene.height, scene.width), scene.background_ph_s, np.float64)
         if static:
             x = np.array([float(t.position_px(0.0)[0]) for t in static])
@@ -511,13 +522,52 @@ class _Runner:
             return np.zeros(0, np.int64), np.zeros(0)
         return np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts])
 
+    def _with_halos(self, frames: np.ndarray, t_base: np.ndarray, t_fine: np.ndarray, hot: np.ndarray,
+                    rates: np.ndarray) -> np.ndarray:
+        """The base frames with the moving sources' halos added, and the halos added to the
+        hot pixels' fine rates (in place), sampled at the base times and interpolated linearly
+        in time between them: a halo at least 2 px wide, moved by 0.25 px or so between fine
+        samples, changes too little within a base interval for its curvature in time to
+        matter, and rendering its 513 px window at every fine sample would cost 10-100 times
+        the cores'."""
+        sc = self.scene
+        t_halo = np.concatenate([[t_base[0] - self.dt], t_base])
+        x, y, f = self._sources_untracked(t_halo)
+        out = np.empty(frames.shape, np.float64)
+        at_hot = np.empty((t_halo.size, hot.size))
+        halo = np.empty(sc.width * sc.height)
+        for i in range(t_halo.size):  # one frame at a time: a unit may hold ~100 base samples
+            halo[:] = 0.0
+            idx, val = self._contributions(x[i : i + 1], y[i : i + 1], f[i : i + 1], self._halo_groups)
+            psf.render._accumulate(halo, idx, val)
+            at_hot[i] = halo[hot]
+            if i > 0:
+                np.add(frames[i - 1], halo.reshape(sc.height, sc.width), out=out[i - 1])
+        if hot.size:
+            # Fine sample j lies in base interval k = j // n_sub, a share (j % n_sub + 1) / n_sub in.
+            n_sub = t_fine.size // t_base.size
+            j = np.arange(t_fine.size)
+            k = j // n_sub
+            w = ((j % n_sub + 1) / n_sub)[:, None]
+            rates += (1.0 - w) * at_hot[k] + w * at_hot[k + 1]
+        return out
+
+    def _sources_untracked(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The sources at the times t, without writing them to the ground truth."""
+        last = self._truth_t_last
+        self._truth_t_last = math.inf
+        try:
+            return self._sources(t)
+        finally:
+            self._truth_t_last = last
+
     def _sparse(self, t_fine: np.ndarray, t_base: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
         sc = self.scene
         npix = sc.width * sc.height
         x, y, f = self._sources(t_fine)
         n_t = x.shape[0]
-        idx, val = self._contributions(x, y, f, self._groups)
+        idx, val = self._contributions(x, y, f, self._fine_groups)
         sample_of = idx // npix
         pixel = idx - sample_of * npix
         # Hot: lit by a moving window in this chunk, or still settling from an earlier one.
@@ -536,8 +586,10 @@ class _Runner:
             # sample would zero and add the whole table).
             np.add.at(rates.reshape(-1), sample_of * hot.size + column[pixel], val)
         # Base frames for everyone else: their light is static in this chunk (hot pixels
-        # have passed these times and are skipped by the engine).
+        # have passed these times and are skipped by the engine), but for the halos.
         frames = np.broadcast_to(self.static_map, (t_base.size, sc.height, sc.width))
+        if self._halo_groups:
+            frames = self._with_halos(frames, t_base, t_fine, hot, rates)
         s1 = time.perf_counter()
         fine_events = self.sensor.run_pixels(hot, rates, t_fine)
         fine_codes = self.sensor.last_labels() if self.labels else None

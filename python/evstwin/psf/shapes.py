@@ -536,13 +536,44 @@ class CompositePSF(PSFShape):
     def max_pixel_share(self) -> float:
         return (1.0 - self.halo_fraction) * self.core.max_pixel_share + self.halo_fraction * self.halo.max_pixel_share
 
+    @property
+    def core_part(self) -> PSFShape:
+        """The core alone with its share of the flux (the parts add up to the whole)."""
+        return ScaledPSF(self.core, 1.0 - self.halo_fraction)
+
+    @property
+    def halo_part(self) -> PSFShape:
+        """The halo alone with its share of the flux."""
+        return ScaledPSF(self.halo, self.halo_fraction)
+
     def contributions(
         self, width: int, height: int, x: np.ndarray, y: np.ndarray, flux: np.ndarray,
         offset: np.ndarray | None = None,
     ) -> list[tuple[np.ndarray, np.ndarray]]:
-        f = self.halo_fraction
-        return (self.core.contributions(width, height, x, y, flux * (1.0 - f), offset)
-                + self.halo.contributions(width, height, x, y, flux * f, offset))
+        return (self.core_part.contributions(width, height, x, y, flux, offset)
+                + self.halo_part.contributions(width, height, x, y, flux, offset))
+
+
+class ScaledPSF(PSFShape):
+    """``shape`` with every source's flux times ``factor`` (a ``CompositePSF``'s part)."""
+
+    def __init__(self, shape: PSFShape, factor: float) -> None:
+        self.shape = shape
+        self.factor = float(factor)
+        self.half_width_px = shape.half_width_px
+
+    def __repr__(self) -> str:
+        return f"ScaledPSF({self.shape!r}, {self.factor:g})"
+
+    @property
+    def max_pixel_share(self) -> float:
+        return self.factor * self.shape.max_pixel_share
+
+    def contributions(
+        self, width: int, height: int, x: np.ndarray, y: np.ndarray, flux: np.ndarray,
+        offset: np.ndarray | None = None,
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        return self.shape.contributions(width, height, x, y, flux * self.factor, offset)
 
 
 @functools.lru_cache(maxsize=4)
