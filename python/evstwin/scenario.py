@@ -107,6 +107,7 @@ from .targets import (
     LinearTarget,
     MirroredTarget,
     StaticTarget,
+    SteadyTarget,
     TabulatedTarget,
     Target,
     aligned_rotating_targets,
@@ -336,8 +337,8 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
         allowed = ("kind", "label") + _TARGET_KEYS[kind] + ("magnitude", "light_curve")
     else:
         brightness = () if kind == "ghost" else _BRIGHTNESS_KEYS  # a ghost's is its source's
-        allowed = ("kind", "label") + (() if kind == "ghost" else ("frame",)) + _TARGET_KEYS[kind] + brightness \
-            + _TARGET_PSF_KEYS
+        allowed = ("kind", "label") + (() if kind == "ghost" else ("frame", "halo")) + _TARGET_KEYS[kind] \
+            + brightness + _TARGET_PSF_KEYS
     for key in target:
         if key not in allowed:
             raise ScenarioError(f"unknown scenario key 'targets[{i}].{key}' for kind {kind!r}; allowed: {', '.join(allowed)}")
@@ -671,6 +672,10 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         if "defocus_radius_px" in table:
             own = _wrap(f"targets[{i}].defocus_radius_px with optics={s.get('optics', {})}", _defocus, table, optics)
             made = [with_psf(t, own) for t in made]
+        if table.get("halo", "follows") != "follows":
+            targets.extend(_steady_halo(i, table, made, shape))
+            sources.extend([source] * len(made) + [source + " (its halo, at its mean flux)"] * len(made))
+            continue
         targets.extend(made)
         sources.extend([source] * len(made))
     field_stars = 0
@@ -955,9 +960,11 @@ def _check_work(s: dict[str, Any], width: int, height: int, shape: psf.PSFShape,
     if not 1.0 / rate / n_sub >= 1e-12:
         raise ScenarioError(f"{why}, {1.0 / rate / n_sub:.3g} s apart (< 1e-12 s, the engine's shortest interval)")
     if n_sub > 1 and sp["sparse"]:
-        # The widest window any moving target renders (a defocused ghost's may be wider).
-        half = max([shape.half_width_px] + [targets[j].psf.half_width_px for _, j in moving  # type: ignore[union-attr]
-                                            if targets[j].psf is not None])
+        # The widest window any moving target renders at the fine rate (a defocused ghost's
+        # may be wider; a halo is rendered at the base rate, one frame at a time).
+        sharp = [psf.sharp_part(shape)] + [psf.sharp_part(targets[j].psf) for _, j in moving  # type: ignore[arg-type]
+                                           if targets[j].psf is not None]
+        half = max([p.half_width_px for p in sharp if p is not None], default=0)
         window = min((2 * half + 1) ** 2, width * height)
         fine = max(chunk, n_sub) + n_sub  # the fine samples of one sparse chunk, at most
         # Windows off the sensor are skipped: a drifting field's stars, most of them outside
@@ -1048,6 +1055,22 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.
             raise ScenarioError(f"{key}: rate_hz must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}]; got {entry!r}")
         rates[y, x] = r
     return rates
+
+
+def _steady_halo(i: int, table: dict[str, Any], made: list[Target], shape: psf.PSFShape) -> list[Target]:
+    """``targets[i].halo = "steady"``: the target's core follows its light curve and its
+    scattered-light halo (optics.halo_fraction) keeps its mean flux: the targets rendered with
+    the core, then their steady copies rendered with the halo."""
+    value = table["halo"]
+    if value != "steady":
+        raise ScenarioError(f"targets[{i}].halo must be 'follows' (the default) or 'steady'; got {value!r}")
+    if not isinstance(shape, psf.CompositePSF):
+        raise ScenarioError(f"targets[{i}].halo='steady' needs a halo: set optics.halo_fraction > 0 and "
+                            "optics.halo_fwhm_px")
+    if "defocus_radius_px" in table:
+        raise ScenarioError(f"targets[{i}].halo='steady' applies to the scene's PSF; targets[{i}] has its own "
+                            "(defocus_radius_px)")
+    return [with_psf(t, shape.core_part) for t in made] + [with_psf(SteadyTarget(t), shape.halo_part) for t in made]
 
 
 def _psf_shape(optics: Optics, table: dict[str, Any]) -> psf.PSFShape:

@@ -352,11 +352,11 @@ class _Runner:
         self._fine_groups: list[tuple[psf.PSFShape, np.ndarray]] = []
         self._halo_groups: list[tuple[psf.PSFShape, np.ndarray]] = []
         for shape, cols in self._groups:
-            if isinstance(shape, psf.CompositePSF):
-                self._fine_groups.append((shape.core_part, cols))
-                self._halo_groups.append((shape.halo_part, cols))
-            else:
-                self._fine_groups.append((shape, cols))
+            sharp, smooth = psf.sharp_part(shape), psf.smooth_part(shape)
+            if sharp is not None:
+                self._fine_groups.append((sharp, cols))
+            if smooth is not None:
+                self._halo_groups.append((smooth, cols))
         self.static_map = np.full((scene.height, scene.width), scene.background_ph_s, np.float64)
         if static:
             x = np.array([float(t.position_px(0.0)[0]) for t in static])

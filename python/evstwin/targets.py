@@ -615,6 +615,33 @@ class MirroredTarget(Target):
         return self.flux_fraction * self.source.flux_ph_s(t_s)
 
 
+@dataclass(frozen=True, eq=False)
+class SteadyTarget(Target):
+    """``target`` where it is, at its *mean* flux (``mean_flux_ph_s``) instead of its light
+    curve: the scattered-light halo of a star whose light curve stands for seeing (light
+    moved about within the seeing disc, which leaves the total that the optics scatter
+    unchanged; ``imx636-pointsource``). Its label is the target's with ``-halo``; its PSF the
+    target's (give it its own with :func:`with_psf`)."""
+
+    target: Target
+    brightness: Brightness = dataclasses.field(init=False)
+    label: str = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        adopt(self, self.target, brightness=False)
+        object.__setattr__(self, "brightness", mean_flux_ph_s(self.target.brightness))
+        object.__setattr__(self, "label", f"{self.target.label}-halo" if self.target.label else "halo")
+
+    def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        return self.target.position_px(t_s)
+
+    def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        return self.target.velocity_px_s(t_s)
+
+    def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
+        return self.target.max_speed_px_s(t0_s, t1_s)
+
+
 def mean_flux_ph_s(brightness: Brightness) -> float:
     """A brightness's mean flux [photons/s]: a constant itself, a light curve's time average
     over its table (trapezoids between its points, linear or in ln as it interpolates; a

@@ -459,3 +459,48 @@ def test_sub_sampled_runs_take_the_halo_at_the_base_rate() -> None:
     a, b = simulate(haloed_spin(True)), simulate(haloed_spin(False))
     assert a.sub_sampled_chunks > 0 and len(b.events) > 1000
     assert abs(len(a.events) - len(b.events)) <= 0.005 * len(b.events)
+
+
+def test_a_steady_halo_keeps_the_mean_flux_while_the_core_follows_the_light_curve() -> None:
+    # targets[i].halo = "steady": the core (1 - f of the flux) follows the light curve, the halo
+    # (f) keeps the curve's time average; rendered, the two add up to the composite's render
+    # of a source whose flux is (1 - f) curve(t) + f mean.
+    from evstwin.psf import sharp_part, smooth_part
+    from evstwin.targets import SteadyTarget
+
+    f, curve = 0.4, {"t_s": [0.0, 1.0, 2.0], "flux_ph_s": [1e6, 5e6, 3e6]}
+    mean = (0.5 * (1e6 + 5e6) + 0.5 * (5e6 + 3e6)) / 2.0  # trapezoids: 3.5e6
+    table = {"base": "geo-stare", "optics": {"halo_fraction": f, "halo_fwhm_px": 12.0, "halo_half_width_px": 64},
+             "targets": [{"kind": "static", "x_px": 100.3, "y_px": 80.6, "label": "s", "light_curve": curve,
+                          "halo": "steady"}], "star_field": {}}
+    sc = build(table)
+    core, halo = sc.targets[0], sc.targets[1]
+    assert core.label == "s" and halo.label == "s-halo" and isinstance(halo, SteadyTarget)
+    assert core.psf is sc.psf.core_part and halo.psf is sc.psf.halo_part
+    assert sharp_part(halo.psf) is None and smooth_part(halo.psf) is halo.psf
+    assert sharp_part(core.psf) is core.psf and smooth_part(core.psf) is None
+    t = np.array([0.0, 0.5, 1.7])
+    np.testing.assert_allclose(halo.flux_ph_s(t), mean)
+    np.testing.assert_allclose(core.flux_ph_s(t), [1e6, 3e6, 3.6e6])
+    for ti in t:
+        got = (render_points(sc.width, sc.height, 100.3, 80.6, float(core.flux_ph_s(ti)), core.psf)
+               + render_points(sc.width, sc.height, 100.3, 80.6, mean, halo.psf))
+        expect = (render_points(sc.width, sc.height, 100.3, 80.6, (1 - f) * float(core.flux_ph_s(ti)), sc.psf.core)
+                  + render_points(sc.width, sc.height, 100.3, 80.6, f * mean, sc.psf.halo))
+        np.testing.assert_allclose(got, expect, rtol=1e-12, atol=1e-12 * mean)
+
+
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        ({}, r"targets\[0\].halo='steady' needs a halo: set optics.halo_fraction > 0"),
+        ({"halo_fraction": 0.2, "halo_fwhm_px": 9.0, "value": "always"},
+         r"targets\[0\].halo must be 'follows' \(the default\) or 'steady'; got 'always'"),
+    ],
+)
+def test_steady_halo_errors_name_the_key(extra: dict, match: str) -> None:
+    value = extra.pop("value", "steady")
+    table = {"base": "geo-stare", "optics": extra,
+             "targets": [{"kind": "static", "x_px": 10.0, "y_px": 10.0, "flux_ph_s": 1e6, "halo": value}]}
+    with pytest.raises(ScenarioError, match=match):
+        build(table)

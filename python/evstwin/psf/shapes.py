@@ -536,15 +536,16 @@ class CompositePSF(PSFShape):
     def max_pixel_share(self) -> float:
         return (1.0 - self.halo_fraction) * self.core.max_pixel_share + self.halo_fraction * self.halo.max_pixel_share
 
-    @property
+    @functools.cached_property
     def core_part(self) -> PSFShape:
-        """The core alone with its share of the flux (the parts add up to the whole)."""
+        """The core alone with its share of the flux (the parts add up to the whole; one
+        object per composite, so that sources rendered with it group together)."""
         return ScaledPSF(self.core, 1.0 - self.halo_fraction)
 
-    @property
+    @functools.cached_property
     def halo_part(self) -> PSFShape:
         """The halo alone with its share of the flux."""
-        return ScaledPSF(self.halo, self.halo_fraction)
+        return ScaledPSF(self.halo, self.halo_fraction, smooth=True)
 
     def contributions(
         self, width: int, height: int, x: np.ndarray, y: np.ndarray, flux: np.ndarray,
@@ -555,11 +556,14 @@ class CompositePSF(PSFShape):
 
 
 class ScaledPSF(PSFShape):
-    """``shape`` with every source's flux times ``factor`` (a ``CompositePSF``'s part)."""
+    """``shape`` with every source's flux times ``factor`` (a ``CompositePSF``'s part).
+    ``smooth``: a halo, which a moving source changes slowly enough to sample at the base
+    rate (``smooth_part``)."""
 
-    def __init__(self, shape: PSFShape, factor: float) -> None:
+    def __init__(self, shape: PSFShape, factor: float, smooth: bool = False) -> None:
         self.shape = shape
         self.factor = float(factor)
+        self.smooth = bool(smooth)
         self.half_width_px = shape.half_width_px
 
     def __repr__(self) -> str:
@@ -574,6 +578,22 @@ class ScaledPSF(PSFShape):
         offset: np.ndarray | None = None,
     ) -> list[tuple[np.ndarray, np.ndarray]]:
         return self.shape.contributions(width, height, x, y, flux * self.factor, offset)
+
+
+def sharp_part(shape: PSFShape) -> PSFShape | None:
+    """What of a shape a fast source must be sampled finely for: a composite's core, nothing
+    of a halo alone, the whole of any other shape."""
+    if isinstance(shape, CompositePSF):
+        return shape.core_part
+    return None if getattr(shape, "smooth", False) else shape
+
+
+def smooth_part(shape: PSFShape) -> PSFShape | None:
+    """What of a shape changes slowly wherever a source moves: a composite's halo, a halo
+    alone, nothing of any other shape (``simulate`` samples it at the base rate)."""
+    if isinstance(shape, CompositePSF):
+        return shape.halo_part
+    return shape if getattr(shape, "smooth", False) else None
 
 
 @functools.lru_cache(maxsize=4)
@@ -591,8 +611,15 @@ def with_halo(core: PSFShape, optics: Optics) -> PSFShape:
     ``CompositePSF`` of it and the optics' halo."""
     if optics.halo_fraction == 0.0:
         return core
-    halo = halo_psf(float(optics.halo_fwhm_px), float(optics.halo_beta), int(optics.halo_half_width_px))  # type: ignore[arg-type]
-    return CompositePSF(core, halo, optics.halo_fraction)
+    return _composite(core, float(optics.halo_fwhm_px), float(optics.halo_beta),  # type: ignore[arg-type]
+                      int(optics.halo_half_width_px), float(optics.halo_fraction))
+
+
+@functools.lru_cache(maxsize=8)
+def _composite(core: PSFShape, fwhm_px: float, beta: float, half_width_px: int, fraction: float) -> CompositePSF:
+    # One object per core and halo: a scene's targets rendered with it, or with its parts,
+    # are grouped by identity (targets.psf_groups).
+    return CompositePSF(core, halo_psf(fwhm_px, beta, half_width_px), fraction)
 
 
 # -- from an Optics ----------------------------------------------------------------------------
