@@ -40,7 +40,7 @@ void register_pixel(py::module_& m) {
         EVSTWIN_FIELD(internal_qe) EVSTWIN_FIELD(transmission) EVSTWIN_FIELD(absorption_per_m)
         EVSTWIN_FIELD(depletion_width_m) EVSTWIN_FIELD(pr_pole) EVSTWIN_FIELD(pr_cutoff_ref_hz)
         EVSTWIN_FIELD(pr_ref_current_a) EVSTWIN_FIELD(shot_noise_on_rate_hz) EVSTWIN_FIELD(shot_noise_off_rate_hz)
-        EVSTWIN_FIELD(background_rate_sigma) EVSTWIN_FIELD(leak_rate_sigma) EVSTWIN_FIELD(leak_random_phase) EVSTWIN_FIELD(random_reference_start)
+        EVSTWIN_FIELD(background_rate_sigma) EVSTWIN_FIELD(leak_rate_sigma) EVSTWIN_FIELD(leak_random_phase)
         EVSTWIN_FIELD(leak_photocurrent_hz_per_a)
         EVSTWIN_FIELD(hot_pixel_fraction) EVSTWIN_FIELD(hot_pixel_rate_hz) EVSTWIN_FIELD(hot_pixel_rate_sigma)
         EVSTWIN_FIELD(hot_pixel_duty) EVSTWIN_FIELD(hot_pixel_burst_s) EVSTWIN_FIELD(hot_pixel_on_share) EVSTWIN_FIELD(hot_pixel_alternation)

@@ -44,7 +44,6 @@ class PixelParams:
     background_rate_sigma: float
     leak_rate_sigma: float
     leak_random_phase: bool
-    random_reference_start: bool
     leak_photocurrent_hz_per_a: float
     leak_polarity: str
     hot_pixel_fraction: float

@@ -58,12 +58,6 @@ class PixelParams:
     leak_random_phase: bool = _DEFAULT.leak_random_phase
     """Start every pixel at a random phase of its leak cycle, so the leak is stationary from
     t = 0 (True); False reproduces the paper, where every pixel leaks in lockstep."""
-    random_reference_start: bool = _DEFAULT.random_reference_start
-    """Start each pixel's reference at a uniform random offset in (-theta_off, theta_on) from
-    its level (True), as a sensor that saw a changing scene before the recording began has
-    it; False (default, the paper's) starts it at the level, so that every pixel waits a whole
-    threshold for its first event and a slowly changing scene starts silent. A pixel's leak
-    phase (``leak_random_phase``) takes precedence where it has a leak."""
     leak_photocurrent_hz_per_a: float = _DEFAULT.leak_photocurrent_hz_per_a
     """Rise of the leak rate with the photocurrent [Hz/A], >= 0 (Nozaki & Delbruck 2017:
     parasitic photocurrent in the reset switch's junction). A pixel leaks at
@@ -141,7 +135,7 @@ class PixelParams:
                 allowed = _ENUMS[f.name]
                 if value not in allowed:
                     raise ValueError(f"{f.name} must be one of {', '.join(map(repr, allowed))}; got {f.name}={value!r}")
-            elif f.name in ("photon_shot_noise", "pr_pole", "leak_random_phase", "random_reference_start"):
+            elif f.name in ("photon_shot_noise", "pr_pole", "leak_random_phase"):
                 if not isinstance(value, bool):
                     raise TypeError(f"{f.name} must be True or False; got {f.name}={value!r}")
             elif f.name in _OPTIONAL and value is None:

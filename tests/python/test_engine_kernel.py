@@ -40,10 +40,6 @@ CONFIGS: dict[str, dict[str, object]] = {
                             "leak_polarity": "off", "leak_rate_sigma": 0.4},
     "leak_light_off_sampled": {"noise_model": "sampled", "leak_rate_hz": 0.5, "leak_photocurrent_hz_per_a": 3e15,
                                "leak_polarity": "off"},
-    # References at random offsets within the thresholds at t = 0 (issue 10), with a leak on
-    # part of the run's pixels' rates: the leak's phase wins where there is one.
-    "random_start": {"random_reference_start": True, "threshold_sigma": 0.03},
-    "random_start_leak": {"random_reference_start": True, "leak_rate_hz": 2.0, "leak_rate_sigma": 0.4},
     "hot": {"hot_pixel_fraction": 0.05, "hot_pixel_rate_hz": 80.0, "hot_pixel_rate_sigma": 0.5},
     "noiseless": {"photon_shot_noise": False, "dark_model": "none"},
     "dark_only": {"photon_shot_noise": False},

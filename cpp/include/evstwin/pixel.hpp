@@ -84,13 +84,6 @@ struct PixelParams {
     /// theta_on below the signal), so leak events are stationary from t = 0 instead of all
     /// pixels firing together at 1 / f_leak. Off reproduces the paper's lockstep.
     bool leak_random_phase = true;
-    /// Start each pixel's reference at a random offset within its thresholds: y - ref uniform
-    /// on (-theta_off, theta_on), as a sensor that has been seeing a changing scene before the
-    /// recording begins has it, instead of at the level itself (which makes every pixel wait a
-    /// whole threshold for its first event). Where the leak's random phase applies (a pixel
-    /// with a leak, leak_random_phase on) that phase sets the reference instead. Off (the
-    /// default) keeps the paper's start.
-    bool random_reference_start = false;
     /// The leak's rise with light [Hz/A]: parasitic photocurrent in the reset switch's junction
     /// adds to its dark leakage, so the leak rate grows linearly with the photocurrent (Nozaki &
     /// Delbruck 2017, IEEE TED 64(8)). A pixel's leak rate over a sample is
@@ -719,19 +712,10 @@ struct PixelModel {
                 s.ref = s.y;
             }
         }
-        const double leak0_hz = leak_rate_hz(photon_rate) * s.leak_spread;
-        const bool leak_phase = p.leak_random_phase && leak0_hz > 0.0;
-        if (p.random_reference_start && !leak_phase) {
-            // Uniform on the open interval (-theta_off, theta_on): nothing fires at once. For
-            // a pixel whose light last moved one way the offset is uniform on that side (the
-            // reference was set at its last event, a whole number of thresholds back); with
-            // either side equally likely per unit of threshold, the whole interval.
-            const double u = uniform_open(philox4x32({3u, 0u, pixel, PURPOSE_INIT}, key)[0]);
-            s.ref = s.y - (u * (s.theta_on + s.theta_off) - s.theta_off);
-        }
         s.level_at_event = s.ref;
         s.noise_at_event = s.ny;
-        if (leak_phase) {
+        const double leak0_hz = leak_rate_hz(photon_rate) * s.leak_spread;
+        if (p.leak_random_phase && leak0_hz > 0.0) {
             // The leak's phase as it stands in the steady state: the difference d = y - ref
             // drifts towards the leak's level (theta_on for an ON leak, -theta_off for an OFF
             // one) at f_leak theta and restarts from 0 at every event; its distance d0 from 0
