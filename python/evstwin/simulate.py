@@ -228,6 +228,8 @@ def _meta(runner: _Runner, scene: Scene) -> dict[str, Any]:
         "evstwin_version": __version__,
         "readout_enabled": runner.readout is not None,
     }
+    if runner.n_pre:
+        meta["pre_roll_s"] = runner.n_pre * runner.dt
     if scene.roi is not None:  # sensor.roi: where this width x height recording lies on the sensor
         meta["roi_x0_px"], meta["roi_y0_px"] = scene.roi[0], scene.roi[1]
     # Flat scalars: every event-file format stores scalar meta (io.writer), none a nested table.
@@ -265,8 +267,8 @@ def _names(moving: Sequence[Target]) -> list[str]:
     return names
 
 
-def _is_static(target: Target, duration_s: float) -> bool:
-    return not isinstance(target.brightness, LightCurve) and target.max_speed_px_s(0.0, duration_s) == 0.0
+def _is_static(target: Target, duration_s: float, start_s: float = 0.0) -> bool:
+    return not isinstance(target.brightness, LightCurve) and target.max_speed_px_s(start_s, duration_s) == 0.0
 
 
 class _LinearColumns:
@@ -334,14 +336,19 @@ class _Runner:
         self.dt = 1.0 / scene.rate_hz
         self.n_base = max(1, math.ceil(scene.duration_s * scene.rate_hz - 1e-9))
         self.t_end = self.n_base * self.dt
+        # sampling.pre_roll_s: base samples before t = 0 whose events are dropped. Sample k of
+        # the run is at (k - n_pre) dt, an integer times dt: exactly 0 at k = n_pre, and
+        # without a pre-roll the same times, bit for bit, as before it existed.
+        self.n_pre = math.ceil(scene.pre_roll_s * scene.rate_hz - 1e-9) if scene.pre_roll_s > 0.0 else 0
+        self.t_start = -self.n_pre * self.dt if self.n_pre else 0.0
         t0 = time.perf_counter()
-        static = [t for t in scene.targets if _is_static(t, self.t_end)]
+        static = [t for t in scene.targets if _is_static(t, self.t_end, self.t_start)]
         # Moving targets: the tracked ones first (their columns carry the ground truth), then
         # a drifting star field's stars.
         tracked = _tracked(scene)
-        self.moving = [t for t in tracked if not _is_static(t, self.t_end)]
+        self.moving = [t for t in tracked if not _is_static(t, self.t_end, self.t_start)]
         n_tracked = len(self.moving)
-        self.moving += [t for t in scene.targets[len(tracked):] if not _is_static(t, self.t_end)]
+        self.moving += [t for t in scene.targets[len(tracked):] if not _is_static(t, self.t_end, self.t_start)]
         self._linear = _LinearColumns(self.moving)
         # The moving targets by PSF: the scene's first (all of them, most often), then each
         # target's own (a defocused ghost).
@@ -392,7 +399,7 @@ class _Runner:
         # Base intervals per unit of the fine-sampling decision: about SUB_SAMPLED_UNIT_SAMPLES
         # fine samples at the run's fastest, so a pixel is not sampled finely long before or
         # after a source is near it (it is for the whole unit if a source touches it in it).
-        self.unit = max(1, SUB_SAMPLED_UNIT_SAMPLES // self._n_sub(0.0, self.t_end))
+        self.unit = max(1, SUB_SAMPLED_UNIT_SAMPLES // self._n_sub(self.t_start, self.t_end))
 
     # -- the loop --------------------------------------------------------------------------------
 
@@ -401,6 +408,12 @@ class _Runner:
         labels (in the same order) when the runner keeps them, with the readout's times and
         losses when the scene has a readout (a dropped event's label goes with it)."""
         for events, labels in self._engine_chunks(bar):
+            if self.n_pre and events.size and events["t"][0] < 0:
+                # The pre-roll's events are dropped (a chunk is sorted by t). An event in the
+                # last half microsecond before t = 0 rounds to 0 and stays.
+                keep = events["t"] >= 0
+                events = events[keep]
+                labels = None if labels is None else labels[keep]
             if self.readout is not None:
                 r0 = time.perf_counter()
                 if labels is None:
@@ -416,31 +429,33 @@ class _Runner:
         with its labels when the runner keeps them.
 
         Which pixels are sampled finely, and how finely, is decided per *unit*: a fixed run of
-        base intervals aligned from t = 0 (``self.unit``, set by the scene's fastest source, not
-        by ``chunk_samples``). Every pixel's time grid, and so its random numbers and events, is
-        then the same whatever the chunking; ``chunk_samples`` only groups the units where
-        nothing moves fast enough to need the fine rate, and the fine samples of a dense one."""
-        yield self._dense(np.array([0.0]))
+        base intervals aligned from the run's first sample (``self.unit``, set by the scene's
+        fastest source, not by ``chunk_samples``). Every pixel's time grid, and so its random
+        numbers and events, is then the same whatever the chunking; ``chunk_samples`` only
+        groups the units where nothing moves fast enough to need the fine rate, and the fine
+        samples of a dense one. Sample k is at (k - n_pre) dt (``sampling.pre_roll_s``)."""
+        yield self._dense(np.array([self.t_start]))
         chunk = self.scene.chunk_samples
+        n_pre, n_all = self.n_pre, self.n_pre + self.n_base
         a = 0
-        while a < self.n_base:
+        while a < n_all:
             u0 = a - a % self.unit
-            b = min(u0 + self.unit, self.n_base)
-            n_sub = self._n_sub(u0 * self.dt, b * self.dt)
+            b = min(u0 + self.unit, n_all)
+            n_sub = self._n_sub((u0 - n_pre) * self.dt, (b - n_pre) * self.dt)
             if n_sub == 1:
                 # Base-rate units: group them into chunks of up to chunk_samples intervals.
-                stop = min(a + chunk, self.n_base)
+                stop = min(a + chunk, n_all)
                 while b < stop:
-                    nb = min(b + self.unit, self.n_base)
-                    if self._n_sub(b * self.dt, nb * self.dt) > 1:
+                    nb = min(b + self.unit, n_all)
+                    if self._n_sub((b - n_pre) * self.dt, (nb - n_pre) * self.dt) > 1:
                         break
                     b = nb
                 b = min(b, stop)
-                yield self._dense(np.arange(a + 1, b + 1) * self.dt)
+                yield self._dense((np.arange(a + 1, b + 1) - n_pre) * self.dt)
             else:
                 # A sub-sampled unit, whole: a base-rate chunk never ends inside one.
                 self.sub_sampled_chunks += 1
-                k = np.arange(a + 1, b + 1)
+                k = np.arange(a + 1, b + 1) - n_pre
                 t_base = k * self.dt
                 i = np.arange(1, n_sub + 1)
                 # Fine times: the base times themselves where i == n_sub, exactly.
@@ -452,7 +467,7 @@ class _Runner:
                     for j in range(0, t_fine.size, chunk):
                         yield self._dense(t_fine[j : j + chunk])
             if bar is not None:
-                bar.update(round(min(b * self.dt, self.scene.duration_s) - bar.n, 6))
+                bar.update(round(min(max(b - n_pre, 0) * self.dt, self.scene.duration_s) - bar.n, 6))
             a = b
 
     def _n_sub(self, t0: float, t1: float) -> int:
@@ -472,7 +487,7 @@ class _Runner:
             target = self.moving[j]
             x[:, j], y[:, j] = target.position_px(t)
             f[:, j] = target.flux_ph_s(t)
-        keep = t > self._truth_t_last  # chunks come in time order; never repeat a time
+        keep = (t > self._truth_t_last) & (t >= 0.0)  # chunks come in time order; never repeat a time
         if keep.any():
             self._truth_t_last = float(t[keep][-1])
             for j, name in enumerate(self.track_names):

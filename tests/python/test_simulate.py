@@ -341,3 +341,36 @@ def test_a_key_below_a_value_is_a_scenario_error() -> None:
         set_value(s, "sensor.width.x", 0)
     with pytest.raises(ScenarioError, match=r"sensor.width is a value \(1\), not a table: 'sensor.width.x.y'"):
         set_value(s, "sensor.width.x.y", 0)
+
+
+def test_a_pre_roll_starts_the_recording_where_a_longer_run_would_be() -> None:
+    # sampling.pre_roll_s: the sensor watches the scene before t = 0 and its events there are
+    # dropped. A noise-free periodic scene is periodic once it has settled, so a run with two
+    # periods of pre-roll must record what a run without one records in its third period,
+    # shifted back by two periods (the same pixels, counts and times, to the microsecond
+    # rounding of times that differ by float rounding of the phase).
+    period = 0.5
+    plain = spinning(1000.0, max_shift_px=1e3, cutoff_hz=200.0)
+    plain["duration_s"] = 3 * period
+    rolled = spinning(1000.0, max_shift_px=1e3, cutoff_hz=200.0)
+    rolled["duration_s"] = period
+    rolled["sampling"]["pre_roll_s"] = 2 * period
+    a, b = simulate(plain), simulate(rolled)
+    late = a.events[a.events["t"] >= 2 * period * 1e6]
+    assert len(b.events) > 500 and b.events["t"].min() >= 0 and len(late) == len(b.events)
+    key = lambda e: np.lexsort((e["p"], e["x"], e["y"], e["t"]))  # noqa: E731
+    la, lb = late[key(late)], b.events[key(b.events)]
+    assert np.array_equal(la[["x", "y", "p"]], lb[["x", "y", "p"]])
+    assert np.abs(la["t"] - 2 * period * 1e6 - lb["t"]).max() <= 1
+    # Without the pre-roll the first period differs: the pixels start at the light of t = 0.
+    first = a.events[a.events["t"] < period * 1e6]
+    assert len(first) != len(b.events) or not np.array_equal(first["x"], b.events["x"])
+    # The ground truth starts at t = 0, and the file says how long the sensor watched before.
+    assert b.meta["truth"]["led"]["t_s"][0] == 0.0 and b.meta["pre_roll_s"] == 2 * period
+
+
+def test_pre_roll_must_be_a_non_negative_number() -> None:
+    s = spinning(1000.0)
+    s["sampling"]["pre_roll_s"] = -1.0
+    with pytest.raises(ScenarioError, match=r"sampling.pre_roll_s must be >= 0 and <= 1e\+06; got -1.0"):
+        build(s)
