@@ -251,8 +251,8 @@ class Optics:
     """Moffat exponent of the halo, in (1, 10]: far from its core the halo falls as
     r^(-2 beta) (1.5: r^-3, the usual slope of scattered light in telescopes)."""
     halo_half_width_px: int = 256
-    """Half width of the halo's window [px], 8..256 (the cost of rendering a source grows with
-    its square: ~4 ms a source and sample at 256 here)."""
+    """Half width of the halo's window [px], 8..512 (the cost of rendering a source grows with
+    its square; ``python bench/bench_psf.py``)."""
 
     def __post_init__(self) -> None:
         f = _positive("focal_length_m", self.focal_length_m)
@@ -338,8 +338,8 @@ class Optics:
         if not 1.0 < hb <= 10.0:
             raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={self.halo_beta!r}")
         hh = self.halo_half_width_px
-        if isinstance(hh, bool) or not isinstance(hh, (int, np.integer)) or not 8 <= hh <= 256:
-            raise ValueError(f"halo_half_width_px must be an integer in [8, 256]; got halo_half_width_px={hh!r}")
+        if isinstance(hh, bool) or not isinstance(hh, (int, np.integer)) or not 8 <= hh <= 512:
+            raise ValueError(f"halo_half_width_px must be an integer in [8, 512]; got halo_half_width_px={hh!r}")
         if self.halo_fwhm_px is not None:
             w = _finite("halo_fwhm_px", self.halo_fwhm_px)
             if not 2.0 <= w <= 200.0:

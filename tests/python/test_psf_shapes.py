@@ -363,7 +363,8 @@ def test_sparse_rendering_gives_the_dense_events_for_a_tabulated_shape() -> None
         (lambda: Optics(halo_fwhm_px=5.0), r"go together.*got halo_fraction=0.0, halo_fwhm_px=5.0"),
         (lambda: Optics(halo_fraction=0.1, halo_fwhm_px=1.0), r"halo_fwhm_px must be in \[2, 200\]; got halo_fwhm_px=1.0"),
         (lambda: Optics(halo_fraction=0.1, halo_fwhm_px=5.0, halo_beta=1.0), r"halo_beta must be in \(1, 10\].*halo_beta=1.0"),
-        (lambda: Optics(halo_half_width_px=300), r"halo_half_width_px must be an integer in \[8, 256\]; got halo_half_width_px=300"),
+        (lambda: Optics(halo_half_width_px=600), r"halo_half_width_px must be an integer in \[8, 512\]; got halo_half_width_px=600"),
+        (lambda: halo_psf(6.0, 1.5, 513), r"halo_half_width_px must be an integer in \[8, 512\]; got halo_half_width_px=513"),
         (lambda: CompositePSF(GaussianPSF(1.0), halo_psf(6.0, 1.5, 32), 0.0), r"halo_fraction must be in \(0, 1\)"),
     ],
 )

@@ -336,6 +336,12 @@ def moffat_psf(
     with np.errstate(over="ignore"):
         radius = alpha * math.sqrt(max(0.0, math.exp(math.log(DEFAULT_TAIL_FRACTION) / (1.0 - be)) - 1.0))
     h = _half_from("moffat", half_width_px, _default_half(radius, blur))
+    return _moffat_kernel(f, be, blur, k, h)
+
+
+def _moffat_kernel(f: float, be: float, blur: float, k: int, h: int) -> KernelPSF:
+    """``moffat_psf``'s table, its arguments checked (h may exceed MAX_KERNEL_HALF_PX for a halo)."""
+    alpha = moffat_alpha_px(f, be)
     m = max(1, math.ceil(4.0 / (k * alpha)))
     m = max(1, min(m, _MAX_GRID_SIDE // (2 * k * (h + 1))))
     n = _grid("moffat", h, k, m)
@@ -506,6 +512,8 @@ def image_psf(
 
 # -- scattered-light halo -------------------------------------------------------------------------
 
+MAX_HALO_HALF_PX = 512
+"""Largest half width of a halo's window [px] (1025 px a side: a table of 9 phases, 76 MB)."""
 HALO_SUBPIXEL = 2
 """Sub-pixel phases of a halo's table: a halo at least 2 px wide (``Optics.halo_fwhm_px``)
 varies so slowly within a pixel that bilinear interpolation between half-pixel phases is off
@@ -601,7 +609,16 @@ def halo_psf(fwhm_px: float, beta: float, half_width_px: int) -> KernelPSF:
     """The halo of ``CompositePSF``: a Moffat of this FWHM [px] and beta, tabulated at
     ``HALO_SUBPIXEL`` phases on a (2 h + 1)^2 window (``moffat_psf``; its taper and
     ``captured_fraction`` apply). Cached."""
-    shape = moffat_psf(fwhm_px, beta, 0.0, HALO_SUBPIXEL, half_width_px)
+    f = _finite("halo_fwhm_px", fwhm_px)
+    if not 2.0 <= f <= 200.0:
+        raise ValueError(f"halo_fwhm_px must be in [2, 200]; got halo_fwhm_px={fwhm_px!r}")
+    be = _finite("halo_beta", beta)
+    if not 1.0 < be <= 10.0:
+        raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={beta!r}")
+    h = half_width_px
+    if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 8 <= h <= MAX_HALO_HALF_PX:
+        raise ValueError(f"halo_half_width_px must be an integer in [8, {MAX_HALO_HALF_PX}]; got halo_half_width_px={h!r}")
+    shape = _moffat_kernel(f, be, 0.0, HALO_SUBPIXEL, int(h))
     shape.kind = "halo"
     return shape
 
