@@ -501,13 +501,21 @@ class _Runner:
         if not self.moving:
             return np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
         x, y, f = self._sources(t)
-        shape, cols = self._groups[0]
+        shape, cols = self._fine_groups[0] if self._fine_groups else (self._groups[0][0], np.zeros(0, np.int64))
         frames = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
                                    background_ph_s=self.static_map)
-        if len(self._groups) > 1:
-            idx, val = self._contributions(x, y, f, self._groups[1:])
+        if len(self._fine_groups) > 1:
+            idx, val = self._contributions(x, y, f, self._fine_groups[1:])
             np.add.at(frames.reshape(-1), idx, val)
+        for i in range(t.size):
+            self._add_halos(frames[i], x[i], y[i], f[i])
         return frames
+
+    def _add_halos(self, frame: np.ndarray, x: np.ndarray, y: np.ndarray, f: np.ndarray) -> None:
+        """The moving sources' halos (the smooth parts) added to one (height, width) frame."""
+        for shape, cols in self._halo_groups:
+            for j in cols:
+                shape.add_dense(frame, float(x[j]), float(y[j]), float(f[j]))  # type: ignore[attr-defined]
 
     def _dense(self, t: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
@@ -550,14 +558,13 @@ class _Runner:
         x, y, f = self._sources_untracked(t_halo)
         out = np.empty(frames.shape, np.float64)
         at_hot = np.empty((t_halo.size, hot.size))
-        halo = np.empty(sc.width * sc.height)
+        halo = np.empty((sc.height, sc.width))
         for i in range(t_halo.size):  # one frame at a time: a unit may hold ~100 base samples
             halo[:] = 0.0
-            idx, val = self._contributions(x[i : i + 1], y[i : i + 1], f[i : i + 1], self._halo_groups)
-            psf.render._accumulate(halo, idx, val)
-            at_hot[i] = halo[hot]
+            self._add_halos(halo, x[i], y[i], f[i])
+            at_hot[i] = halo.reshape(-1)[hot]
             if i > 0:
-                np.add(frames[i - 1], halo.reshape(sc.height, sc.width), out=out[i - 1])
+                np.add(frames[i - 1], halo, out=out[i - 1])
         if hot.size:
             # Fine sample j lies in base interval k = j // n_sub, a share (j % n_sub + 1) / n_sub in.
             n_sub = t_fine.size // t_base.size

@@ -505,3 +505,13 @@ def test_steady_halo_errors_name_the_key(extra: dict, match: str) -> None:
              "targets": [{"kind": "static", "x_px": 10.0, "y_px": 10.0, "flux_ph_s": 1e6, "halo": value}]}
     with pytest.raises(ScenarioError, match=match):
         build(table)
+
+
+@pytest.mark.parametrize(("x", "y"), [(60.3, 50.77), (3.2, 97.5), (-20.0, 40.0), (119.5, 0.25), (500.0, 50.0)])
+def test_a_dense_add_gives_the_rendered_values(x: float, y: float) -> None:
+    # KernelPSF.add_dense, the halos' path in simulate, writes what contributions gives (the
+    # same bilinear mix of phases), inside the image, clipped at its edges, or nothing.
+    shape = halo_psf(6.0, 1.5, 40)
+    img = np.full((100, 120), 7.0)
+    shape.add_dense(img, x, y, 1e6)
+    np.testing.assert_allclose(img - 7.0, render_points(120, 100, x, y, 1e6, shape), rtol=1e-12, atol=1e-9)

@@ -117,6 +117,31 @@ class KernelPSF(PSFShape):
         return _scatter(width, height, x, y, flux, self.half_width_px, weights, offset)
 
 
+    def add_dense(self, image: np.ndarray, x: float, y: float, flux: float) -> None:
+        """Add one source to a (height, width) image in place: the values ``contributions``
+        gives (the same bilinear mix of phases, summed in another order), written as one
+        slice of the image, which for a wide window (a halo's 1025 px) costs a third of the
+        flat indices and bincount of the general path."""
+        if not flux > 0.0:
+            return
+        k, h, table = self.subpixel, self.half_width_px, self.table
+        cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
+        tx, ty = (x - cx + 0.5) * k, (y - cy + 0.5) * k
+        p, q = min(max(math.floor(tx), 0), k - 1), min(max(math.floor(ty), 0), k - 1)
+        a, b = tx - p, ty - q
+        height, width = image.shape
+        x0, y0 = cx - h, cy - h
+        xs, ys, xe, ye = max(0, x0), max(0, y0), min(width, x0 + 2 * h + 1), min(height, y0 + 2 * h + 1)
+        if xs >= xe or ys >= ye:
+            return
+        rows, cols = slice(ys - y0, ye - y0), slice(xs - x0, xe - x0)
+        out = image[ys:ye, xs:xe]
+        for (qq, pp), w in (((q, p), (1.0 - a) * (1.0 - b)), ((q, p + 1), a * (1.0 - b)),
+                            ((q + 1, p), (1.0 - a) * b), ((q + 1, p + 1), a * b)):
+            if w != 0.0:
+                out += (flux * w) * table[qq, pp, rows, cols]
+
+
 def taper_width_px(half_width_px: int) -> float:
     """Width [px] of the cosine taper at the edge of a tabulated PSF: h / 8, at least 0.5 px."""
     return max(0.5, half_width_px / 8.0)
@@ -586,6 +611,10 @@ class ScaledPSF(PSFShape):
         offset: np.ndarray | None = None,
     ) -> list[tuple[np.ndarray, np.ndarray]]:
         return self.shape.contributions(width, height, x, y, flux * self.factor, offset)
+
+    def add_dense(self, image: np.ndarray, x: float, y: float, flux: float) -> None:
+        """``KernelPSF.add_dense`` of the scaled shape (a halo's part)."""
+        self.shape.add_dense(image, x, y, flux * self.factor)  # type: ignore[attr-defined]
 
 
 def sharp_part(shape: PSFShape) -> PSFShape | None:
