@@ -24,7 +24,8 @@ The tables mirror the Python objects:
                   the pixels near moving targets; default true), ``chunk_samples``,
                   ``max_events`` (most events of one engine call; default 1e8, see
                   ``Sensor.max_events``), ``pre_roll_s`` (the sensor watches the scene this
-                  long before t = 0, its events dropped; default 0).
+                  long before t = 0, its events dropped; default 0) and
+                  ``pre_roll_rate_hz`` (its sampling rate; default ``rate_hz``).
 ``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
 ``[hot_pixels]``  an explicit hot-pixel map, in place of the draw of ``pixel.hot_pixel_fraction``:
                   ``pixels = [[x, y, rate_hz], ...]`` and/or ``file = "map.npy"`` (a
@@ -165,7 +166,7 @@ SCHEMA: dict[str, Any] = {
     "pixel": {name: Any for name in PixelParams.field_names()},
     "optics": {k: Any for k in _OPTICS_KEYS},
     "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int, "max_events": int,
-                 "pre_roll_s": float},
+                 "pre_roll_s": float, "pre_roll_rate_hz": float},
     "background": {"photon_rate_ph_s": float, "sky_mag_per_arcsec2": float},
     "hot_pixels": {"pixels": list, "file": str},
     "targets": list,
@@ -398,6 +399,8 @@ def _check_values(s: dict[str, Any]) -> None:
         raise ScenarioError(f"sampling.chunk_samples must be an integer >= 1; got {sp['chunk_samples']!r}")
     if "pre_roll_s" in sp:
         number("sampling.pre_roll_s", sp["pre_roll_s"], 0.0, 1e6)
+    if "pre_roll_rate_hz" in sp:
+        number("sampling.pre_roll_rate_hz", sp["pre_roll_rate_hz"], 0.0, 1e7, lo_open=True)
     if "max_events" in sp and not 1 <= sp["max_events"] <= MAX_MAX_EVENTS:
         raise ScenarioError(f"sampling.max_events must be in [1, {MAX_MAX_EVENTS}]; got {sp['max_events']!r}")
     bg = s.get("background", {})
@@ -520,6 +523,11 @@ class Scene:
     (rounded up to whole base samples) and its events before t = 0 are dropped, so that every
     pixel starts the recording with its history: the reference where its last event left it,
     its noise, leak and hot-pixel phases (``simulate``)."""
+    pre_roll_rate_hz: float | None = None
+    """sampling.pre_roll_rate_hz: the pre-roll's sampling rate [Hz] (None: rate_hz). Whole
+    frames, no sub-sampling: a pre-roll only sets the pixels' state, and with the continuous
+    noise model that state does not depend on the sampling, so a slow scene can be pre-rolled
+    at a fraction of the run's rate."""
     field_stars: int = 0
     """How many of the last ``targets`` the ``[star_field]`` made. Rendered like the others,
     but not written as ground-truth tracks when they drift: thousands of tracks would cost 32
@@ -769,6 +777,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         hot_pixel_rates_hz=hot,
         chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
         pre_roll_s=float(sp.get("pre_roll_s", 0.0)),
+        pre_roll_rate_hz=None if "pre_roll_rate_hz" not in sp else float(sp["pre_roll_rate_hz"]),
         readout=readout, atmosphere=atmosphere,
     )
 
@@ -940,7 +949,8 @@ def _check_work(s: dict[str, Any], width: int, height: int, shape: psf.PSFShape,
     interval divided so that no target moves more than max_shift_px between samples)."""
     sp = s["sampling"]
     duration, rate, shift, chunk = float(s["duration_s"]), float(sp["rate_hz"]), float(sp["max_shift_px"]), sp["chunk_samples"]
-    n_base = max(1.0, math.ceil(duration * rate - 1e-9)) + math.ceil(float(sp.get("pre_roll_s", 0.0)) * rate - 1e-9)
+    n_base = max(1.0, math.ceil(duration * rate - 1e-9)) + math.ceil(
+        float(sp.get("pre_roll_s", 0.0)) * float(sp.get("pre_roll_rate_hz", rate)) - 1e-9)
     if not n_base <= MAX_SAMPLES:
         raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base:.3g} samples (> {MAX_SAMPLES:g}); "
                             f"got duration_s={s['duration_s']!r}, sampling.rate_hz={sp['rate_hz']!r}")

@@ -229,7 +229,8 @@ def _meta(runner: _Runner, scene: Scene) -> dict[str, Any]:
         "readout_enabled": runner.readout is not None,
     }
     if runner.n_pre:
-        meta["pre_roll_s"] = runner.n_pre * runner.dt
+        meta["pre_roll_s"] = runner.n_pre * runner.dt_pre
+        meta["pre_roll_rate_hz"] = 1.0 / runner.dt_pre
     if scene.roi is not None:  # sensor.roi: where this width x height recording lies on the sensor
         meta["roi_x0_px"], meta["roi_y0_px"] = scene.roi[0], scene.roi[1]
     # Flat scalars: every event-file format stores scalar meta (io.writer), none a nested table.
@@ -336,11 +337,12 @@ class _Runner:
         self.dt = 1.0 / scene.rate_hz
         self.n_base = max(1, math.ceil(scene.duration_s * scene.rate_hz - 1e-9))
         self.t_end = self.n_base * self.dt
-        # sampling.pre_roll_s: base samples before t = 0 whose events are dropped. Sample k of
-        # the run is at (k - n_pre) dt, an integer times dt: exactly 0 at k = n_pre, and
-        # without a pre-roll the same times, bit for bit, as before it existed.
-        self.n_pre = math.ceil(scene.pre_roll_s * scene.rate_hz - 1e-9) if scene.pre_roll_s > 0.0 else 0
-        self.t_start = -self.n_pre * self.dt if self.n_pre else 0.0
+        # sampling.pre_roll_s: samples before t = 0, at pre_roll_rate_hz, whose events are
+        # dropped. Pre-roll sample j is at (j - n_pre) dt_pre, the last exactly at t = 0; the
+        # run's own samples then follow as without a pre-roll.
+        self.dt_pre = 1.0 / scene.pre_roll_rate_hz if scene.pre_roll_rate_hz else self.dt
+        self.n_pre = math.ceil(scene.pre_roll_s / self.dt_pre - 1e-9) if scene.pre_roll_s > 0.0 else 0
+        self.t_start = -self.n_pre * self.dt_pre if self.n_pre else 0.0
         t0 = time.perf_counter()
         static = [t for t in scene.targets if _is_static(t, self.t_end, self.t_start)]
         # Moving targets: the tracked ones first (their columns carry the ground truth), then
@@ -399,7 +401,7 @@ class _Runner:
         # Base intervals per unit of the fine-sampling decision: about SUB_SAMPLED_UNIT_SAMPLES
         # fine samples at the run's fastest, so a pixel is not sampled finely long before or
         # after a source is near it (it is for the whole unit if a source touches it in it).
-        self.unit = max(1, SUB_SAMPLED_UNIT_SAMPLES // self._n_sub(self.t_start, self.t_end))
+        self.unit = max(1, SUB_SAMPLED_UNIT_SAMPLES // self._n_sub(0.0, self.t_end))
 
     # -- the loop --------------------------------------------------------------------------------
 
@@ -429,33 +431,36 @@ class _Runner:
         with its labels when the runner keeps them.
 
         Which pixels are sampled finely, and how finely, is decided per *unit*: a fixed run of
-        base intervals aligned from the run's first sample (``self.unit``, set by the scene's
-        fastest source, not by ``chunk_samples``). Every pixel's time grid, and so its random
-        numbers and events, is then the same whatever the chunking; ``chunk_samples`` only
-        groups the units where nothing moves fast enough to need the fine rate, and the fine
-        samples of a dense one. Sample k is at (k - n_pre) dt (``sampling.pre_roll_s``)."""
-        yield self._dense(np.array([self.t_start]))
+        base intervals aligned from t = 0 (``self.unit``, set by the scene's fastest source, not
+        by ``chunk_samples``). Every pixel's time grid, and so its random numbers and events, is
+        then the same whatever the chunking; ``chunk_samples`` only groups the units where
+        nothing moves fast enough to need the fine rate, and the fine samples of a dense one.
+        A pre-roll (``sampling.pre_roll_s``) comes first, whole frames at its own rate up to
+        and including t = 0, without sub-sampling: its events are dropped, and it is there to
+        leave each pixel's state where the scene's history puts it."""
         chunk = self.scene.chunk_samples
-        n_pre, n_all = self.n_pre, self.n_pre + self.n_base
+        yield self._dense(np.array([self.t_start]))
+        for j in range(1, self.n_pre + 1, chunk):
+            yield self._dense((np.arange(j, min(j + chunk, self.n_pre + 1)) - self.n_pre) * self.dt_pre)
         a = 0
-        while a < n_all:
+        while a < self.n_base:
             u0 = a - a % self.unit
-            b = min(u0 + self.unit, n_all)
-            n_sub = self._n_sub((u0 - n_pre) * self.dt, (b - n_pre) * self.dt)
+            b = min(u0 + self.unit, self.n_base)
+            n_sub = self._n_sub(u0 * self.dt, b * self.dt)
             if n_sub == 1:
                 # Base-rate units: group them into chunks of up to chunk_samples intervals.
-                stop = min(a + chunk, n_all)
+                stop = min(a + chunk, self.n_base)
                 while b < stop:
-                    nb = min(b + self.unit, n_all)
-                    if self._n_sub((b - n_pre) * self.dt, (nb - n_pre) * self.dt) > 1:
+                    nb = min(b + self.unit, self.n_base)
+                    if self._n_sub(b * self.dt, nb * self.dt) > 1:
                         break
                     b = nb
                 b = min(b, stop)
-                yield self._dense((np.arange(a + 1, b + 1) - n_pre) * self.dt)
+                yield self._dense(np.arange(a + 1, b + 1) * self.dt)
             else:
                 # A sub-sampled unit, whole: a base-rate chunk never ends inside one.
                 self.sub_sampled_chunks += 1
-                k = np.arange(a + 1, b + 1) - n_pre
+                k = np.arange(a + 1, b + 1)
                 t_base = k * self.dt
                 i = np.arange(1, n_sub + 1)
                 # Fine times: the base times themselves where i == n_sub, exactly.
@@ -467,7 +472,7 @@ class _Runner:
                     for j in range(0, t_fine.size, chunk):
                         yield self._dense(t_fine[j : j + chunk])
             if bar is not None:
-                bar.update(round(min(max(b - n_pre, 0) * self.dt, self.scene.duration_s) - bar.n, 6))
+                bar.update(round(min(b * self.dt, self.scene.duration_s) - bar.n, 6))
             a = b
 
     def _n_sub(self, t0: float, t1: float) -> int:
