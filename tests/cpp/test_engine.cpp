@@ -503,4 +503,31 @@ TEST(max_events_stops_a_flood_the_same_way_on_any_thread_count) {
     }
 }
 
+TEST(pixel_divider_is_the_exact_division_for_every_row_width) {
+    // collect_sample's (x, y) of an event: the multiply-shift quotient against / and % for
+    // every width the sensor accepts, at the ends of the index range, around multiples of the
+    // width (where a rounding error would show first) and at pseudo-random indices.
+    constexpr std::uint32_t top = (std::uint32_t{1} << detail::PixelDivider::INDEX_BITS) - 1;
+    std::uint64_t state = 88172645463325252ull;
+    int wrong = 0;
+    for (std::uint32_t d = 1; d <= 65535; ++d) {
+        const detail::PixelDivider div(d);
+        const std::uint32_t last_multiple = top / d * d;
+        const std::uint32_t ns[] = {0, 1, d - 1, d, d + 1, top, top - 1, last_multiple, last_multiple - 1,
+                                    last_multiple - d, last_multiple - d + 1};
+        for (std::uint32_t n : ns)
+            if (n <= top && div.quotient(n) != n / d) ++wrong;
+        for (int r = 0; r < 8; ++r) {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            const std::uint32_t n = static_cast<std::uint32_t>(state) & top;
+            if (div.quotient(n) != n / d) ++wrong;
+        }
+    }
+    CHECK(wrong == 0);
+    CHECK_THROWS(detail::PixelDivider(0));
+    CHECK_THROWS(detail::PixelDivider(65536));
+}
+
 TEST_MAIN()
