@@ -441,6 +441,22 @@ private:
         std::uint8_t label;  ///< EventLabel: why it fired
     };
 
+    /// A block's event list, taken out of block_events_ while the block runs and put back
+    /// after it (also when it throws). The vectors' headers lie side by side in block_events_,
+    /// and blocks are handed out in order, so two threads appending to neighbouring blocks'
+    /// lists wrote the same cache line (the end pointer) on every event: false sharing that
+    /// cost the event-heavy load ~15 % more CPU an event on 2 threads than on 1.
+    struct TakenEvents {
+        explicit TakenEvents(std::vector<RawEvent>& home) : home_(home) { out.swap(home_); }
+        ~TakenEvents() { out.swap(home_); }
+        TakenEvents(const TakenEvents&) = delete;
+        TakenEvents& operator=(const TakenEvents&) = delete;
+        std::vector<RawEvent> out;
+
+    private:
+        std::vector<RawEvent>& home_;
+    };
+
     /// The event's time in integer microseconds, rounded half away from zero as std::llround
     /// (without its library call): the truncation is exact, and so is the remainder x - i for
     /// any |x| < 2^63 (at and above 2^52, x is an integer and the remainder 0).
@@ -573,7 +589,8 @@ private:
                    std::size_t n_probe, TraceSample* trace) {
         const std::size_t npix = state_.size();
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
-        std::vector<RawEvent>& out = block_events_[b];
+        TakenEvents taken(block_events_[b]);
+        std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
@@ -657,7 +674,8 @@ private:
                          const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
                          PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
         const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
-        std::vector<RawEvent>& out = block_events_[b];
+        TakenEvents taken(block_events_[b]);
+        std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
