@@ -571,6 +571,9 @@ TEST(bridge_fires_decides_as_the_exact_probabilities) {
     }
     CHECK(wrong == 0);
     CHECK(near_ties > 50000);
+    // A NaN distance (never formed by the comparator) decides as the exact formula: no crossing.
+    bool on = true;
+    CHECK(!detail::bridge_fires(0.5, std::nan(""), 0.01, 0.01, 0.01, 1e-4, on) && !on);
 }
 
 TEST_MAIN()

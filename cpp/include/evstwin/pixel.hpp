@@ -197,13 +197,15 @@ inline bool bridge_fires(double u, double on0, double on1, double off0, double o
     }
     // The exponents as bridge_crossing_probability forms them; above 40 it gives 0.
     const double e_on = on0 * on1 / (2.0 * mid), e_off = off0 * off1 / (2.0 * mid);
-    const double q_on = e_on > 40.0 ? 0.0 : exp_neg_bracket(e_on);
-    const double q_off = e_off > 40.0 ? 0.0 : exp_neg_bracket(e_off);
+    // (A negative or NaN exponent, which the comparator's callers never form, goes to the exps.)
+    const bool in_range = (e_on >= 0.0) & (e_off >= 0.0);
+    const double q_on = !in_range || e_on > 40.0 ? 0.0 : exp_neg_bracket(e_on);
+    const double q_off = !in_range || e_off > 40.0 ? 0.0 : exp_neg_bracket(e_off);
     const double q = q_on + q_off;
     constexpr double lo = 1.0 - 1e-6, hi = 1.0 + 1e-6;
     const bool fire_known = (u < q * lo) | (u > q * hi);
     const bool on_known = (u < q_on * lo) | (u > q_on * hi);
-    if (fire_known & on_known) {
+    if (in_range & fire_known & on_known) {
         on = u < q_on;
         return u < q;
     }
@@ -298,7 +300,6 @@ struct PixelState {
     double bg_clock_on = 0.0, bg_clock_off = 0.0;
 };
 
-/// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
 /// CounterStream(key, pixel, sample, purpose) whose first block of four words a Philox batch
 /// has already computed (`first`; nullptr: none, the stream computes it as usual). The same
 /// words in the same order: the first four from `first`, the rest from the stream, which
@@ -336,6 +337,7 @@ struct BridgePre {
     bool fires = false, on = false;
 };
 
+/// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
 struct SampleConstants {
     double t0 = 0.0, t1 = 0.0, dt = 0.0;
     double inv_dt = 0.0;       ///< 1 / dt: a multiply in the hot loop instead of a divide
