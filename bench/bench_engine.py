@@ -20,6 +20,7 @@ Only the engine's run() calls are timed; the input is rendered beforehand per ch
 
     python bench/bench_engine.py [--load reference|event-heavy|imx636] [--duration 10]
                                  [--numpy-duration 0.5] [--threads 1,2]
+    python bench/bench_engine.py --call-overhead 20000   # Python's cost per run() call
 """
 
 from __future__ import annotations
@@ -100,6 +101,20 @@ def numpy_ideal(frames: np.ndarray, theta_on: float, theta_off: float) -> tuple[
     return time.perf_counter() - start, n_ev
 
 
+def call_overhead(n_calls: int) -> None:
+    """Microseconds per run() call through Sensor.run and through the binding alone (_core),
+    on one pixel and one sample a call: what a call costs besides its pixels and events."""
+    rate = np.full((1, 1, 1), 2e6, dtype=np.float32)
+    for name in ("Sensor.run", "_core.run"):
+        sensor = Sensor(1, 1, PixelParams(), seed=1, num_threads=1)
+        run = sensor.run if name == "Sensor.run" else sensor._core.run
+        times = [np.array([k * 1e-3]) for k in range(n_calls)]
+        start = time.perf_counter()
+        for t in times:
+            run(rate, t)
+        print(f"{name}: {(time.perf_counter() - start) / n_calls * 1e6:.1f} us per call (1 pixel, 1 sample)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--load", choices=sorted(SIZES), default="reference")
@@ -112,7 +127,12 @@ def main() -> None:
                     help="seconds of scene rendered and replayed (default 2: one turn; imx636: 0.1)")
     ap.add_argument("--noise-model", choices=["continuous", "sampled"], default="continuous",
                     help="the engine's shot-noise model (the NumPy reference implements 'sampled')")
+    ap.add_argument("--call-overhead", type=int, default=0, metavar="N",
+                    help="only time N one-pixel, one-sample run() calls (Python's cost per call)")
     args = ap.parse_args()
+    if args.call_overhead > 0:
+        call_overhead(args.call_overhead)
+        return
     imx = args.load == "imx636"
     duration = args.duration if args.duration is not None else (1.0 if imx else 10.0)
     chunk = 50 if imx and args.chunk == 250 else args.chunk

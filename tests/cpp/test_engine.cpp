@@ -503,4 +503,77 @@ TEST(max_events_stops_a_flood_the_same_way_on_any_thread_count) {
     }
 }
 
+TEST(pixel_divider_is_the_exact_division_for_every_row_width) {
+    // collect_sample's (x, y) of an event: the multiply-shift quotient against / and % for
+    // every width the sensor accepts, at the ends of the index range, around multiples of the
+    // width (where a rounding error would show first) and at pseudo-random indices.
+    constexpr std::uint32_t top = (std::uint32_t{1} << detail::PixelDivider::INDEX_BITS) - 1;
+    std::uint64_t state = 88172645463325252ull;
+    int wrong = 0;
+    for (std::uint32_t d = 1; d <= 65535; ++d) {
+        const detail::PixelDivider div(d);
+        const std::uint32_t last_multiple = top / d * d;
+        const std::uint32_t ns[] = {0, 1, d - 1, d, d + 1, top, top - 1, last_multiple, last_multiple - 1,
+                                    last_multiple - d, last_multiple - d + 1};
+        for (std::uint32_t n : ns)
+            if (n <= top && div.quotient(n) != n / d) ++wrong;
+        for (int r = 0; r < 8; ++r) {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            const std::uint32_t n = static_cast<std::uint32_t>(state) & top;
+            if (div.quotient(n) != n / d) ++wrong;
+        }
+    }
+    CHECK(wrong == 0);
+    CHECK_THROWS(detail::PixelDivider(0));
+    CHECK_THROWS(detail::PixelDivider(65536));
+}
+
+TEST(exp_neg_bracket_is_within_1e_8_of_exp) {
+    // The bracket bridge_fires decides on: its stated error against the library's exp, on a
+    // fine grid of [0, 40] and at the ends.
+    double worst = 0.0;
+    for (int i = 0; i <= 400000; ++i) {
+        const double e = 40.0 * i / 400000.0;
+        worst = std::max(worst, std::fabs(detail::exp_neg_bracket(e) / std::exp(-e) - 1.0));
+    }
+    CHECK(worst < 1e-8);
+    CHECK(detail::exp_neg_bracket(0.0) == 1.0);
+}
+
+TEST(bridge_fires_decides_as_the_exact_probabilities) {
+    // Whether the bridge fires and at which level, against u < p_on + p_off and u < p_on with
+    // bridge_crossing_probability, for random bridges and uniforms, and for uniforms placed
+    // within a relative 1e-12 to 1e-6 of the sums (where the bracket cannot decide and the
+    // exps must), distances beyond exp(-40) and a zero variance.
+    std::uint64_t state = 0x9E3779B97F4A7C15ull;
+    const auto next = [&state] {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        return (static_cast<double>(state >> 11) + 0.5) * 0x1p-53;
+    };
+    int wrong = 0, near_ties = 0;
+    for (int i = 0; i < 200000; ++i) {
+        const double mid = i % 1000 == 0 ? 0.0 : 1e-4 * next();
+        const double on0 = 0.05 * next(), on1 = 0.05 * next(), off0 = 0.05 * next(), off1 = 0.05 * next();
+        const double p_on = bridge_crossing_probability(on0, on1, mid);
+        const double p_off = bridge_crossing_probability(off0, off1, mid);
+        double u = uniform_open(static_cast<std::uint32_t>(next() * 4294967296.0));
+        if (i % 4 == 1) u = (p_on + p_off) * (1.0 + (next() - 0.5) * std::pow(10.0, -6.0 - 6.0 * next()));
+        if (i % 4 == 2) u = p_on * (1.0 + (next() - 0.5) * std::pow(10.0, -6.0 - 6.0 * next()));
+        if (!(u > 0.0 && u < 1.0)) continue;
+        near_ties += i % 4 == 1 || i % 4 == 2;
+        bool on = false;
+        const bool fires = detail::bridge_fires(u, on0, on1, off0, off1, mid, on);
+        wrong += fires != (u < p_on + p_off) || (fires && on != (u < p_on));
+    }
+    CHECK(wrong == 0);
+    CHECK(near_ties > 50000);
+    // A NaN distance (never formed by the comparator) decides as the exact formula: no crossing.
+    bool on = true;
+    CHECK(!detail::bridge_fires(0.5, std::nan(""), 0.01, 0.01, 0.01, 1e-4, on) && !on);
+}
+
 TEST_MAIN()

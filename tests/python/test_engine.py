@@ -275,6 +275,69 @@ def test_same_events_whatever_threads_and_chunks(dtype: type) -> None:
     assert other_seed.tobytes() != ref.tobytes()
 
 
+# The event-heavy regime (bench_engine.py --load event-heavy): a 200 Hz source follower lets the
+# dark current's shot noise cross the thresholds on most samples of most pixels.
+EVENT_HEAVY = PixelParams(threshold_sigma=0.03, cutoff_hz=200.0)
+
+
+def is_time_then_pixel_ordered(events: np.ndarray, width: int) -> bool:
+    """Whether events are sorted by (t, row-major pixel), ties allowed."""
+    pixel = events["y"].astype(np.int64) * width + events["x"]
+    t = events["t"]
+    return bool(np.all((t[1:] > t[:-1]) | ((t[1:] == t[:-1]) & (pixel[1:] >= pixel[:-1]))))
+
+
+def test_event_heavy_sort_is_the_same_on_any_thread_count_and_chunking() -> None:
+    # Tens of thousands of events a call over ten blocks: each sample's events of all blocks
+    # are counting-sorted by their own thread. A call of one sample is ordered by (t, pixel)
+    # alone; the concatenated one-sample calls must equal one call, on 1 and 2 threads.
+    w, h, n = 64, 40, 40
+    rate = np.full((n, h, w), 2e6, dtype=np.float32)
+    t = np.arange(n) * 1e-3
+    one = Sensor(w, h, EVENT_HEAVY, seed=3, num_threads=1).run(rate, t)
+    assert len(one) > 0.3 * w * h * (n - 1)  # event-heavy indeed
+    two = Sensor(w, h, EVENT_HEAVY, seed=3, num_threads=2).run(rate, t)
+    assert two.tobytes() == one.tobytes()
+    stepped = Sensor(w, h, EVENT_HEAVY, seed=3, num_threads=2)
+    parts = [stepped.run(rate[k : k + 1], t[k : k + 1]) for k in range(n)]
+    assert all(is_time_then_pixel_ordered(part, w) for part in parts)
+    assert np.concatenate(parts).tobytes() == one.tobytes()
+    assert np.all(np.diff(one["t"]) >= 0)
+
+
+def test_event_heavy_run_pixels_sort_in_any_pixel_order_and_thread_count() -> None:
+    # run_pixels' list in a shuffled order: each sample's events are sorted by (t, pixel) with
+    # a comparison sort, samples in parallel (64 x 40 pixels x 14 samples: above the engine's
+    # PARALLEL_MIN_UPDATES, so two threads do share the work). Within one sample call that
+    # order is exact.
+    w, h, n = 64, 40, 14
+    order = np.random.default_rng(5).permutation(w * h)
+    rate = np.full((n, w * h), 2e6)
+    t = 0.01 + np.arange(n) * 1e-3
+    outs = []
+    for threads in (1, 2):
+        sensor = Sensor(w, h, EVENT_HEAVY, seed=8, num_threads=threads)
+        sensor.run(np.full((1, h, w), 2e6), [0.0])
+        outs.append(sensor.run_pixels(order, rate, t))
+    assert len(outs[0]) > 0.3 * w * h * n
+    assert outs[1].tobytes() == outs[0].tobytes()
+    sensor = Sensor(w, h, EVENT_HEAVY, seed=8, num_threads=2)
+    sensor.run(np.full((1, h, w), 2e6), [0.0])
+    parts = [sensor.run_pixels(order, rate[k : k + 1], t[k : k + 1]) for k in range(n)]
+    assert all(is_time_then_pixel_ordered(part, w) for part in parts)
+    assert np.concatenate(parts).tobytes() == outs[0].tobytes()
+
+
+def test_events_reach_numpy_without_a_copy() -> None:
+    # The engine's event vector becomes the array's memory (a capsule frees it with the
+    # array): NumPy does not own, and so did not copy, the data.
+    rate, t = moving_spot(40, 16, 8)
+    events = Sensor(16, 8, NOISY, seed=2).run(rate, t)
+    assert len(events) > 0 and events.dtype == EVENT_DTYPE
+    assert events.flags.owndata is False
+    assert type(events.base).__name__ == "PyCapsule"
+
+
 def test_reset_replays_the_same_events() -> None:
     rate, t = moving_spot(50, 20, 10)
     sensor = Sensor(20, 10, NOISY, seed=4)

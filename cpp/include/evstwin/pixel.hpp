@@ -160,6 +160,60 @@ inline void require_range(const char* name, double v, double lo, double hi, cons
                                     "; got " + name + "=" + fmt(v));
     }
 }
+
+/// exp(-e) for 0 <= e <= 40 within a relative 1e-8 (tests/cpp checks it against std::exp):
+/// 2^k e^r with k the nearest integer to -e log2(e) and |r| <= ln(2) / 2, e^r by its Taylor
+/// series to r^7 (remainder below 0.35^8 / 8! = 5e-9), 2^k put in the exponent bits. No
+/// library call, no table. Only a bracket for decisions (bridge_fires), never a value of
+/// the model.
+inline double exp_neg_bracket(double e) {
+    const double t = -e * 1.4426950408889634;  // log2(e)
+    const double k = std::floor(t + 0.5);
+    const double r = (t - k) * 0.6931471805599453;
+    double p = 1.0 / 5040.0;
+    p = p * r + 1.0 / 720.0;
+    p = p * r + 1.0 / 120.0;
+    p = p * r + 1.0 / 24.0;
+    p = p * r + 1.0 / 6.0;
+    p = p * r + 0.5;
+    p = p * r + 1.0;
+    p = p * r + 1.0;
+    const std::uint64_t bits = static_cast<std::uint64_t>(static_cast<std::int64_t>(k) + 1023) << 52;
+    double two_k;
+    std::memcpy(&two_k, &bits, sizeof two_k);
+    return p * two_k;
+}
+
+/// Whether a uniform u in (0, 1) fires a Brownian bridge that crosses the ON level with
+/// probability bridge_crossing_probability(on0, on1, mid) = p_on and the OFF one with p_off
+/// (u < p_on + p_off), and at which (on: u < p_on): the decisions compare_bridged() takes,
+/// the same for every u. Decided on exp_neg_bracket where u lies farther than a relative 1e-6
+/// from both sums (their error is below 1e-8, the library exp's 1e-16), so the two exps are
+/// computed only for the one uniform in ~10^5 that lies that close.
+inline bool bridge_fires(double u, double on0, double on1, double off0, double off1, double mid, bool& on) {
+    if (!(mid > 0.0)) {  // bridge_crossing_probability is 0 for both
+        on = false;
+        return false;
+    }
+    // The exponents as bridge_crossing_probability forms them; above 40 it gives 0.
+    const double e_on = on0 * on1 / (2.0 * mid), e_off = off0 * off1 / (2.0 * mid);
+    // (A negative or NaN exponent, which the comparator's callers never form, goes to the exps.)
+    const bool in_range = (e_on >= 0.0) & (e_off >= 0.0);
+    const double q_on = !in_range || e_on > 40.0 ? 0.0 : exp_neg_bracket(e_on);
+    const double q_off = !in_range || e_off > 40.0 ? 0.0 : exp_neg_bracket(e_off);
+    const double q = q_on + q_off;
+    constexpr double lo = 1.0 - 1e-6, hi = 1.0 + 1e-6;
+    const bool fire_known = (u < q * lo) | (u > q * hi);
+    const bool on_known = (u < q_on * lo) | (u > q_on * hi);
+    if (in_range & fire_known & on_known) {
+        on = u < q_on;
+        return u < q;
+    }
+    const double p_on = bridge_crossing_probability(on0, on1, mid);
+    const double p_off = bridge_crossing_probability(off0, off1, mid);
+    on = u < p_on;
+    return u < p_on + p_off;
+}
 }  // namespace detail
 
 /// Throws std::invalid_argument naming the first parameter out of range and its value.
@@ -244,6 +298,43 @@ struct PixelState {
     std::uint8_t hot_pol = 0, hot_active = 1;
     /// Continuous model: what is left of the exponential budgets of eq. 12's ON and OFF clocks.
     double bg_clock_on = 0.0, bg_clock_off = 0.0;
+};
+
+/// CounterStream(key, pixel, sample, purpose) whose first block of four words a Philox batch
+/// has already computed (`first`; nullptr: none, the stream computes it as usual). The same
+/// words in the same order: the first four from `first`, the rest from the stream, which
+/// recomputes its first block once to reach the second (only the ziggurat's rare slow path
+/// asks for a fifth word).
+class PrefilledStream {
+public:
+    PrefilledStream(Philox4x32Key key, std::uint32_t pixel, std::uint64_t sample, std::uint32_t purpose,
+                    const Philox4x32Counter* first)
+        : rest_(key, pixel, sample, purpose), used_(first ? 0 : 5) {
+        if (first) first_ = *first;
+    }
+    std::uint32_t word() {
+        if (used_ < 4) return first_[used_++];
+        if (used_ == 4) {  // past the given block: the stream's first block is the same four words
+            for (int i = 0; i < 4; ++i) (void)rest_.word();
+            used_ = 5;
+        }
+        return rest_.word();
+    }
+    /// As CounterStream::uniform(): the next word in (0, 1).
+    double uniform() { return uniform_open(word()); }
+
+private:
+    CounterStream rest_;
+    Philox4x32Counter first_{};
+    int used_;  ///< words taken from first_ (0-4); 5: the rest come from rest_
+};
+
+/// compare_bridged()'s draw for one pixel made ahead by the block kernel (bridge_decisions):
+/// the first block of the bridge's random words and whether (and at which level) it fires.
+struct BridgePre {
+    Philox4x32Counter words{};
+    bool known = false;  ///< false: compare_bridged draws as usual
+    bool fires = false, on = false;
 };
 
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
@@ -1001,6 +1092,8 @@ struct PixelModel {
         // and the ziggurat batch's flags of the normals left to the slow path.
         std::vector<std::uint32_t> ctr0, ctr1, ctr2, need_at, r0, r1, r2, r3;
         std::vector<std::uint8_t> slow1, slow2;
+        std::vector<BridgePre> bridge_pre;  ///< step_block_continuous' bridge decisions of the busy pixels
+        std::vector<double> bridge_args;    ///< bridge_decisions' five numbers a pixel
         double cached_rate = -1.0, cached_x = 0.0;
         // The photoreceptor pole's decay and ramp depend on the current only through the
         // electron count of the interval: kept per count for the current dt.
@@ -1019,6 +1112,7 @@ struct PixelModel {
                 leak.resize(n);
                 ctr0.resize(n); ctr1.resize(n); ctr2.resize(n); need_at.resize(n);
                 r0.resize(n); r1.resize(n); r2.resize(n); r3.resize(n); slow1.resize(n); slow2.resize(n);
+                bridge_pre.resize(n);
             }
         }
     };
@@ -1300,14 +1394,76 @@ struct PixelModel {
                 ++n_busy;
             }
         }
+        // Without the pole (continuous_finish never refines), the busy pixels' bridge draws are
+        // decided ahead, in passes without unpredictable branches (bridge_decisions).
+        BridgePre* pre = nullptr;
+        if (SfOnly && n_busy > 0) {
+            pre = scratch.bridge_pre.data();
+            bridge_decisions(st, v.ids, busy_at, n_busy, y, leak, bvar, c, key, scratch, pre);
+        }
         for (std::size_t b = 0; b < n_busy; ++b) {
             PixelState& s = st[busy_at[b]];
             pixel = v.ids[busy_at[b]];
             continuous_finish(s, x[b], z[b], y[b], nz[b], ny[b], cur[b], leak[b], bvar[b], noise_d[b], c, key, pixel,
-                              emit, nullptr);
+                              emit, nullptr, pre ? pre + b : nullptr);
             if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
             s.t = c.t1;
             ++s.n;
+        }
+    }
+
+    /// compare_bridged()'s decision, made ahead for n busy pixels of a block (local indices
+    /// busy_at, global ids[], new levels y1, leak rates leak_hz, bridge variances bvar; the
+    /// state still at c.t0): where the line stays inside both levels, the bridge's first
+    /// Philox block (one vectorised batch), its uniform and whether it fires, and at which
+    /// level (detail::bridge_fires). compare_bridged then reads them instead of drawing: the
+    /// long chain of a scalar Philox call, two divisions and two exps no longer stands
+    /// between a pixel's state and its comparator's first unpredictable branch. The same
+    /// expressions on the same state (continuous_finish's background_fire changes only the
+    /// clocks), so the same decisions.
+    void bridge_decisions(const PixelState* st, const std::uint32_t* ids, const std::uint32_t* busy_at, std::size_t n,
+                          const double* y1, const double* leak_hz, const double* bvar, const SampleConstants& c,
+                          Philox4x32Key key, BlockScratch& scratch, BridgePre* pre) const {
+        std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
+        std::uint32_t* at = scratch.need_at.data();
+        std::vector<double>& q = scratch.bridge_args;
+        if (q.size() < 5 * n) q.resize(5 * n);
+        std::size_t m = 0;
+        for (std::size_t b = 0; b < n; ++b) {
+            const PixelState& s = st[busy_at[b]];
+            pre[b].known = false;
+            const double t_start = std::max(c.t0, s.refr_until);
+            const double g = (y1[b] - s.y) * c.inv_dt + leak_slope(s, leak_hz[b]);
+            const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
+            const double d_end = (s.y - s.ref) + g * c.dt;
+            const double th_on = s.theta_on, th_off = s.theta_off;
+            const bool inside = (bvar[b] > 0.0) & (t_start < c.t1) & (d_start < th_on) & (d_start > -th_off) &
+                                (d_end < th_on) & (d_end > -th_off);
+            const double sigma2 = 4.0 * bvar[b] * c.inv_dt;
+            const double span = c.t1 - t_start;
+            double* a = q.data() + 5 * m;
+            a[0] = th_on - d_start;
+            a[1] = th_on - d_end;
+            a[2] = th_off + d_start;
+            a[3] = th_off + d_end;
+            a[4] = 0.25 * sigma2 * span;
+            c0[m] = static_cast<std::uint32_t>(s.n);
+            c1[m] = static_cast<std::uint32_t>(s.n >> 32);
+            c2[m] = ids[busy_at[b]];
+            at[m] = static_cast<std::uint32_t>(b);
+            m += inside;
+        }
+        if (m == 0) return;
+        std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
+        philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, m, r0, r1, r2, r3);
+        for (std::size_t k = 0; k < m; ++k) {
+            BridgePre& r = pre[at[k]];
+            const double* a = q.data() + 5 * k;
+            bool on = false;
+            r.fires = detail::bridge_fires(uniform_open(r0[k]), a[0], a[1], a[2], a[3], a[4], on);
+            r.on = on;
+            r.words = {r0[k], r1[k], r2[k], r3[k]};
+            r.known = true;
         }
     }
 
@@ -1780,7 +1936,7 @@ struct PixelModel {
     EVSTWIN_ALWAYS_INLINE void continuous_finish(PixelState& s, double x, double z, double y, double nz, double ny,
                                                  double current_a, double leak_hz, double bridge_var, double D,
                                                  const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
-                                                 Emit& emit, TraceSample* trace) const {
+                                                 Emit& emit, TraceSample* trace, const BridgePre* pre = nullptr) const {
         const double leak_g = leak_slope(s, leak_hz);
         double t_noise = 0.0;
         const int noise_pol = has_background() ? background_fire(s, current_a, c, key, pixel, t_noise) : -1;
@@ -1794,7 +1950,7 @@ struct PixelModel {
         if (two_poles && a * c.dt > 1.0 && crossing_plausible(s, y, c, leak_g, bridge_var)) {
             refine_and_compare(s, x, z, y - ny, nz, ny, c, leak_g, a, D, noise_pol, t_noise, key, pixel, emit);
         } else {
-            compare_bridged(s, y, ny, c, leak_g, bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit);
+            compare_bridged(s, y, ny, c, leak_g, bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit, pre);
         }
         if (trace) *trace = {current_a, x, y, s.ref};
         s.x = x;
@@ -1825,7 +1981,8 @@ struct PixelModel {
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void compare_bridged(PixelState& s, double y, double ny, const SampleConstants& c,
                                                double leak_g, double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
-                                               std::uint32_t pixel, std::uint32_t purpose, Emit& emit) const {
+                                               std::uint32_t pixel, std::uint32_t purpose, Emit& emit,
+                                               const BridgePre* pre = nullptr) const {
         if (bridge_var > 0.0) {
             const double t_start = std::max(c.t0, s.refr_until);
             if (t_start < c.t1) {
@@ -1838,15 +1995,20 @@ struct PixelModel {
                     const double sigma2 = 4.0 * bridge_var * c.inv_dt;
                     const double span = c.t1 - t_start;
                     const double mid = 0.25 * sigma2 * span;
-                    const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
-                    const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
-                    // The bridge's uniforms are drawn only where a crossing is possible at all:
-                    // no uniform lies below 2^-33 (uniform_open), so none is drawn for a smaller
-                    // probability, and the outcome is the same.
-                    CounterStream more(key, pixel, s.n, purpose);
-                    const double u = p_on + p_off > 0x1p-33 ? more.uniform() : 1.0;
-                    if (u < p_on + p_off) {
-                        const bool on = u < p_on;
+                    // The crossing's probabilities p_on, p_off (bridge_crossing_probability) and
+                    // its uniform u: it fires where u < p_on + p_off, at the ON level where u <
+                    // p_on (detail::bridge_fires, which needs the exps only near a tie). u is
+                    // drawn whatever p is: a counter-based draw changes nothing else, and where
+                    // p_on + p_off <= 2^-33 no uniform (uniform_open) lies below it.
+                    // `pre`: the same words and decision, made ahead in a batch (bridge_decisions).
+                    const bool ahead = pre && pre->known;
+                    PrefilledStream more(key, pixel, s.n, purpose, ahead ? &pre->words : nullptr);
+                    const double u = more.uniform();
+                    bool on = ahead && pre->on;
+                    const bool fires = ahead ? pre->fires
+                                             : detail::bridge_fires(u, th_on - d_start, th_on - d_end, th_off + d_start,
+                                                                    th_off + d_end, mid, on);
+                    if (fires) {
                         const double u0 = on ? th_on - d_start : th_off + d_start;
                         const double u1 = on ? th_on - d_end : th_off + d_end;
                         const double g_time = normal_ziggurat(more.word(), [&more] { return more.word(); });

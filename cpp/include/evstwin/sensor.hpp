@@ -3,9 +3,9 @@
 //
 // Parallel over pixels with OpenMP when compiled with it. The pixels are cut into fixed
 // blocks (independent of the thread count); each block keeps its own event list, written
-// sample by sample, and collect() orders each sample's events of all blocks by (t, pixel)
-// with a stable counting sort on the integer timestamps, so the output is the same bit for
-// bit whatever the thread count or chunking.
+// sample by sample, and collect_prepare() / collect_sample() order each sample's events of
+// all blocks by (t, pixel) with a stable counting sort on the integer timestamps, the samples
+// in parallel, so the output is the same bit for bit whatever the thread count or chunking.
 #pragma once
 
 #include <algorithm>
@@ -19,6 +19,10 @@
 #include <string>
 #include <vector>
 
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
 #include "config.hpp"
 #include "event.hpp"
 #include "pixel.hpp"
@@ -27,6 +31,50 @@
 EVSTWIN_FP_STRICT_BEGIN
 
 namespace evstwin {
+
+namespace detail {
+/// n / d for a pixel index n < 2^26 and a row width 1 <= d <= 65535 by a multiply and a
+/// shift (collect_sample() turns every event's pixel into (x, y); a 32-bit division there cost more
+/// than the rest of the copy). With l = ceil(log2 d), k = 26 + l and m = ceil(2^k / d),
+/// n m / 2^k = n / d + n (m d - 2^k) / (d 2^k) lies below n / d + 1 / d, so its floor is
+/// floor(n / d) (Granlund and Montgomery, PLDI 1994); n m < 2^26 (2^27 + 1) fits in 64 bits.
+struct PixelDivider {
+    static constexpr int INDEX_BITS = 26;
+    explicit PixelDivider(std::uint32_t d) : d_(d) {
+        if (d < 1 || d > 65535) throw std::invalid_argument("PixelDivider needs a divisor in [1, 65535]; got " + std::to_string(d));
+        int l = 0;
+        while ((std::uint32_t{1} << l) < d) ++l;
+        shift_ = INDEX_BITS + l;
+        m_ = ((std::uint64_t{1} << shift_) + d - 1) / d;
+    }
+    /// floor(n / d) for n < 2^26.
+    std::uint32_t quotient(std::uint32_t n) const { return static_cast<std::uint32_t>((n * m_) >> shift_); }
+    std::uint32_t divisor() const { return d_; }
+
+private:
+    std::uint32_t d_;
+    int shift_ = 0;
+    std::uint64_t m_ = 0;
+};
+
+/// Ask Linux to back the 2 MiB pages inside [p, p + bytes) with huge pages (transparent huge
+/// pages in "madvise" mode, the usual default; NumPy asks the same for its large arrays). A
+/// call's event output is fresh memory written once: with 4 KiB pages its page faults took
+/// 5 ns an event, more than sorting it (100 ms for 19 M events, against 20 ms; see README,
+/// "Third round"). A hint: the memory and its contents are the same either way.
+inline void advise_huge_pages(void* p, std::size_t bytes) {
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    constexpr std::uintptr_t HUGE_PAGE = std::uintptr_t{1} << 21;
+    if (bytes < 2 * HUGE_PAGE) return;
+    const std::uintptr_t a = (reinterpret_cast<std::uintptr_t>(p) + HUGE_PAGE - 1) & ~(HUGE_PAGE - 1);
+    const std::uintptr_t e = (reinterpret_cast<std::uintptr_t>(p) + bytes) & ~(HUGE_PAGE - 1);
+    if (e > a) (void)madvise(reinterpret_cast<void*>(a), e - a, MADV_HUGEPAGE);
+#else
+    (void)p;
+    (void)bytes;
+#endif
+}
+}  // namespace detail
 
 class Sensor {
 public:
@@ -54,6 +102,8 @@ public:
     /// whose state alone is 5.9 GB; a larger request is refused before anything is allocated
     /// rather than failing (or swapping) minutes into the allocation.
     static constexpr std::uint64_t MAX_PIXELS = std::uint64_t{1} << 26;
+    static_assert(MAX_PIXELS <= (std::uint64_t{1} << detail::PixelDivider::INDEX_BITS),
+                  "collect_sample()'s PixelDivider needs pixel indices below 2^26");
     /// Fewest pixel-updates (pixels x samples) in one call worth a parallel region: below it
     /// (~0.3 ms of work) waking the other threads and waiting at the join costs more than
     /// it saves, and on a loaded machine the join waits for a descheduled thread.
@@ -199,14 +249,20 @@ public:
         const std::size_t nblocks = (npix + BLOCK - 1) / BLOCK;
         start_call(nblocks, n_samples);
 
-        guarded_for_each_block(nblocks, npix * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
-            run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
-                      probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
-        });
+        CollectPlan plan;
+        guarded_for_each_block(
+            nblocks, npix * n_samples,
+            [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
+                          probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
+            },
+            [&] { return collect_prepare(plan, true); },
+            [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
 
         samples_ += n_samples;
         last_t_ = t_s[n_samples - 1];
-        return collect(true);
+        collect_finish();
+        return std::move(plan.events);
     }
 
     /// Advance only the listed pixels through their own sample times: the sparse second
@@ -270,12 +326,18 @@ public:
         for (std::size_t k = 1; k < n_samples; ++k) consts[k] = model_.constants(t_s[k - 1], t_s[k]);
         const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
         start_call(nblocks, n_samples);
-        guarded_for_each_block(nblocks, n_pixels * n_samples, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
-            run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
-        });
         // The listed pixels need not be in increasing order: each sample's events are sorted
         // by (t, pixel), not only by t.
-        return collect(false);
+        CollectPlan plan;
+        guarded_for_each_block(
+            nblocks, n_pixels * n_samples,
+            [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
+            },
+            [&] { return collect_prepare(plan, false); },
+            [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
+        collect_finish();
+        return std::move(plan.events);
     }
 
 private:
@@ -289,14 +351,17 @@ private:
 
     /// for_each_block, marking the sensor stopped when a block throws (the pixels of the
     /// other blocks have advanced). A block does not start once the call is over max_events.
-    template <class Fn>
-    void guarded_for_each_block(std::size_t nblocks, std::size_t updates, Fn&& fn) {
+    template <class Fn, class Prepare, class Part>
+    void guarded_for_each_block(std::size_t nblocks, std::size_t updates, Fn&& fn, Prepare&& prepare, Part&& part) {
         try {
-            for_each_block(nblocks, updates, [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
-                if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
-                fn(b, poisson, scratch);
-                note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
-            });
+            for_each_block(
+                nblocks, updates,
+                [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                    if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
+                    fn(b, poisson, scratch);
+                    note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
+                },
+                prepare, part);
         } catch (...) {
             stopped_ = true;
             throw;
@@ -305,14 +370,19 @@ private:
 
     /// fn(block, poisson, scratch) for every block, in parallel when OpenMP is on, with
     /// per-thread sampler caches and scratch (neither changes results). Blocks are fixed, so
-    /// which thread runs one does not matter. An exception in a block is rethrown here,
-    /// after the parallel region (it must not escape it). One parallel region per call, and
-    /// none for less than PARALLEL_MIN_UPDATES of work; blocks are handed out dynamically so
-    /// a thread that shares its core with another process takes fewer of them.
-    template <class Fn>
-    void for_each_block(std::size_t nblocks, std::size_t updates, Fn&& fn) {
+    /// which thread runs one does not matter. Then, once every block is done and unless one
+    /// failed, prepare() (one thread) returns a number of parts, and part(i, sort) runs for
+    /// each of them, again spread over the threads (collect_sample()'s per-sample sort: the
+    /// samples' events go to disjoint places of the output). An exception in a block, in
+    /// prepare or in a part is rethrown here, after the parallel region (it must not escape
+    /// it). One parallel region per call, and none for less than PARALLEL_MIN_UPDATES of
+    /// work; blocks and parts are handed out dynamically so a thread that shares its core
+    /// with another process takes fewer of them.
+    template <class Fn, class Prepare, class Part>
+    void for_each_block(std::size_t nblocks, std::size_t updates, Fn&& fn, Prepare&& prepare, Part&& part) {
         std::exception_ptr error;
         const std::int64_t nb = static_cast<std::int64_t>(nblocks);
+        std::int64_t n_parts = 0;  // set by prepare(); read by every thread after the barrier that ends it
 #if EVSTWIN_HAS_OPENMP
         const bool parallel = num_threads_ > 1 && nblocks > 1 && updates >= PARALLEL_MIN_UPDATES;
 #pragma omp parallel num_threads(num_threads_) if (parallel)
@@ -333,6 +403,33 @@ private:
                     if (!error) error = std::current_exception();
                 }
             }
+            // (the loop's implied barrier: every block is done, `error` final)
+#if EVSTWIN_HAS_OPENMP
+#pragma omp single
+#endif
+            {
+                if (!error) {
+                    try {
+                        n_parts = static_cast<std::int64_t>(prepare());
+                    } catch (...) {
+                        error = std::current_exception();
+                    }
+                }
+            }
+            SortScratch sort;
+#if EVSTWIN_HAS_OPENMP
+#pragma omp for schedule(dynamic, 1)
+#endif
+            for (std::int64_t i = 0; i < n_parts; ++i) {
+                try {
+                    part(static_cast<std::size_t>(i), sort);
+                } catch (...) {
+#if EVSTWIN_HAS_OPENMP
+#pragma omp critical(evstwin_error)
+#endif
+                    if (!error) error = std::current_exception();
+                }
+            }
         }
         if (error) std::rethrow_exception(error);
     }
@@ -342,6 +439,22 @@ private:
         std::uint32_t pixel;
         std::uint8_t p;
         std::uint8_t label;  ///< EventLabel: why it fired
+    };
+
+    /// A block's event list, taken out of block_events_ while the block runs and put back
+    /// after it (also when it throws). The vectors' headers lie side by side in block_events_,
+    /// and blocks are handed out in order, so two threads appending to neighbouring blocks'
+    /// lists wrote the same cache line (the end pointer) on every event: false sharing that
+    /// cost the event-heavy load ~15 % more CPU an event on 2 threads than on 1.
+    struct TakenEvents {
+        explicit TakenEvents(std::vector<RawEvent>& home) : home_(home) { out.swap(home_); }
+        ~TakenEvents() { out.swap(home_); }
+        TakenEvents(const TakenEvents&) = delete;
+        TakenEvents& operator=(const TakenEvents&) = delete;
+        std::vector<RawEvent> out;
+
+    private:
+        std::vector<RawEvent>& home_;
     };
 
     /// The event's time in integer microseconds, rounded half away from zero as std::llround
@@ -476,7 +589,8 @@ private:
                    std::size_t n_probe, TraceSample* trace) {
         const std::size_t npix = state_.size();
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
-        std::vector<RawEvent>& out = block_events_[b];
+        TakenEvents taken(block_events_[b]);
+        std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
@@ -560,7 +674,8 @@ private:
                          const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
                          PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
         const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
-        std::vector<RawEvent>& out = block_events_[b];
+        TakenEvents taken(block_events_[b]);
+        std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
@@ -632,6 +747,23 @@ private:
                                 "max_events if memory allows");
     }
 
+    /// collect_sample()'s working memory for one thread: the counting sort's slots, or a sample's
+    /// events for the comparison sort.
+    struct SortScratch {
+        std::vector<std::uint32_t> slots;
+        std::vector<RawEvent> sample_events;
+    };
+
+    /// What collect_prepare() lays out for collect_sample(): the output, the blocks that made
+    /// events, and where each sample's events start in the output.
+    struct CollectPlan {
+        std::vector<Event> events;
+        std::vector<std::uint32_t> busy;  ///< the blocks with events, in order
+        std::vector<std::size_t> base;    ///< sample k's events go to [base[k], base[k + 1])
+        bool pixel_ordered = true;
+        detail::PixelDivider row{1};      ///< pixel -> (x, y) without a division
+    };
+
     /// The call's events in output order: by time in microseconds; within one microsecond,
     /// events of an earlier sample interval first (a microsecond can straddle two run() calls,
     /// and this is the order that concatenating their outputs gives), then by pixel; ties (one
@@ -639,13 +771,17 @@ private:
     ///
     /// Every event of sample k lies in [t0, t1] of its interval, so after rounding to
     /// microseconds none comes after an event of sample k + 1: the order is sample by sample,
-    /// and within a sample by (t_us, pixel). The blocks write each sample's events in pixel
-    /// order when `pixel_ordered` (run(): each block's pixels in increasing order, every
+    /// and within a sample by (t_us, pixel). So each sample's place in the output is known
+    /// from the blocks' counts alone (collect_prepare), and the samples are sorted
+    /// independently, in parallel (collect_sample). The blocks write each sample's events in
+    /// pixel order when `pixel_ordered` (run(): each block's pixels in increasing order, every
     /// pixel's events together), so a stable counting sort on t_us over the blocks taken in
     /// order gives that order in two passes, without comparisons; otherwise (run_pixels' list
     /// in any order), or where a sample's microseconds span far more slots than it has events,
     /// a stable sort by (t_us, pixel) of that sample's events does.
-    std::vector<Event> collect(bool pixel_ordered) {
+    ///
+    /// Returns the number of samples to sort (0 when there are no events).
+    std::size_t collect_prepare(CollectPlan& plan, bool pixel_ordered) {
         const std::size_t nblocks = blocks_in_call_, n_samples = samples_in_call_;
         std::size_t total = 0;
         for (std::size_t b = 0; b < nblocks; ++b) total += block_events_[b].size();
@@ -653,69 +789,86 @@ private:
             stopped_ = true;
             throw_max_events();
         }
-        std::vector<Event> events(total);
+        plan.pixel_ordered = pixel_ordered;
+        plan.row = detail::PixelDivider(static_cast<std::uint32_t>(width_));
+        plan.events.reserve(total);  // allocated, not yet touched: the hint comes before the faults
+        detail::advise_huge_pages(plan.events.data(), total * sizeof(Event));
+        plan.events.resize(total);
         labels_.resize(total);
-        const std::uint32_t w = static_cast<std::uint32_t>(width_);
-        auto put = [&](std::size_t j, const RawEvent& e) {
-            events[j] = Event{e.t_us, static_cast<std::uint16_t>(e.pixel % w), static_cast<std::uint16_t>(e.pixel / w), e.p};
-            labels_[j] = e.label;
-        };
-        // The blocks that made events, and each one's start of the current sample's events.
-        std::vector<std::uint32_t> busy;
+        if (total == 0) return 0;
         for (std::size_t b = 0; b < nblocks; ++b)
-            if (!block_events_[b].empty()) busy.push_back(static_cast<std::uint32_t>(b));
-        std::vector<std::uint32_t> start(busy.size(), 0);
-        std::vector<std::uint32_t> slots;
-        std::vector<RawEvent> sample_events;
-        std::size_t base = 0;
-        for (std::size_t k = 0; k < n_samples && base < total; ++k) {
-            std::size_t n_k = 0;
-            std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
-            for (std::size_t i = 0; i < busy.size(); ++i) {
-                const std::vector<RawEvent>& out = block_events_[busy[i]];
-                const std::uint32_t end = block_sample_ends_[busy[i]][k];
-                for (std::uint32_t e = start[i]; e < end; ++e) {
-                    lo = std::min(lo, out[e].t_us);
-                    hi = std::max(hi, out[e].t_us);
-                }
-                n_k += end - start[i];
+            if (!block_events_[b].empty()) plan.busy.push_back(static_cast<std::uint32_t>(b));
+        plan.base.assign(n_samples + 1, 0);
+        for (const std::uint32_t b : plan.busy) {
+            const std::uint32_t* ends = block_sample_ends_[b].data();
+            std::uint32_t prev = 0;
+            for (std::size_t k = 0; k < n_samples; ++k) {
+                plan.base[k + 1] += ends[k] - prev;
+                prev = ends[k];
             }
-            if (n_k == 0) continue;
-            const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
-            if (pixel_ordered && span <= 4 * n_k + 4096) {
-                // Counting sort: slots[d] = where the events of microsecond lo + d start.
-                slots.assign(span + 2, 0);
-                for (std::size_t i = 0; i < busy.size(); ++i) {
-                    const std::vector<RawEvent>& out = block_events_[busy[i]];
-                    const std::uint32_t end = block_sample_ends_[busy[i]][k];
-                    for (std::uint32_t e = start[i]; e < end; ++e) ++slots[static_cast<std::size_t>(out[e].t_us - lo) + 1];
-                }
-                for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
-                for (std::size_t i = 0; i < busy.size(); ++i) {
-                    const std::vector<RawEvent>& out = block_events_[busy[i]];
-                    const std::uint32_t end = block_sample_ends_[busy[i]][k];
-                    for (std::uint32_t e = start[i]; e < end; ++e)
-                        put(base + slots[static_cast<std::size_t>(out[e].t_us - lo)]++, out[e]);
-                }
-            } else {
-                sample_events.clear();
-                for (std::size_t i = 0; i < busy.size(); ++i) {
-                    const std::vector<RawEvent>& out = block_events_[busy[i]];
-                    sample_events.insert(sample_events.end(), out.begin() + start[i],
-                                         out.begin() + block_sample_ends_[busy[i]][k]);
-                }
-                std::stable_sort(sample_events.begin(), sample_events.end(), [](const RawEvent& a, const RawEvent& b) {
-                    return a.t_us != b.t_us ? a.t_us < b.t_us : a.pixel < b.pixel;
-                });
-                for (std::size_t e = 0; e < n_k; ++e) put(base + e, sample_events[e]);
-            }
-            for (std::size_t i = 0; i < busy.size(); ++i) start[i] = block_sample_ends_[busy[i]][k];
-            base += n_k;
         }
-        // Keep the blocks' memory for the next call, unless a flood made it large.
+        for (std::size_t k = 0; k < n_samples; ++k) plan.base[k + 1] += plan.base[k];
+        return n_samples;
+    }
+
+    /// Sample k's events of all blocks, sorted, into their place of the output (see
+    /// collect_prepare). Touches only that place: samples may run concurrently.
+    void collect_sample(CollectPlan& plan, std::size_t k, SortScratch& sort) {
+        const std::size_t base = plan.base[k], n_k = plan.base[k + 1] - base;
+        if (n_k == 0) return;
+        Event* events = plan.events.data() + base;
+        std::uint8_t* labels = labels_.data() + base;
+        const detail::PixelDivider row = plan.row;
+        const auto put = [&](std::size_t j, const RawEvent& e) {
+            const std::uint32_t y = row.quotient(e.pixel);
+            events[j] = Event{e.t_us, static_cast<std::uint16_t>(e.pixel - y * row.divisor()), static_cast<std::uint16_t>(y),
+                              e.p};
+            labels[j] = e.label;
+        };
+        const auto first = [this, k](std::uint32_t b) { return k == 0 ? 0u : block_sample_ends_[b][k - 1]; };
+        std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
+        for (const std::uint32_t b : plan.busy) {
+            const RawEvent* out = block_events_[b].data();
+            const std::uint32_t end = block_sample_ends_[b][k];
+            for (std::uint32_t e = first(b); e < end; ++e) {
+                lo = std::min(lo, out[e].t_us);
+                hi = std::max(hi, out[e].t_us);
+            }
+        }
+        const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
+        if (plan.pixel_ordered && span <= 4 * n_k + 4096) {
+            // Counting sort: slots[d] = where the events of microsecond lo + d start.
+            std::vector<std::uint32_t>& slots = sort.slots;
+            slots.assign(span + 2, 0);
+            for (const std::uint32_t b : plan.busy) {
+                const RawEvent* out = block_events_[b].data();
+                const std::uint32_t end = block_sample_ends_[b][k];
+                for (std::uint32_t e = first(b); e < end; ++e) ++slots[static_cast<std::size_t>(out[e].t_us - lo) + 1];
+            }
+            for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
+            for (const std::uint32_t b : plan.busy) {
+                const RawEvent* out = block_events_[b].data();
+                const std::uint32_t end = block_sample_ends_[b][k];
+                for (std::uint32_t e = first(b); e < end; ++e) put(slots[static_cast<std::size_t>(out[e].t_us - lo)]++, out[e]);
+            }
+        } else {
+            std::vector<RawEvent>& sample_events = sort.sample_events;
+            sample_events.clear();
+            for (const std::uint32_t b : plan.busy) {
+                const std::vector<RawEvent>& out = block_events_[b];
+                sample_events.insert(sample_events.end(), out.begin() + first(b), out.begin() + block_sample_ends_[b][k]);
+            }
+            std::stable_sort(sample_events.begin(), sample_events.end(), [](const RawEvent& a, const RawEvent& b) {
+                return a.t_us != b.t_us ? a.t_us < b.t_us : a.pixel < b.pixel;
+            });
+            for (std::size_t e = 0; e < n_k; ++e) put(e, sample_events[e]);
+        }
+    }
+
+    /// Keep the blocks' memory for the next call, unless a flood made it large.
+    void collect_finish() {
         for (auto& b : block_events_)
             if (b.capacity() > (std::size_t{1} << 18)) std::vector<RawEvent>().swap(b);
-        return events;
     }
 
     PixelModel model_;
