@@ -54,6 +54,8 @@ def write_trial(out: str, a: argparse.Namespace) -> None:
               f"halo_beta = {a.halo_beta:g}\nhalo_half_width_px = 512\n")
     text, n = re.subn(r'^psf = "airy"\n(?:.*\n)*?psf_half_width_px = 128[^\n]*\n', optics, text, count=1, flags=re.M)
     assert n == 1, "the built-in scenario's [optics] changed: update this script"
+    if a.motion_scale != 1.0:
+        text = re.sub(r"^path = \{.*\}$", lambda m: scaled_path(m.group(0), a.motion_scale), text, count=1, flags=re.M)
     text = re.sub(r"^flux_ph_s = 3e\+08$", f"flux_ph_s = {a.companion_flux:g}", text, flags=re.M)
     text = re.sub(r"^flux_fraction = .*$", f"flux_fraction = {BUILTIN_GHOST_PH_S / a.flux:.4g}", text, flags=re.M)
     text = text.replace("[sampling]\n", f"[sampling]\npre_roll_s = {a.pre_roll:g}\npre_roll_rate_hz = 20.0\n", 1)
@@ -61,6 +63,19 @@ def write_trial(out: str, a: argparse.Namespace) -> None:
     with open(out, "w") as f:
         f.write(text)
     print(f"wrote {out}")
+
+
+def scaled_path(line: str, scale: float) -> str:
+    """The path's offsets before the slew times ``scale``: the event centroid moves less than the
+    image (ON and OFF events fall on both sides of it), as the flicker's gain made up for."""
+    m = re.match(r"path = \{ t_s = \[(.*)\], dx_px = \[(.*)\], dy_px = \[(.*)\] \}", line)
+    assert m is not None
+    t, dx, dy = (np.array([float(v) for v in g.split(",")]) for g in m.groups())
+    before = t < STEADY_END_S
+    dx[before] *= scale
+    dy[before] *= scale
+    return "path = {{ t_s = [{}], dx_px = [{}], dy_px = [{}] }}".format(
+        ", ".join(f"{v:.3f}" for v in t), ", ".join(f"{v:.2f}" for v in dx), ", ".join(f"{v:.2f}" for v in dy))
 
 
 def rings(path: str, twin: bool) -> None:
@@ -98,6 +113,8 @@ def main() -> None:
     ap.add_argument("--halo-fwhm", type=float, default=100.0)
     ap.add_argument("--halo-beta", type=float, default=1.5)
     ap.add_argument("--pre-roll", type=float, default=12.0)
+    ap.add_argument("--motion-scale", type=float, default=1.0,
+                    help="the image motion before the slew times this (the centroid understates it)")
     a = ap.parse_args()
     if a.write:
         write_trial(a.write, a)
