@@ -174,8 +174,9 @@ IMAGE_MOTION_SMOOTH_BINS = 3
 IMAGE_MOTION_RADIUS_PX = 25.0
 
 
-def write_image_motion_scenario(ev: Events, out: str, flux_ph_s: float = 6e9) -> None:
-    """imx636-pointsource with a steady star moved by the measured image motion (docstring)."""
+def write_image_motion_scenario(ev: Events, out: str, flux_ph_s: float = 6e9, base: str | None = None) -> None:
+    """imx636-pointsource (or the scenario text ``base``: ``make_imx636_pointsource.to_toml``'s)
+    with a steady star moved by the measured image motion (docstring)."""
     import re
     from importlib.resources import files
 
@@ -197,7 +198,7 @@ def write_image_motion_scenario(ev: Events, out: str, flux_ph_s: float = 6e9) ->
     path = "path = {{ t_s = [{}], dx_px = [{}], dy_px = [{}] }}".format(
         ", ".join(f"{v:.3f}" for v in t_mid), ", ".join(f"{v:.2f}" for v in offsets[0]),
         ", ".join(f"{v:.2f}" for v in offsets[1]))
-    text = files("evstwin").joinpath("scenarios/imx636-pointsource.toml").read_text()
+    text = base if base is not None else files("evstwin").joinpath("scenarios/imx636-pointsource.toml").read_text()
     text = re.sub(r"^path = \{.*\}$", lambda _: path, text, flags=re.M)
     text = re.sub(r"^light_curve = \{.*\}$", f"flux_ph_s = {flux_ph_s:g}", text, count=1, flags=re.M)
     text = text.replace('name = "imx636-pointsource"', 'name = "imx636-pointsource-image-motion"')
