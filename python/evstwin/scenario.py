@@ -690,6 +690,10 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             own = _wrap(f"targets[{i}].defocus_radius_px with optics={s.get('optics', {})}", _defocus, table, optics)
             made = [with_psf(t, own) for t in made]
         if table.get("halo", "follows") != "follows":
+            if atmosphere is not None and atmosphere.scintillation is not None:
+                # Each target's scintillation is its own stream: the core and its halo copy
+                # would twinkle apart.
+                raise ScenarioError(f"targets[{i}].halo='steady' with [atmosphere] scintillation is not supported")
             targets.extend(_steady_halo(i, table, made, shape))
             sources.extend([source] * len(made) + [source + " (its halo, at its mean flux)"] * len(made))
             continue
@@ -768,6 +772,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     if atmosphere is not None:
         targets = _atmosphere_on(atmosphere, s, targets, optics, t_end)
     _check_work(s, width, height, shape, targets, sources)
+    _check_pre_roll(s, targets, sources, field_stars, moves, atmosphere)
     _check_intervals(params, float(sp["rate_hz"]))
     return Scene(
         roi=roi,
@@ -949,11 +954,13 @@ def _check_work(s: dict[str, Any], width: int, height: int, shape: psf.PSFShape,
     interval divided so that no target moves more than max_shift_px between samples)."""
     sp = s["sampling"]
     duration, rate, shift, chunk = float(s["duration_s"]), float(sp["rate_hz"]), float(sp["max_shift_px"]), sp["chunk_samples"]
-    n_base = max(1.0, math.ceil(duration * rate - 1e-9)) + math.ceil(
-        float(sp.get("pre_roll_s", 0.0)) * float(sp.get("pre_roll_rate_hz", rate)) - 1e-9)
+    n_pre = math.ceil(float(sp.get("pre_roll_s", 0.0)) * float(sp.get("pre_roll_rate_hz", rate)) - 1e-9)
+    n_base = max(1.0, math.ceil(duration * rate - 1e-9)) + n_pre
     if not n_base <= MAX_SAMPLES:
-        raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base:.3g} samples (> {MAX_SAMPLES:g}); "
-                            f"got duration_s={s['duration_s']!r}, sampling.rate_hz={sp['rate_hz']!r}")
+        pre = (f", sampling.pre_roll_s={sp['pre_roll_s']!r} x sampling.pre_roll_rate_hz="
+               f"{sp.get('pre_roll_rate_hz', sp['rate_hz'])!r} = {n_pre:.3g} more") if n_pre else ""
+        raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base - n_pre:.3g} samples{pre} (> {MAX_SAMPLES:g} in "
+                            f"all); got duration_s={s['duration_s']!r}, sampling.rate_hz={sp['rate_hz']!r}")
     frame_bytes = 8.0 * width * height
     if not chunk * frame_bytes <= MAX_CHUNK_BYTES:
         raise ScenarioError(
@@ -1075,6 +1082,37 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.
             raise ScenarioError(f"{key}: rate_hz must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}]; got {entry!r}")
         rates[y, x] = r
     return rates
+
+
+def _check_pre_roll(s: dict[str, Any], targets: list[Target], sources: list[str], field_stars: int, moves: bool,
+                    atmosphere: Any) -> None:
+    """What a pre-roll (sampling.pre_roll_s) cannot do yet, refused by name: a target that
+    cannot be placed before t = 0 (a table that starts there, a satellite's pass), a drifting
+    field of random stars and an atmosphere's motion or scintillation (both drawn for [0,
+    duration_s] only: the stars that would cross the sensor before t = 0, and the atmosphere
+    there, are missing)."""
+    sp = s["sampling"]
+    pre = float(sp.get("pre_roll_s", 0.0))
+    if pre <= 0.0:
+        return
+    rate = float(sp.get("pre_roll_rate_hz", sp["rate_hz"]))
+    t0 = -math.ceil(pre * rate - 1e-9) / rate
+    key = f"sampling.pre_roll_s={sp['pre_roll_s']!r}"
+    if field_stars and moves:
+        raise ScenarioError(f"{key} with a drifting [star_field] of random stars is not supported: the stars are "
+                            "drawn for [0, duration_s] only, so those crossing the sensor before t = 0 would be missing")
+    if atmosphere is not None and (atmosphere.motion is not None or atmosphere.scintillation is not None):
+        raise ScenarioError(f"{key} with [atmosphere] image motion or scintillation is not supported: they are drawn "
+                            "for [0, duration_s] only")
+    t = np.array([t0, 0.5 * t0])
+    for target, source in zip(targets, sources):
+        try:
+            target.position_px(t)
+            target.flux_ph_s(t)
+            target.max_speed_px_s(t0, 0.0)
+        except ValueError as exc:
+            raise ScenarioError(f"{key}: {source} cannot be placed before t = 0 ({exc}); give it a track that "
+                                "covers the pre-roll, or no pre-roll") from None
 
 
 def _steady_halo(i: int, table: dict[str, Any], made: list[Target], shape: psf.PSFShape) -> list[Target]:

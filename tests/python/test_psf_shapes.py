@@ -515,3 +515,16 @@ def test_a_dense_add_gives_the_rendered_values(x: float, y: float) -> None:
     img = np.full((100, 120), 7.0)
     shape.add_dense(img, x, y, 1e6)
     np.testing.assert_allclose(img - 7.0, render_points(120, 100, x, y, 1e6, shape), rtol=1e-12, atol=1e-9)
+
+
+def test_the_fit_groups_see_a_core_and_its_halo_together() -> None:
+    # tune.counts.source_flux_map takes, per pixel, the largest light one source brings it:
+    # for a composite PSF, the core and the halo added, not the larger of the two.
+    from evstwin.tune.counts import source_flux_map
+
+    table = haloed_spin(True)
+    table["targets"] = [{"kind": "static", "x_px": 30.3, "y_px": 20.6, "flux_ph_s": 1e6}]
+    sc = build(table)
+    flux = source_flux_map(sc)
+    expect = render_points(sc.width, sc.height, 30.3, 20.6, 1e6, sc.psf)
+    np.testing.assert_allclose(flux, expect, rtol=1e-12, atol=1e-9)

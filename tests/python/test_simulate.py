@@ -400,3 +400,21 @@ def test_a_coarse_pre_roll_leaves_a_slow_scene_where_a_fine_one_does() -> None:
     diff = counts(fine.events) - counts(coarse.events)
     assert np.abs(diff).max() <= 1 and np.count_nonzero(diff) <= 0.01 * len(fine.events)
     assert len(none.events) < len(fine.events)  # without it the first threshold takes longer
+
+
+def test_what_a_pre_roll_cannot_do_is_refused_by_name() -> None:
+    # A table that starts at t = 0 cannot be placed before it; a drifting random star field is
+    # drawn for [0, duration_s] only. Both are one error naming sampling.pre_roll_s.
+    s = spinning(1000.0)
+    s["sampling"]["pre_roll_s"] = 0.5
+    s["targets"] = [{"kind": "tabulated", "t_s": [0.0, 0.5], "x_px": [10.0, 20.0], "y_px": [10.0, 12.0],
+                     "flux_ph_s": 1e9, "label": "tab"}]
+    with pytest.raises(ScenarioError, match=r"sampling.pre_roll_s=0.5: targets\[0\].* cannot be placed before t = 0"):
+        build(s)
+    geo = {"base": "geo-stare", "sampling": {"pre_roll_s": 1.0}, "star_field": {"drift_px_s": [3.0, 0.0]}}
+    with pytest.raises(ScenarioError, match=r"sampling.pre_roll_s=1.0 with a drifting \[star_field\] of random stars"):
+        build(geo)
+    big = spinning(1000.0)
+    big["sampling"].update(pre_roll_s=1e6, pre_roll_rate_hz=1e4)
+    with pytest.raises(ScenarioError, match=r"sampling.pre_roll_s=1000000.0 x sampling.pre_roll_rate_hz=10000.0"):
+        build(big)

@@ -93,8 +93,23 @@ def source_flux_map(scene: Any) -> np.ndarray:
             x_all = np.ascontiguousarray(np.concatenate(xs))
             y_all = np.ascontiguousarray(np.concatenate(ys))
             f_all = np.ascontiguousarray(np.concatenate(fs))
-            for idx, val in psf_mod.contributions(w, h, x_all, y_all, f_all, shape):
-                np.maximum.at(flat, idx, val)
+            if not isinstance(shape, psf_mod.CompositePSF):
+                for idx, val in psf_mod.contributions(w, h, x_all, y_all, f_all, shape):
+                    np.maximum.at(flat, idx, val)
+                continue
+            # A core and its halo come as separate chunks: add them up per source and time
+            # (each source-time its own block of flat indices), then take the largest.
+            area = (2 * shape.half_width_px + 1) ** 2
+            step = max(1, 4_000_000 // area)
+            for s0 in range(0, x_all.size, step):
+                sl = slice(s0, s0 + step)
+                offset = np.arange(x_all[sl].size, dtype=np.int64) * (w * h)
+                parts = psf_mod.contributions(w, h, x_all[sl], y_all[sl], f_all[sl], shape, offset=offset)
+                if not parts:
+                    continue
+                keys, inverse = np.unique(np.concatenate([p[0] for p in parts]), return_inverse=True)
+                summed = np.bincount(inverse.reshape(-1), weights=np.concatenate([p[1] for p in parts]))
+                np.maximum.at(flat, keys % (w * h), summed)
     return flat.reshape(h, w)
 
 
