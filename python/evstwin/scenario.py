@@ -959,8 +959,9 @@ def _check_work(s: dict[str, Any], width: int, height: int, shape: psf.PSFShape,
     if not n_base <= MAX_SAMPLES:
         pre = (f", sampling.pre_roll_s={sp['pre_roll_s']!r} x sampling.pre_roll_rate_hz="
                f"{sp.get('pre_roll_rate_hz', sp['rate_hz'])!r} = {n_pre:.3g} more") if n_pre else ""
-        raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base - n_pre:.3g} samples{pre} (> {MAX_SAMPLES:g} in "
-                            f"all); got duration_s={s['duration_s']!r}, sampling.rate_hz={sp['rate_hz']!r}")
+        raise ScenarioError(f"duration_s x sampling.rate_hz = {n_base - n_pre:.3g} samples{pre} (> {MAX_SAMPLES:g}"
+                            f"{' in all' if n_pre else ''}); got duration_s={s['duration_s']!r}, "
+                            f"sampling.rate_hz={sp['rate_hz']!r}")
     frame_bytes = 8.0 * width * height
     if not chunk * frame_bytes <= MAX_CHUNK_BYTES:
         raise ScenarioError(
