@@ -174,11 +174,20 @@ IMAGE_MOTION_SMOOTH_BINS = 3
 IMAGE_MOTION_RADIUS_PX = 25.0
 
 
-def write_image_motion_scenario(ev: Events, out: str, flux_ph_s: float = 6e9, base: str | None = None) -> None:
-    """imx636-pointsource (or the scenario text ``base``: ``make_imx636_pointsource.to_toml``'s)
-    with a steady star moved by the measured image motion (docstring)."""
-    import re
+def write_image_motion_scenario(ev: Events, out: str, flux_ph_s: float = 6e9) -> None:
+    """``image_motion_scenario`` of the built-in imx636-pointsource, written to ``out``."""
     from importlib.resources import files
+
+    base = files("evstwin").joinpath("scenarios/imx636-pointsource.toml").read_text()
+    with open(out, "w") as f:
+        f.write(image_motion_scenario(ev, base, flux_ph_s))
+    print(f"wrote {out}")
+
+
+def image_motion_scenario(ev: Events, base: str, flux_ph_s: float) -> str:
+    """The scenario text ``base`` with a steady star (its light curve replaced by
+    ``flux_ph_s``) moved by the measured image motion as the field's path (docstring)."""
+    import re
 
     t, x, y, _ = ev
     sx, sy = star_track(t)
@@ -198,13 +207,9 @@ def write_image_motion_scenario(ev: Events, out: str, flux_ph_s: float = 6e9, ba
     path = "path = {{ t_s = [{}], dx_px = [{}], dy_px = [{}] }}".format(
         ", ".join(f"{v:.3f}" for v in t_mid), ", ".join(f"{v:.2f}" for v in offsets[0]),
         ", ".join(f"{v:.2f}" for v in offsets[1]))
-    text = base if base is not None else files("evstwin").joinpath("scenarios/imx636-pointsource.toml").read_text()
-    text = re.sub(r"^path = \{.*\}$", lambda _: path, text, flags=re.M)
+    text = re.sub(r"^path = \{.*\}$", lambda _: path, base, flags=re.M)
     text = re.sub(r"^light_curve = \{.*\}$", f"flux_ph_s = {flux_ph_s:g}", text, count=1, flags=re.M)
-    text = text.replace('name = "imx636-pointsource"', 'name = "imx636-pointsource-image-motion"')
-    with open(out, "w") as f:
-        f.write(text)
-    print(f"wrote {out}")
+    return text.replace('name = "imx636-pointsource"', 'name = "imx636-pointsource-image-motion"')
 
 
 def simulate_dimmed_ghost(k_per_s: float, out: str) -> None:

@@ -24,16 +24,15 @@ from __future__ import annotations
 
 import argparse
 import re
-import tempfile
 
 import numpy as np
 from imx636_ghost_polarity import (
     GHOST_WINDOW,
     STAR_T0_PX,
     STAR_V_PX_S,
+    image_motion_scenario,
     in_window,
     load,
-    write_image_motion_scenario,
 )
 
 RAW = "../shared/data/imx636_pointsource_evt3.raw"
@@ -82,27 +81,7 @@ halo_fwhm_px = {halo_fwhm:g}
 halo_beta = {halo_beta:g}
 halo_half_width_px = 512
 
-[pixel]
-# The preset's photodiode constants are the DAVIS346's (0.24 % of photons collected); a BSI
-# pixel collects far more. Silicon absorption near 700 nm and a 5 um collection depth give
-# tau (1 - exp(-alpha W)) = 0.68 x 0.63 = 43 %, the range Prophesee quotes for the IMX636.
-absorption_per_m = 2.0e5
-depletion_width_m = 5.0e-6
-# The preset's 10 Hz source follower is a DAVIS346 bias copied over; an IMX636 pixel lit by a
-# bright star follows kHz changes (Prophesee's datasheet latency is ~100 us at 1000 lux).
-# Dark pixels stay slow through the photoreceptor pole (pr_pole, current-dependent).
-cutoff_hz = 2000.0
-# Thresholds: the preset assumes ln(1.25) = 0.223 both ways; in a 200 x 200 window around the
-# star the recording's ON/OFF ratio is 0.91, so theta_off is lower: 0.235 and 0.21, same mean.
-theta_on = 0.235
-theta_off = 0.21
-
-[hot_pixels]
-# The recording's hot pixel, 1170 Hz while active (the preset's telegraph duty 0.13 and
-# 46 ms bursts apply): 1447 events in 10.77 s, measured by evstwin calibrate-noise.
-pixels = [[187, 261, 1170.0]]
-
-[sampling]
+{pixel_tables}[sampling]
 rate_hz = 200.0
 # The sensor watched the sky before the recording began: the halo's pixels 200 px out drift by
 # a threshold in ~10 s and fire from the first 100 ms of the recording; without a pre-roll
@@ -137,12 +116,11 @@ def write_trial(out: str, a: argparse.Namespace) -> None:
     values = {k: getattr(a, k) for k in ("seeing_fwhm", "seeing_beta", "halo_fraction", "halo_fwhm", "halo_beta",
                                           "pre_roll", "motion_scale", "flux", "companion_flux")}
     ghost_fraction = BUILTIN_GHOST_PH_S / a.flux
-    base = make.to_toml(res, a.flux, (a.companion_flux, a.companion_flux), HEADER.format(**values),
+    base = make.to_toml(res, a.flux, (a.companion_flux, a.companion_flux),
+                        HEADER.format(**values, pixel_tables=make.PIXEL_TABLES),
                         STAR_NOTE.format(**values), ghost_fraction)
     base = base.replace(make.SLEW_NOTE, "")
-    with tempfile.NamedTemporaryFile("w", suffix=".toml") as tmp:
-        write_image_motion_scenario(load(a.raw, twin=False), tmp.name, a.flux, base=base)
-        text = open(tmp.name).read()
+    text = image_motion_scenario(load(a.raw, twin=False), base, a.flux)
     if a.motion_scale != 1.0:
         text = re.sub(r"^path = \{.*\}$", lambda m: scaled_path(m.group(0), a.motion_scale), text, count=1, flags=re.M)
     text = text.replace('name = "imx636-pointsource-image-motion"', 'name = "imx636-pointsource"')

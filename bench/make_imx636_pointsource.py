@@ -193,6 +193,31 @@ def measure_ghost(t: np.ndarray, x: np.ndarray, y: np.ndarray, star0: tuple[floa
             "radius_px": radius, "events_within_110_px": int(np.sum(r < 110.0))}
 
 
+PIXEL_TABLES = """\
+[pixel]
+# The preset's photodiode constants are the DAVIS346's (0.24 % of photons collected); a BSI
+# pixel collects far more. Silicon absorption near 700 nm and a 5 um collection depth give
+# tau (1 - exp(-alpha W)) = 0.68 x 0.63 = 43 %, the range Prophesee quotes for the IMX636.
+absorption_per_m = 2.0e5
+depletion_width_m = 5.0e-6
+# The preset's 10 Hz source follower is a DAVIS346 bias copied over; an IMX636 pixel lit by a
+# bright star follows kHz changes (Prophesee's datasheet latency is ~100 us at 1000 lux).
+# Dark pixels stay slow through the photoreceptor pole (pr_pole, current-dependent).
+cutoff_hz = 2000.0
+# Thresholds: the preset assumes ln(1.25) = 0.223 both ways; in a 200 x 200 window around the
+# star the recording's ON/OFF ratio is 0.91, so theta_off is lower: 0.235 and 0.21, same mean.
+theta_on = 0.235
+theta_off = 0.21
+
+[hot_pixels]
+# The recording's hot pixel, 1170 Hz while active (the preset's telegraph duty 0.13 and
+# 46 ms bursts apply): 1447 events in 10.77 s, measured by evstwin calibrate-noise.
+pixels = [[187, 261, 1170.0]]
+
+"""
+"""The scenario's [pixel] and [hot_pixels] tables, shared with bench/imx636_halo_trial.py."""
+
+
 HEADER = """\
 # The real recording ../shared/data/imx636_pointsource_evt3.raw (Prophesee EVK4, IMX636
 # 1280 x 720, 10.77 s, 1,218,618 events: 553,295 ON, 665,323 OFF) as a scenario: a bright
@@ -223,28 +248,7 @@ spider_width_ratio = 0.02       # 4 mm vanes on a 0.2 m pupil
 extra_blur_sigma_px = 8.0
 psf_half_width_px = 128         # the halo's events reach ~100 px from the star
 
-[pixel]
-# The preset's photodiode constants are the DAVIS346's (0.24 % of photons collected); a BSI
-# pixel collects far more. Silicon absorption near 700 nm and a 5 um collection depth give
-# tau (1 - exp(-alpha W)) = 0.68 x 0.63 = 43 %, the range Prophesee quotes for the IMX636.
-absorption_per_m = 2.0e5
-depletion_width_m = 5.0e-6
-# The preset's 10 Hz source follower is a DAVIS346 bias copied over; an IMX636 pixel lit by a
-# bright star follows kHz flicker (Prophesee's datasheet latency is ~100 us at 1000 lux).
-# 2 kHz lets the star's 50 Hz scintillation through; dark pixels stay slow through the
-# photoreceptor pole (pr_pole, current-dependent), so the dark background is unchanged.
-cutoff_hz = 2000.0
-# Thresholds: the preset assumes ln(1.25) = 0.223 both ways. In a 200 x 200 window around the
-# star the recording's ON/OFF ratio is 0.91 under a light curve that returns to its mean,
-# so theta_off is lower than theta_on: 0.235 (a 26.5 % step) and 0.21 (23 %), same mean.
-theta_on = 0.235
-theta_off = 0.21
-
-[hot_pixels]
-# The recording's hot pixel, 1170 Hz while active (the preset's telegraph duty 0.13 and
-# 46 ms bursts apply): 1447 events in 10.77 s, measured by evstwin calibrate-noise.
-pixels = [[187, 261, 1170.0]]
-
+""" + PIXEL_TABLES + """\
 [sampling]
 rate_hz = 200.0                 # the light curve has a point every 10 ms
 """

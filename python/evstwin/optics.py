@@ -175,6 +175,25 @@ PAPER_F_NUMBER = 1.8
 scenario's when [optics] gives no f_number."""
 
 
+MAX_HALO_HALF_PX = 512
+"""Largest half width of a halo's window [px] (1025 px a side: a table of 9 phases, 76 MB)."""
+
+
+def check_halo_shape(fwhm_px: float | None, beta: float, half_width_px: int) -> None:
+    """The ranges of a halo's shape (``Optics.halo_*``; ``psf.halo_psf``): FWHM in [2, 200] px
+    (None: not given), beta in (1, 10], an integer half width in [8, MAX_HALO_HALF_PX]."""
+    if fwhm_px is not None:
+        w = _finite("halo_fwhm_px", fwhm_px)
+        if not 2.0 <= w <= 200.0:
+            raise ValueError(f"halo_fwhm_px must be in [2, 200]; got halo_fwhm_px={fwhm_px!r}")
+    b = _finite("halo_beta", beta)
+    if not 1.0 < b <= 10.0:
+        raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={beta!r}")
+    h = half_width_px
+    if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 8 <= h <= MAX_HALO_HALF_PX:
+        raise ValueError(f"halo_half_width_px must be an integer in [8, {MAX_HALO_HALF_PX}]; got halo_half_width_px={h!r}")
+
+
 @dataclass(frozen=True)
 class Optics:
     """A lens or telescope in front of a sensor: PSF width, plate scale, photometry, projection.
@@ -334,16 +353,7 @@ class Optics:
         hf = _finite("halo_fraction", self.halo_fraction)
         if not 0.0 <= hf < 1.0:
             raise ValueError(f"halo_fraction must be in [0, 1); got halo_fraction={self.halo_fraction!r}")
-        hb = _finite("halo_beta", self.halo_beta)
-        if not 1.0 < hb <= 10.0:
-            raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={self.halo_beta!r}")
-        hh = self.halo_half_width_px
-        if isinstance(hh, bool) or not isinstance(hh, (int, np.integer)) or not 8 <= hh <= 512:
-            raise ValueError(f"halo_half_width_px must be an integer in [8, 512]; got halo_half_width_px={hh!r}")
-        if self.halo_fwhm_px is not None:
-            w = _finite("halo_fwhm_px", self.halo_fwhm_px)
-            if not 2.0 <= w <= 200.0:
-                raise ValueError(f"halo_fwhm_px must be in [2, 200]; got halo_fwhm_px={self.halo_fwhm_px!r}")
+        check_halo_shape(self.halo_fwhm_px, self.halo_beta, self.halo_half_width_px)
         if (hf > 0.0) != (self.halo_fwhm_px is not None):
             raise ValueError("halo_fraction > 0 and halo_fwhm_px go together (a halo needs its width, a width its "
                              f"share); got halo_fraction={self.halo_fraction!r}, halo_fwhm_px={self.halo_fwhm_px!r}")

@@ -520,7 +520,8 @@ class Scene:
     """sampling.max_events: the cap on one engine call's events (None: the engine's default)."""
     pre_roll_s: float = 0.0
     """sampling.pre_roll_s [s]: the sensor starts watching the scene this long before t = 0
-    (rounded up to whole base samples) and its events before t = 0 are dropped, so that every
+    (rounded up to whole pre-roll samples, ``pre_roll_samples``) and its events before t = 0
+    are dropped, so that every
     pixel starts the recording with its history: the reference where its last event left it,
     its noise, leak and hot-pixel phases (``simulate``)."""
     pre_roll_rate_hz: float | None = None
@@ -954,7 +955,7 @@ def _check_work(s: dict[str, Any], width: int, height: int, shape: psf.PSFShape,
     interval divided so that no target moves more than max_shift_px between samples)."""
     sp = s["sampling"]
     duration, rate, shift, chunk = float(s["duration_s"]), float(sp["rate_hz"]), float(sp["max_shift_px"]), sp["chunk_samples"]
-    n_pre = math.ceil(float(sp.get("pre_roll_s", 0.0)) * float(sp.get("pre_roll_rate_hz", rate)) - 1e-9)
+    n_pre = pre_roll_samples(float(sp.get("pre_roll_s", 0.0)), rate, sp.get("pre_roll_rate_hz"))[0]
     n_base = max(1.0, math.ceil(duration * rate - 1e-9)) + n_pre
     if not n_base <= MAX_SAMPLES:
         pre = (f", sampling.pre_roll_s={sp['pre_roll_s']!r} x sampling.pre_roll_rate_hz="
@@ -1085,6 +1086,13 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.
     return rates
 
 
+def pre_roll_samples(pre_roll_s: float, rate_hz: float, pre_roll_rate_hz: float | None = None) -> tuple[int, float]:
+    """(n, dt): a pre-roll of ``pre_roll_s`` takes n samples dt apart before t = 0, the last at
+    t = 0 (dt = 1 / pre_roll_rate_hz, or 1 / rate_hz without one; n = 0 without a pre-roll)."""
+    dt = 1.0 / (pre_roll_rate_hz if pre_roll_rate_hz else rate_hz)
+    return (math.ceil(pre_roll_s / dt - 1e-9) if pre_roll_s > 0.0 else 0), dt
+
+
 def _check_pre_roll(s: dict[str, Any], targets: list[Target], sources: list[str], field_stars: int, moves: bool,
                     atmosphere: Any) -> None:
     """What a pre-roll (sampling.pre_roll_s) cannot do yet, refused by name: a target that
@@ -1093,11 +1101,10 @@ def _check_pre_roll(s: dict[str, Any], targets: list[Target], sources: list[str]
     duration_s] only: the stars that would cross the sensor before t = 0, and the atmosphere
     there, are missing)."""
     sp = s["sampling"]
-    pre = float(sp.get("pre_roll_s", 0.0))
-    if pre <= 0.0:
+    n_pre, dt = pre_roll_samples(float(sp.get("pre_roll_s", 0.0)), float(sp["rate_hz"]), sp.get("pre_roll_rate_hz"))
+    if not n_pre:
         return
-    rate = float(sp.get("pre_roll_rate_hz", sp["rate_hz"]))
-    t0 = -math.ceil(pre * rate - 1e-9) / rate
+    t0 = -n_pre * dt
     key = f"sampling.pre_roll_s={sp['pre_roll_s']!r}"
     if field_stars and moves:
         raise ScenarioError(f"{key} with a drifting [star_field] of random stars is not supported: the stars are "

@@ -36,7 +36,7 @@ import numpy as np
 from . import psf
 from ._core import __version__
 from .readout import Readout
-from .scenario import ScenarioError, Scene, build, load, parse_assignment, set_value
+from .scenario import ScenarioError, Scene, build, load, parse_assignment, pre_roll_samples, set_value
 from .sensor import EVENT_DTYPE, Sensor
 from .targets import LightCurve, LinearTarget, Target, psf_groups
 
@@ -340,8 +340,7 @@ class _Runner:
         # sampling.pre_roll_s: samples before t = 0, at pre_roll_rate_hz, whose events are
         # dropped. Pre-roll sample j is at (j - n_pre) dt_pre, the last exactly at t = 0; the
         # run's own samples then follow as without a pre-roll.
-        self.dt_pre = 1.0 / scene.pre_roll_rate_hz if scene.pre_roll_rate_hz else self.dt
-        self.n_pre = math.ceil(scene.pre_roll_s / self.dt_pre - 1e-9) if scene.pre_roll_s > 0.0 else 0
+        self.n_pre, self.dt_pre = pre_roll_samples(scene.pre_roll_s, scene.rate_hz, scene.pre_roll_rate_hz)
         self.t_start = -self.n_pre * self.dt_pre if self.n_pre else 0.0
         t0 = time.perf_counter()
         static = [t for t in scene.targets if _is_static(t, self.t_end, self.t_start)]
@@ -482,7 +481,9 @@ class _Runner:
         speed = max(speed, self._linear.max_speed_px_s)
         return max(1, math.ceil(speed * self.dt / self.scene.max_shift_px - 1e-9))
 
-    def _sources(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _sources(self, t: np.ndarray, truth: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The sources' (T, S) positions and fluxes at the times t, written to the ground truth
+        (new times at or after 0) unless ``truth`` is False."""
         n = len(self.moving)
         x = np.empty((t.size, n))
         y = np.empty((t.size, n))
@@ -493,7 +494,7 @@ class _Runner:
             x[:, j], y[:, j] = target.position_px(t)
             f[:, j] = target.flux_ph_s(t)
         keep = (t > self._truth_t_last) & (t >= 0.0)  # chunks come in time order; never repeat a time
-        if keep.any():
+        if truth and keep.any():
             self._truth_t_last = float(t[keep][-1])
             for j, name in enumerate(self.track_names):
                 self._truth_sink(name, {"t_s": t[keep], "x_px": x[keep, j], "y_px": y[keep, j],
@@ -506,7 +507,7 @@ class _Runner:
         if not self.moving:
             return np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
         x, y, f = self._sources(t)
-        shape, cols = self._fine_groups[0] if self._fine_groups else (self._groups[0][0], np.zeros(0, np.int64))
+        shape, cols = self._fine_groups[0]  # the scene's PSF (its core, with a halo) comes first
         frames = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
                                    background_ph_s=self.static_map)
         if len(self._fine_groups) > 1:
@@ -560,7 +561,7 @@ class _Runner:
         the cores'."""
         sc = self.scene
         t_halo = np.concatenate([[t_base[0] - self.dt], t_base])
-        x, y, f = self._sources_untracked(t_halo)
+        x, y, f = self._sources(t_halo, truth=False)
         out = np.empty(frames.shape, np.float64)
         at_hot = np.empty((t_halo.size, hot.size))
         halo = np.empty((sc.height, sc.width))
@@ -578,15 +579,6 @@ class _Runner:
             w = ((j % n_sub + 1) / n_sub)[:, None]
             rates += (1.0 - w) * at_hot[k] + w * at_hot[k + 1]
         return out
-
-    def _sources_untracked(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The sources at the times t, without writing them to the ground truth."""
-        last = self._truth_t_last
-        self._truth_t_last = math.inf
-        try:
-            return self._sources(t)
-        finally:
-            self._truth_t_last = last
 
     def _sparse(self, t_fine: np.ndarray, t_base: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()

@@ -41,6 +41,7 @@ scattered light to any shape (``CompositePSF``: the two rendered apart and summe
 
 from __future__ import annotations
 
+from ..optics import MAX_HALO_HALF_PX
 from .render import (
     MAX_WINDOW_HALF_PX,
     GaussianPSF,
@@ -58,7 +59,6 @@ from .shapes import (
     DEFAULT_SUBPIXEL,
     DEFAULT_TAIL_FRACTION,
     HALO_SUBPIXEL,
-    MAX_HALO_HALF_PX,
     MAX_KERNEL_HALF_PX,
     MOFFAT_DEFAULT_BETA,
     CompositePSF,

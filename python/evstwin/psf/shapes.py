@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..optics import Optics, _finite, _non_negative
+from ..optics import Optics, _finite, _non_negative, check_halo_shape
 from .render import GaussianPSF, PSFShape, _scatter, pixel_fractions
 
 DEFAULT_SUBPIXEL = 8
@@ -537,8 +537,6 @@ def image_psf(
 
 # -- scattered-light halo -------------------------------------------------------------------------
 
-MAX_HALO_HALF_PX = 512
-"""Largest half width of a halo's window [px] (1025 px a side: a table of 9 phases, 76 MB)."""
 HALO_SUBPIXEL = 2
 """Sub-pixel phases of a halo's table: a halo at least 2 px wide (``Optics.halo_fwhm_px``)
 varies so slowly within a pixel that bilinear interpolation between half-pixel phases is off
@@ -638,16 +636,8 @@ def halo_psf(fwhm_px: float, beta: float, half_width_px: int) -> KernelPSF:
     """The halo of ``CompositePSF``: a Moffat of this FWHM [px] and beta, tabulated at
     ``HALO_SUBPIXEL`` phases on a (2 h + 1)^2 window (``moffat_psf``; its taper and
     ``captured_fraction`` apply). Cached."""
-    f = _finite("halo_fwhm_px", fwhm_px)
-    if not 2.0 <= f <= 200.0:
-        raise ValueError(f"halo_fwhm_px must be in [2, 200]; got halo_fwhm_px={fwhm_px!r}")
-    be = _finite("halo_beta", beta)
-    if not 1.0 < be <= 10.0:
-        raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={beta!r}")
-    h = half_width_px
-    if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 8 <= h <= MAX_HALO_HALF_PX:
-        raise ValueError(f"halo_half_width_px must be an integer in [8, {MAX_HALO_HALF_PX}]; got halo_half_width_px={h!r}")
-    shape = _moffat_kernel(f, be, 0.0, HALO_SUBPIXEL, int(h))
+    check_halo_shape(fwhm_px, beta, half_width_px)
+    shape = _moffat_kernel(float(fwhm_px), float(beta), 0.0, HALO_SUBPIXEL, int(half_width_px))
     shape.kind = "halo"
     return shape
 

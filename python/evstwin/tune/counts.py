@@ -93,12 +93,8 @@ def source_flux_map(scene: Any) -> np.ndarray:
             x_all = np.ascontiguousarray(np.concatenate(xs))
             y_all = np.ascontiguousarray(np.concatenate(ys))
             f_all = np.ascontiguousarray(np.concatenate(fs))
-            if not isinstance(shape, psf_mod.CompositePSF):
-                for idx, val in psf_mod.contributions(w, h, x_all, y_all, f_all, shape):
-                    np.maximum.at(flat, idx, val)
-                continue
-            # A core and its halo come as separate chunks: add them up per source and time
-            # (each source-time its own block of flat indices), then take the largest.
+            # Each source-time its own block of flat indices: a shape may give one pixel in
+            # several chunks (a core and its halo), added up before the largest is taken.
             area = (2 * shape.half_width_px + 1) ** 2
             step = max(1, 4_000_000 // area)
             for s0 in range(0, x_all.size, step):
