@@ -31,6 +31,14 @@ LowPass lowpass_from(const std::string& s) {
 #define EVSTWIN_FIELD(name) .def_readwrite(#name, &PixelParams::name)
 
 void register_pixel(py::module_& m) {
+    m.def(
+        "validate_hot_pixel_chain",
+        [](double duty, double burst_s, double on_share, double alternation, const std::string& prefix) {
+            evstwin::validate_hot_chain({duty, burst_s, on_share, alternation}, prefix);
+        },
+        py::arg("duty"), py::arg("burst_s"), py::arg("on_share"), py::arg("alternation"), py::arg("prefix"),
+        "Raise ValueError naming the first field (prefix + name) of a hot pixel's chain out of range.");
+
     py::class_<PixelParams>(m, "PixelParams", "C++ pixel parameters (see evstwin.PixelParams)")
         .def(py::init<>())
         EVSTWIN_FIELD(theta_on) EVSTWIN_FIELD(theta_off) EVSTWIN_FIELD(refractory_s)

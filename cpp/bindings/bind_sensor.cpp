@@ -166,6 +166,20 @@ void register_sensor(py::module_& m) {
              "Why each event of the last run/run_pixels call fired (EventLabel codes).")
         .def("set_hot_pixel_rates",
              [](Sensor& s, std::vector<double> rates) { s.set_hot_pixel_rates(rates); }, py::arg("rates_hz"))
+        .def(
+            "set_hot_pixel_chains",
+            [](Sensor& s, std::vector<std::uint32_t> pixels, std::vector<double> duty, std::vector<double> burst_s,
+               std::vector<double> on_share, std::vector<double> alternation) {
+                const std::size_t n = pixels.size();
+                if (duty.size() != n || burst_s.size() != n || on_share.size() != n || alternation.size() != n)
+                    throw py::value_error("set_hot_pixel_chains: pixels, duty, burst_s, on_share and alternation must "
+                                          "have the same length");
+                std::vector<evstwin::HotPixelChain> chains(n);
+                for (std::size_t k = 0; k < n; ++k) chains[k] = {duty[k], burst_s[k], on_share[k], alternation[k]};
+                s.set_hot_pixel_chains(pixels, chains);
+            },
+            py::arg("pixels"), py::arg("duty"), py::arg("burst_s"), py::arg("on_share"), py::arg("alternation"))
+        .def_readonly_static("MAX_HOT_PIXEL_CHAINS", &Sensor::MAX_HOT_PIXEL_CHAINS)
         .def("hot_pixel_rates",
              [](const Sensor& s) { return to_numpy(s.hot_pixel_rates(), {s.height(), s.width()}); })
         .def("thresholds",

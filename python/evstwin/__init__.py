@@ -20,7 +20,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from ._core import __version__
 from .io import read_events, write_events
-from .pixel import PixelParams
+from .pixel import HotPixelChain, PixelParams
 from .presets import thresholds_from_biases
 from .sensor import EVENT_DTYPE, EVENT_LABELS, TRACE_DTYPE, Sensor
 from .simulate import simulate, simulate_to_file
@@ -29,6 +29,7 @@ __all__ = [
     "EVENT_DTYPE",
     "EVENT_LABELS",
     "TRACE_DTYPE",
+    "HotPixelChain",
     "PixelParams",
     "Sensor",
     "__version__",

@@ -178,3 +178,37 @@ class PixelParams:
     @classmethod
     def field_names(cls) -> list[str]:
         return [f.name for f in dataclasses.fields(cls)]
+
+
+@dataclass(frozen=True)
+class HotPixelChain:
+    """One hot pixel's own telegraph and polarity chain, in place of what ``PixelParams``'
+    ``hot_pixel_duty``, ``hot_pixel_burst_s``, ``hot_pixel_on_share`` and
+    ``hot_pixel_alternation`` give every other hot pixel (``Sensor(hot_pixel_chains=...)``; a
+    scenario's ``[hot_pixels]`` table entries). Real hot pixels differ: the IMX636 recording's
+    flickering pixel fires ON 0.59 of the time in short bursts, its leaky one 0.98 in one burst
+    of a second. The fields mean what the ``PixelParams`` fields of the same name mean."""
+
+    duty: float
+    """Share of the time the pixel is active, in [1e-6, 1]."""
+    burst_s: float
+    """Mean active period [s] (exponential), in [1e-6, 1e6]."""
+    on_share: float
+    """Long-run share of ON events, in [1e-6, 1 - 1e-6]."""
+    alternation: float
+    """Share of successive events of opposite polarity, in [0, 2 min(on_share, 1 - on_share)];
+    2 on_share (1 - on_share): each event's polarity drawn afresh."""
+
+    def __post_init__(self) -> None:
+        for name in ("duty", "burst_s", "on_share", "alternation"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                raise TypeError(f"HotPixelChain.{name} must be a number; got {name}={value!r}")
+        _core.validate_hot_pixel_chain(float(self.duty), float(self.burst_s), float(self.on_share),
+                                       float(self.alternation), "HotPixelChain.")
+
+    @classmethod
+    def of(cls, params: PixelParams) -> HotPixelChain:
+        """The chain ``params`` gives every hot pixel."""
+        return cls(params.hot_pixel_duty, params.hot_pixel_burst_s, params.hot_pixel_on_share,
+                   params.hot_pixel_alternation)

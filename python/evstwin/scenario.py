@@ -30,7 +30,11 @@ The tables mirror the Python objects:
 ``[hot_pixels]``  an explicit hot-pixel map, in place of the draw of ``pixel.hot_pixel_fraction``:
                   ``pixels = [[x, y, rate_hz], ...]`` and/or ``file = "map.npy"`` (a
                   (height, width) array of rates [Hz], 0 = not hot); see
-                  ``PixelParams.hot_pixel_rate_hz`` for what a rate means.
+                  ``PixelParams.hot_pixel_rate_hz`` for what a rate means. An entry may be a
+                  table ``{x, y, rate_hz, duty, burst_s, on_share, alternation}``: the pixel's
+                  own telegraph and polarity chain (``evstwin.HotPixelChain``), each key not
+                  given the ``pixel.hot_pixel_*`` value, except that an ``on_share`` without
+                  ``alternation`` draws each event's polarity afresh (alternation 2 s (1 - s)).
 ``[[targets]]``   ``kind`` = ``static`` | ``linear`` | ``circular`` | ``rotating_bar`` |
                   ``tabulated`` | ``tle`` (two-line elements, placed by the pointing: see
                   below), its geometry, and one brightness: ``flux_ph_s``,
@@ -88,9 +92,9 @@ from typing import Any
 
 import numpy as np
 
-from . import psf
+from . import _core, psf
 from .optics import PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M, Optics
-from .pixel import PixelParams
+from .pixel import HotPixelChain, PixelParams
 from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
 from .readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S, ReadoutParams
 from .sensor import MAX_MAX_EVENTS
@@ -537,6 +541,9 @@ class Scene:
     """The readout applied to the events (None: off, the engine's times kept)."""
     hot_pixel_rates_hz: np.ndarray | None = None
     """[hot_pixels]: the (height, width) hot-pixel rates [Hz], or None (the draw applies)."""
+    hot_pixel_chains: dict[tuple[int, int], HotPixelChain] = dataclasses.field(default_factory=dict)
+    """[hot_pixels]: {(x, y): chain} of the listed pixels with a telegraph and polarity chain of
+    their own (a table entry with duty, burst_s, on_share or alternation)."""
     roi: tuple[int, int, int, int] | None = None
     """sensor.roi: (x0, y0, w, h) of the sensor this scene simulates (``width`` x ``height`` =
     w x h, every coordinate the ROI's); None: the whole (window of the) sensor."""
@@ -620,7 +627,15 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     for key, value in pixel.items():
         if isinstance(value, int) and not isinstance(value, bool) and key not in _PIXEL_TEXT_KEYS:
             pixel[key] = float(value)
-        params = _wrap(f"pixel.{key}", params.replace, **{key: pixel[key]})
+    # One key at a time, to name a bad one; but a hot pixel's ON share and alternation bound
+    # each other (alternation <= 2 min(s, 1 - s)), so a pair that is valid together goes in
+    # together, whatever the preset's alternation was.
+    chain = ("hot_pixel_on_share", "hot_pixel_alternation")
+    for key in pixel:
+        together = [k for k in chain if k in pixel] if key in chain else [key]
+        if key in chain and key != together[0]:
+            continue
+        params = _wrap(", ".join(f"pixel.{k}" for k in together), params.replace, **{k: pixel[k] for k in together})
 
     optics_kw = dict(s.get("optics", {}))
     optics = _wrap(
@@ -762,13 +777,15 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
             f"background={dict(bg)} ({background:.3g} photons/s)"
         )
     readout = _readout(s, preset)
-    hot = _hot_pixel_map(s.get("hot_pixels"), width, height)
+    hot, hot_chains = _hot_pixel_map(s.get("hot_pixels"), width, height, params)
     roi = _roi(s["sensor"].get("roi"), width, height)
     if roi is not None:
         x0, y0, width, height = roi
         reach = max([shape.half_width_px] + [t.psf.half_width_px for t in targets if t.psf is not None])
         targets, sources, field_stars = _into_roi(targets, sources, field_stars, roi, reach, t_end)
         hot = None if hot is None else np.ascontiguousarray(hot[y0 : y0 + height, x0 : x0 + width])
+        hot_chains = {(x - x0, y - y0): c for (x, y), c in hot_chains.items()
+                      if 0 <= x - x0 < width and 0 <= y - y0 < height}
     sp = s["sampling"]
     if atmosphere is not None:
         targets = _atmosphere_on(atmosphere, s, targets, optics, t_end)
@@ -780,7 +797,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         scenario=s, preset=preset, width=width, height=height, params=params, optics=optics, targets=targets,
         background_ph_s=background, duration_s=float(s["duration_s"]), seed=int(s["seed"]),
         rate_hz=float(sp["rate_hz"]), max_shift_px=float(sp["max_shift_px"]), sparse=bool(sp["sparse"]),
-        hot_pixel_rates_hz=hot,
+        hot_pixel_rates_hz=hot, hot_pixel_chains=hot_chains,
         chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
         pre_roll_s=float(sp.get("pre_roll_s", 0.0)),
         pre_roll_rate_hz=None if "pre_roll_rate_hz" not in sp else float(sp["pre_roll_rate_hz"]),
@@ -1047,11 +1064,16 @@ MAX_HOT_PIXEL_RATE_HZ = 1e6
 """The engine's largest hot-pixel rate [Hz] (``Sensor::set_hot_pixel_rates``)."""
 
 
-def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.ndarray | None:
-    """[hot_pixels] as a (height, width) array of rates [Hz] (None: no map, the draw applies).
-    A file's map comes first; listed pixels are set over it."""
+HOT_PIXEL_CHAIN_KEYS = ("duty", "burst_s", "on_share", "alternation")
+"""The keys of a ``[hot_pixels] pixels`` table entry that give the pixel a chain of its own."""
+
+
+def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int,
+                   params: PixelParams) -> tuple[np.ndarray | None, dict[tuple[int, int], HotPixelChain]]:
+    """[hot_pixels] as a (height, width) array of rates [Hz] (None: no map, the draw applies)
+    and the listed pixels' own chains. A file's map comes first; listed pixels are set over it."""
     if not table:
-        return None
+        return None, {}
     rates = np.zeros((height, width))
     if "file" in table:
         path = table["file"]
@@ -1070,20 +1092,59 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int) -> np.
         rates[:] = loaded
     pixels = table.get("pixels", [])
     if not isinstance(pixels, list):
-        raise ScenarioError(f"hot_pixels.pixels must be an array of [x, y, rate_hz]; got {pixels!r}")
+        raise ScenarioError(f"hot_pixels.pixels must be an array of [x, y, rate_hz] or {{x, y, rate_hz, ...}}; got "
+                            f"{pixels!r}")
+    chains: dict[tuple[int, int], HotPixelChain] = {}
     for i, entry in enumerate(pixels):
         key = f"hot_pixels.pixels[{i}]"
-        ok = isinstance(entry, list) and len(entry) == 3 and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in entry)
-        if not ok or any(isinstance(v, float) and not v.is_integer() for v in entry[:2]):
-            raise ScenarioError(f"{key} must be [x, y, rate_hz] (whole pixel coordinates and a rate in Hz); got {entry!r}")
-        x, y, r = int(entry[0]), int(entry[1]), float(entry[2])
+        x, y, r, own = _hot_pixel_entry(key, entry)
         if not (0 <= x < width and 0 <= y < height):
             raise ScenarioError(f"{key}={entry!r} lies off the {width}x{height} sensor")
         if not 0.0 <= r <= MAX_HOT_PIXEL_RATE_HZ:
             raise ScenarioError(f"{key}: rate_hz must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}]; got {entry!r}")
         rates[y, x] = r
-    return rates
+        if own:
+            base = HotPixelChain.of(params)
+            fields = {name: float(own.get(name, getattr(base, name))) for name in HOT_PIXEL_CHAIN_KEYS}
+            if "on_share" in own and "alternation" not in own:
+                # A share of its own with the params' alternation would be a chain of another
+                # pixel's memory (or no chain at all: 0.78 is out of reach at a share of 0.98).
+                fields["alternation"] = 2.0 * fields["on_share"] * (1.0 - fields["on_share"])
+            try:
+                _core.validate_hot_pixel_chain(fields["duty"], fields["burst_s"], fields["on_share"],
+                                               fields["alternation"], f"{key}.")
+            except ValueError as exc:
+                raise ScenarioError(str(exc)) from None
+            chains[(x, y)] = HotPixelChain(**fields)
+        else:
+            chains.pop((x, y), None)
+    return rates, chains
+
+
+def _hot_pixel_entry(key: str, entry: Any) -> tuple[int, int, float, dict[str, float]]:
+    """One ``[hot_pixels] pixels`` entry as (x, y, rate_hz, its own chain's keys)."""
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    if isinstance(entry, dict):
+        known = ("x", "y", "rate_hz", *HOT_PIXEL_CHAIN_KEYS)
+        unknown = sorted(set(entry) - set(known))
+        if unknown:
+            raise ScenarioError(f"{key} has unknown key(s) {unknown}; known: {list(known)}")
+        missing = [k for k in ("x", "y", "rate_hz") if k not in entry]
+        if missing:
+            raise ScenarioError(f"{key} must give x, y and rate_hz; {', '.join(missing)} missing in {entry!r}")
+        for name, value in entry.items():
+            if not number(value) or (name in ("x", "y") and isinstance(value, float) and not value.is_integer()):
+                what = "a whole pixel coordinate" if name in ("x", "y") else "a number"
+                raise ScenarioError(f"{key}.{name} must be {what}; got {name}={value!r}")
+        own = {k: float(v) for k, v in entry.items() if k in HOT_PIXEL_CHAIN_KEYS}
+        return int(entry["x"]), int(entry["y"]), float(entry["rate_hz"]), own
+    ok = isinstance(entry, list) and len(entry) == 3 and all(number(v) for v in entry)
+    if not ok or any(isinstance(v, float) and not v.is_integer() for v in entry[:2]):
+        raise ScenarioError(f"{key} must be [x, y, rate_hz] (whole pixel coordinates and a rate in Hz) or a table "
+                            f"{{x, y, rate_hz, duty, burst_s, on_share, alternation}}; got {entry!r}")
+    return int(entry[0]), int(entry[1]), float(entry[2]), {}
 
 
 def pre_roll_samples(pre_roll_s: float, rate_hz: float, pre_roll_rate_hz: float | None = None) -> tuple[int, float]:

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import contextlib
+import numbers
 import operator
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
 from . import _core
-from .pixel import PixelParams
+from .pixel import HotPixelChain, PixelParams
 
 EVENT_DTYPE: np.dtype = _core.EVENT_DTYPE
 """Event record (declared once, in C++): t [us, int64], x, y [uint16], p [uint8, 1 = ON]."""
@@ -73,10 +74,15 @@ class Sensor:
         num_threads: int | None = None,
         max_events: int | None = None,
         hot_pixel_rates_hz: npt.ArrayLike | None = None,
+        hot_pixel_chains: Mapping[tuple[int, int], HotPixelChain] | None = None,
     ) -> None:
         """hot_pixel_rates_hz: an explicit hot-pixel map, (height, width) rates r [Hz] (0 = not
         hot; see ``PixelParams.hot_pixel_rate_hz`` for what r means), in place of the pixels that
-        ``params.hot_pixel_fraction`` would draw."""
+        ``params.hot_pixel_fraction`` would draw.
+
+        hot_pixel_chains: {(x, y): HotPixelChain}, hot pixels with a telegraph and polarity
+        chain of their own (whenever they are hot, by the draw or the map); every other pixel
+        draws exactly what it draws without them."""
         params = PixelParams() if params is None else params
         if not isinstance(params, PixelParams):
             raise TypeError(f"params must be an evstwin.PixelParams; got {type(params).__name__}")
@@ -102,6 +108,29 @@ class Sensor:
                 raise ValueError(f"hot_pixel_rates_hz must have the sensor's shape (height, width) = ({height}, {width}); "
                                  f"got shape {rates.shape}")
             self._core.set_hot_pixel_rates(rates.ravel())
+        if hot_pixel_chains:
+            self._set_hot_pixel_chains(hot_pixel_chains)
+
+    def _set_hot_pixel_chains(self, chains: Mapping[tuple[int, int], HotPixelChain]) -> None:
+        width, height = self._core.width, self._core.height
+        if len(chains) > int(_core.Sensor.MAX_HOT_PIXEL_CHAINS):
+            raise ValueError(f"hot_pixel_chains may hold at most {int(_core.Sensor.MAX_HOT_PIXEL_CHAINS)} pixels; got "
+                             f"{len(chains)}")
+        pixels = []
+        for key, chain in chains.items():
+            ok = (isinstance(key, tuple) and len(key) == 2
+                  and all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in key))
+            if not ok:
+                raise TypeError(f"hot_pixel_chains keys must be (x, y) pixel coordinates; got {key!r}")
+            x, y = int(key[0]), int(key[1])
+            if not (0 <= x < width and 0 <= y < height):
+                raise ValueError(f"hot_pixel_chains[{key!r}] lies off the {width}x{height} sensor")
+            if not isinstance(chain, HotPixelChain):
+                raise TypeError(f"hot_pixel_chains[{key!r}] must be an evstwin.HotPixelChain; got {type(chain).__name__}")
+            pixels.append(y * width + x)
+        values = list(chains.values())
+        self._core.set_hot_pixel_chains(pixels, [c.duty for c in values], [c.burst_s for c in values],
+                                        [c.on_share for c in values], [c.alternation for c in values])
 
     def hot_pixel_rates_hz(self) -> np.ndarray:
         """Each pixel's hot rate r [Hz] (0 = not hot), (height, width): the draw or the map."""

@@ -332,7 +332,7 @@ class _Runner:
         self.scene = scene
         self.labels = labels
         self.sensor = Sensor(scene.width, scene.height, scene.params, seed=scene.seed, num_threads=num_threads,
-                             hot_pixel_rates_hz=scene.hot_pixel_rates_hz)
+                             hot_pixel_rates_hz=scene.hot_pixel_rates_hz, hot_pixel_chains=scene.hot_pixel_chains)
         self.psf = scene.psf
         self.dt = 1.0 / scene.rate_hz
         self.n_base = max(1, math.ceil(scene.duration_s * scene.rate_hz - 1e-9))

@@ -576,4 +576,44 @@ TEST(bridge_fires_decides_as_the_exact_probabilities) {
     CHECK(!detail::bridge_fires(0.5, std::nan(""), 0.01, 0.01, 0.01, 1e-4, on) && !on);
 }
 
+TEST(hot_pixel_chains_of_their_own_leave_every_other_draw_alone) {
+    // Every pixel hot at 300 Hz; pixel 5 gets an ON-only-ish chain of its own and pixel 9 the
+    // params' own chain: pixel 9 and every pixel without a chain fire as without chains, bit
+    // for bit, and pixel 5 fires ON a share ~0.95 (each polarity drawn afresh).
+    PixelParams p = ideal();
+    p.refractory_s = 1e-4;
+    const std::vector<double> hot(16, 300.0);
+    std::vector<double> t(1001), rate(16 * t.size(), 1e9);
+    for (std::size_t i = 0; i < t.size(); ++i) t[i] = 0.01 * static_cast<double>(i);
+    Sensor plain(4, 4, p, 3, 1), own(4, 4, p, 3, 2);
+    plain.set_hot_pixel_rates(hot);
+    own.set_hot_pixel_rates(hot);
+    own.set_hot_pixel_chains({5, 9}, {HotPixelChain{1.0, 0.1, 0.95, 2 * 0.95 * 0.05}, hot_chain_of(p)});
+    const auto a = plain.run(rate.data(), t.data(), t.size());
+    const auto b = own.run(rate.data(), t.data(), t.size());
+    std::vector<Event> a_rest, b_rest;
+    double on = 0, n5 = 0;
+    for (const Event& e : a) if (e.y * 4 + e.x != 5) a_rest.push_back(e);
+    for (const Event& e : b) {
+        if (e.y * 4 + e.x != 5) b_rest.push_back(e);
+        else { n5 += 1; on += e.p; }
+    }
+    CHECK(a_rest.size() == b_rest.size() && !a_rest.empty());
+    CHECK(std::memcmp(a_rest.data(), b_rest.data(), a_rest.size() * sizeof(Event)) == 0);
+    CHECK(n5 > 2000);
+    CHECK_NEAR(on / n5, 0.95, 5 * std::sqrt(0.95 * 0.05 / n5));
+    // Bad chains are refused by name, before anything changes.
+    CHECK_THROWS(own.set_hot_pixel_chains({16}, {hot_chain_of(p)}));
+    CHECK_THROWS(own.set_hot_pixel_chains({3, 3}, {hot_chain_of(p), hot_chain_of(p)}));
+    CHECK_THROWS(own.set_hot_pixel_chains({3}, {}));
+    CHECK_THROWS(own.set_hot_pixel_chains({3}, {HotPixelChain{1.0, 0.1, 0.95, 0.5}}));
+    std::string message;
+    try {
+        own.set_hot_pixel_chains({2, 3}, {hot_chain_of(p), HotPixelChain{0.0, 0.1, 0.5, 1.0}});
+    } catch (const std::invalid_argument& e) {
+        message = e.what();
+    }
+    CHECK(message.rfind("hot_pixel_chains[1].duty must be in", 0) == 0);
+}
+
 TEST_MAIN()

@@ -109,6 +109,12 @@ def test_the_written_toml_simulates_the_same_rates(cal: NoiseCalibration, dark: 
     assert scenario["sensor"] == {"preset": "imx636", "width": 120, "height": 100}
     assert scenario["pixel"]["leak_rate_hz"] == 0.0
     assert len(scenario["hot_pixels"]["pixels"]) == 6
+    # Each hot pixel with its own chain, as measured (4 significant digits).
+    for entry in scenario["hot_pixels"]["pixels"]:
+        h = next(h for h in cal.hot if (h.x, h.y) == (entry["x"], entry["y"]))
+        assert entry["on_share"] == pytest.approx(h.on / (h.on + h.off), rel=1e-3)
+        assert entry["alternation"] == pytest.approx(h.alternation, rel=1e-3)
+        assert (entry["duty"], entry["burst_s"]) == pytest.approx((h.duty, h.burst_s), rel=1e-3)
     # Simulate it (another seed) and measure again: the rates agree within their errors.
     again = tmp_path / "again.h5"
     assert main(["simulate", str(out), "-o", str(again), "--seed", "7", "--set", "sampling.rate_hz=100",
@@ -120,6 +126,9 @@ def test_the_written_toml_simulates_the_same_rates(cal: NoiseCalibration, dark: 
     for h1 in cal.hot:
         h2 = next(h for h in cal2.hot if (h.x, h.y) == (h1.x, h1.y))
         assert h2.active_rate_hz == pytest.approx(h1.active_rate_hz, rel=0.1)
+        # Its own ON share comes back (two draws of ~2000 correlated events: 10 binomial se).
+        s1, s2 = h1.on / (h1.on + h1.off), h2.on / (h2.on + h2.off)
+        assert abs(s2 - s1) < 10 * math.sqrt(s1 * (1 - s1) * (1 / (h1.on + h1.off) + 1 / (h2.on + h2.off)))
     # Refused without --force, written with it.
     assert main(["calibrate-noise", str(dark), "-o", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
@@ -134,7 +143,7 @@ def test_a_window_cuts_the_sensor_and_shifts_the_map(dark: Path, tmp_path: Path,
     assert "window 80 x 50 at (40, 50)" in captured.err
     assert scenario["sensor"]["width"] == 80 and scenario["sensor"]["height"] == 50
     # (50, 60) and (100, 90) lie in x 40..119, y 50..99: at (10, 10) and (60, 40) of the window.
-    assert sorted((x, y) for x, y, _ in scenario["hot_pixels"]["pixels"]) == [(10, 10), (60, 40)]
+    assert sorted((h["x"], h["y"]) for h in scenario["hot_pixels"]["pixels"]) == [(10, 10), (60, 40)]
 
 
 @pytest.mark.parametrize("roi", ["100,90,40,20", "-1,0,5,5", "0,0,0,5"])

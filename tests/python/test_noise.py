@@ -295,6 +295,63 @@ def test_hot_pixels_flicker_in_bursts_with_the_duty_and_burst_length_given() -> 
     assert abs(busy - d) < 0.08, busy
 
 
+def test_a_hot_pixel_with_a_chain_of_its_own_fires_by_it_and_the_others_are_untouched() -> None:
+    from evstwin import HotPixelChain
+
+    # Every pixel hot at 200 Hz with 0.1 ms dead time, the params' chain strict alternation.
+    # (1, 2) fires ON a share 0.9, each polarity drawn afresh (alternation 2 s (1 - s) = 0.18);
+    # (3, 0) flickers in bursts (duty 0.25). Every other pixel must fire exactly as without.
+    params = PixelParams(photon_shot_noise=False, dark_model="none", shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
+                         refractory_s=1e-4)
+    hot = np.full((4, 4), 200.0)
+    t = np.arange(0, 3001) / 100.0
+    frames = np.full((len(t), 4, 4), 1e9)
+    plain = Sensor(4, 4, params, seed=6, hot_pixel_rates_hz=hot).run(frames, t)
+    chains = {(1, 2): HotPixelChain(duty=1.0, burst_s=0.1, on_share=0.9, alternation=0.18),
+              (3, 0): HotPixelChain(duty=0.25, burst_s=0.05, on_share=0.5, alternation=1.0),
+              (0, 3): HotPixelChain.of(params)}
+    own = Sensor(4, 4, params, seed=6, hot_pixel_rates_hz=hot, hot_pixel_chains=chains).run(frames, t)
+
+    def at(ev: np.ndarray, x: int, y: int) -> np.ndarray:
+        return ev[(ev["x"] == x) & (ev["y"] == y)]
+
+    for y in range(4):
+        for x in range(4):
+            if (x, y) not in ((1, 2), (3, 0)):  # (0, 3)'s own chain is the params': the same draws
+                np.testing.assert_array_equal(at(own, x, y), at(plain, x, y))
+    r_eff = 200.0 / (1 + 200.0 * 1e-4)
+    share = at(own, 1, 2)["p"].astype(float)
+    assert abs(len(share) - 30 * r_eff) < 5 * math.sqrt(30 * r_eff)
+    assert abs(share.mean() - 0.9) < 5 * math.sqrt(0.09 / len(share)), share.mean()  # independent draws
+    switched = np.mean(share[1:] != share[:-1])
+    assert abs(switched - 0.18) < 5 * math.sqrt(0.18 * 0.82 / len(share)), switched
+    bursty = at(own, 3, 0)
+    expect = 30 * 0.25 * r_eff
+    dispersion = 1 + 2 * r_eff * 0.75 ** 2 * 0.05
+    assert abs(len(bursty) - expect) < 5 * math.sqrt(dispersion * expect), (len(bursty), expect)
+    assert np.all(bursty["p"][1:] != bursty["p"][:-1])  # its own chain keeps strict alternation
+    gaps = np.diff(bursty["t"]) / 1e6
+    assert gaps.std() / gaps.mean() > 2  # bursts: a Poisson clock would give 1
+
+
+def test_hot_pixel_chains_are_refused_by_name() -> None:
+    from evstwin import HotPixelChain
+
+    good = HotPixelChain(duty=0.5, burst_s=0.1, on_share=0.5, alternation=1.0)
+    with pytest.raises(ValueError, match=r"HotPixelChain.alternation must be at most 2 min\(HotPixelChain.on_share"):
+        HotPixelChain(duty=0.5, burst_s=0.1, on_share=0.9, alternation=0.5)
+    with pytest.raises(ValueError, match=r"HotPixelChain.duty must be in \[.*; got HotPixelChain.duty=0"):
+        HotPixelChain(duty=0.0, burst_s=0.1, on_share=0.5, alternation=1.0)
+    with pytest.raises(TypeError, match=r"HotPixelChain.burst_s must be a number; got burst_s='0.1'"):
+        HotPixelChain(duty=0.5, burst_s="0.1", on_share=0.5, alternation=1.0)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"hot_pixel_chains\[\(4, 0\)\] lies off the 4x3 sensor"):
+        Sensor(4, 3, hot_pixel_chains={(4, 0): good})
+    with pytest.raises(TypeError, match=r"keys must be \(x, y\) pixel coordinates; got 5"):
+        Sensor(4, 3, hot_pixel_chains={5: good})  # type: ignore[dict-item]
+    with pytest.raises(TypeError, match=r"must be an evstwin.HotPixelChain; got dict"):
+        Sensor(4, 3, hot_pixel_chains={(0, 0): {"duty": 0.5}})  # type: ignore[dict-item]
+
+
 def test_hot_pixels_are_a_fraction_fixed_per_seed() -> None:
     params = PixelParams(hot_pixel_fraction=0.01, hot_pixel_rate_hz=50.0, hot_pixel_rate_sigma=0.5)
     a = Sensor(100, 100, params, seed=4).hot_pixel_rates_hz()
@@ -399,6 +456,65 @@ def test_bad_hot_pixel_maps_name_the_key(table: dict, message: str) -> None:
 
     with pytest.raises(ScenarioError, match=message):
         build(_small_dark(hot_pixels=table))
+
+
+def test_a_scenario_hot_pixel_table_gives_the_pixel_its_own_chain() -> None:
+    from evstwin import HotPixelChain, simulate
+    from evstwin.scenario import build
+
+    base = _small_dark(pixel={"leak_rate_hz": 0.0, "shot_noise_rate_hz": 0.0, "hot_pixel_alternation": 0.78,
+                              "hot_pixel_on_share": 0.59, "hot_pixel_duty": 0.5, "hot_pixel_burst_s": 0.2})
+    table = {"pixels": [[2, 2, 50.0], {"x": 9, "y": 4, "rate_hz": 300.0, "on_share": 0.98},
+                        {"x": 5, "y": 7, "rate_hz": 40.0, "duty": 0.1}]}
+    scene = build({**base, "hot_pixels": table})
+    # Keys not given take the pixel's hot_pixel_* values, but a share of its own without an
+    # alternation draws each polarity afresh: 2 s (1 - s).
+    assert scene.hot_pixel_chains == {(9, 4): HotPixelChain(0.5, 0.2, 0.98, 2 * 0.98 * (1 - 0.98)),
+                                      (5, 7): HotPixelChain(0.1, 0.2, 0.59, 0.78)}
+    assert scene.hot_pixel_rates_hz is not None and scene.hot_pixel_rates_hz[4, 9] == 300.0
+    # The same pixel seen through an ROI keeps its chain, at the ROI's coordinates.
+    windowed = build({**base, "hot_pixels": table, "sensor": {**base["sensor"], "roi": [4, 2, 8, 6]}})
+    assert windowed.hot_pixel_chains == {(5, 2): scene.hot_pixel_chains[(9, 4)],
+                                         (1, 5): scene.hot_pixel_chains[(5, 7)]}
+    r = simulate({**base, "duration_s": 4.0, "hot_pixels": table}, num_threads=1)
+    leaky = r.events[(r.events["x"] == 9) & (r.events["y"] == 4)]
+    # ON 0.98 of ~600 events (duty 0.5 x 300 Hz x 4 s; the telegraph widens the count).
+    assert len(leaky) > 150 and abs(leaky["p"].mean() - 0.98) < 5 * math.sqrt(0.98 * 0.02 / len(leaky)) + 0.01
+
+
+def test_a_hot_pixel_share_and_alternation_go_in_together_whatever_the_presets() -> None:
+    from evstwin.scenario import ScenarioError, build
+
+    # The imx636 preset's chain is 0.59 / 0.78: a share of 0.98 alone cannot keep 0.78, but
+    # with its own alternation it is a valid pair (what calibrate-noise writes for a leaky pixel).
+    imx = {**_small_dark(), "sensor": {"preset": "imx636", "width": 16, "height": 12}}
+    params = build({**imx, "pixel": {"hot_pixel_on_share": 0.98, "hot_pixel_alternation": 0.03}}).params
+    assert (params.hot_pixel_on_share, params.hot_pixel_alternation) == (0.98, 0.03)
+    with pytest.raises(ScenarioError, match=r"pixel.hot_pixel_on_share, pixel.hot_pixel_alternation: "
+                                            r"hot_pixel_alternation must be at most"):
+        build({**imx, "pixel": {"hot_pixel_alternation": 0.5, "hot_pixel_on_share": 0.9}})
+    with pytest.raises(ScenarioError, match=r"^pixel.hot_pixel_on_share: hot_pixel_alternation must be at most"):
+        build({**imx, "pixel": {"hot_pixel_on_share": 0.98}})
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        ({"x": 1, "y": 1, "rate_hz": 5.0, "share": 0.5}, r"hot_pixels.pixels\[0\] has unknown key\(s\) \['share'\]"),
+        ({"x": 1, "y": 1, "duty": 0.5}, r"hot_pixels.pixels\[0\] must give x, y and rate_hz; rate_hz missing"),
+        ({"x": 1.5, "y": 1, "rate_hz": 5.0}, r"hot_pixels.pixels\[0\].x must be a whole pixel coordinate"),
+        ({"x": 1, "y": 1, "rate_hz": 5.0, "duty": "0.5"}, r"hot_pixels.pixels\[0\].duty must be a number"),
+        ({"x": 1, "y": 1, "rate_hz": 5.0, "on_share": 0.9, "alternation": 0.5},
+         r"hot_pixels.pixels\[0\].alternation must be at most 2 min\(hot_pixels.pixels\[0\].on_share"),
+        ({"x": 1, "y": 1, "rate_hz": 5.0, "burst_s": 0.0}, r"hot_pixels.pixels\[0\].burst_s must be in \[.* s; got"),
+        ({"x": 1, "y": 12, "rate_hz": 5.0}, r"hot_pixels.pixels\[0\]=.* lies off the 16x12 sensor"),
+    ],
+)
+def test_bad_hot_pixel_tables_name_the_key(entry: dict, message: str) -> None:
+    from evstwin.scenario import ScenarioError, build
+
+    with pytest.raises(ScenarioError, match=message):
+        build(_small_dark(hot_pixels={"pixels": [entry]}))
 
 
 def test_a_hot_pixel_file_of_the_wrong_shape_is_refused(tmp_path) -> None:

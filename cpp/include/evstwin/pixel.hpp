@@ -21,6 +21,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "config.hpp"
 #include "constants.hpp"
@@ -216,6 +217,40 @@ inline bool bridge_fires(double u, double on0, double on1, double off0, double o
 }
 }  // namespace detail
 
+/// A hot pixel's telegraph and polarity chain: what PixelParams' hot_pixel_duty,
+/// hot_pixel_burst_s, hot_pixel_on_share and hot_pixel_alternation give every hot pixel, and
+/// what a sensor may give one pixel of its own (Sensor::set_hot_pixel_chains): real hot
+/// pixels differ (the IMX636 recording's flickering pixel is ON 0.59 of the time, its leaky
+/// one 0.98, in one burst of a second).
+struct HotPixelChain {
+    double duty = 1.0;        ///< share of the time the pixel is active (fires)
+    double burst_s = 0.1;     ///< mean active period [s] (exponential)
+    double on_share = 0.5;    ///< long-run share of ON events
+    double alternation = 1.0; ///< share of successive events of opposite polarity
+};
+
+/// The chain PixelParams gives every hot pixel without a chain of its own.
+inline HotPixelChain hot_chain_of(const PixelParams& p) {
+    return {p.hot_pixel_duty, p.hot_pixel_burst_s, p.hot_pixel_on_share, p.hot_pixel_alternation};
+}
+
+/// Throws std::invalid_argument naming the first field out of range and its value; the
+/// fields are named prefix + "duty", ... ("hot_pixel_" for PixelParams' own).
+inline void validate_hot_chain(const HotPixelChain& c, const std::string& prefix) {
+    using detail::require_range;
+    const auto name = [&](const char* field) { return prefix + field; };
+    require_range(name("duty").c_str(), c.duty, 1e-6, 1.0, " (share of the time)");
+    require_range(name("burst_s").c_str(), c.burst_s, 1e-6, 1e6, " s");
+    require_range(name("on_share").c_str(), c.on_share, 1e-6, 1.0 - 1e-6, " (share of a hot pixel's events)");
+    require_range(name("alternation").c_str(), c.alternation, 0.0, 1.0, " (share of successive events)");
+    if (c.alternation > 2.0 * std::min(c.on_share, 1.0 - c.on_share) * (1.0 + 1e-12))
+        throw std::invalid_argument(name("alternation") + " must be at most 2 min(" + name("on_share") + ", 1 - " +
+                                    name("on_share") + ") (a chain that is ON a share s of the time switches at most "
+                                    "2 min(s, 1 - s) of its events); got " + name("alternation") + "=" +
+                                    detail::fmt(c.alternation) + " with " + name("on_share") + "=" +
+                                    detail::fmt(c.on_share));
+}
+
 /// Throws std::invalid_argument naming the first parameter out of range and its value.
 inline void validate(const PixelParams& p) {
     using detail::require_range;
@@ -235,16 +270,7 @@ inline void validate(const PixelParams& p) {
     require_range("hot_pixel_fraction", p.hot_pixel_fraction, 0.0, 1.0, "");
     require_range("hot_pixel_rate_hz", p.hot_pixel_rate_hz, 0.0, 1e6, " Hz");
     require_range("hot_pixel_rate_sigma", p.hot_pixel_rate_sigma, 0.0, 3.0, " (natural-log units)");
-    require_range("hot_pixel_duty", p.hot_pixel_duty, 1e-6, 1.0, " (share of the time)");
-    require_range("hot_pixel_burst_s", p.hot_pixel_burst_s, 1e-6, 1e6, " s");
-    require_range("hot_pixel_on_share", p.hot_pixel_on_share, 1e-6, 1.0 - 1e-6, " (share of a hot pixel's events)");
-    require_range("hot_pixel_alternation", p.hot_pixel_alternation, 0.0, 1.0, " (share of successive events)");
-    if (p.hot_pixel_alternation > 2.0 * std::min(p.hot_pixel_on_share, 1.0 - p.hot_pixel_on_share) * (1.0 + 1e-12))
-        throw std::invalid_argument("hot_pixel_alternation must be at most 2 min(hot_pixel_on_share, 1 - "
-                                    "hot_pixel_on_share) (a chain that is ON a share s of the time switches at most "
-                                    "2 min(s, 1 - s) of its events); got hot_pixel_alternation=" +
-                                    detail::fmt(p.hot_pixel_alternation) + " with hot_pixel_on_share=" +
-                                    detail::fmt(p.hot_pixel_on_share));
+    validate_hot_chain(hot_chain_of(p), "hot_pixel_");
     if (p.noise_model == NoiseModel::Continuous && p.dark_model == DarkModel::Paper)
         throw std::invalid_argument("dark_model='paper' (eq. 4: Poisson(rate) electrons per sample, whatever dt) is a "
                                     "per-sample model; use it with noise_model='sampled'");
@@ -296,6 +322,7 @@ struct PixelState {
     double hot_last_t = -std::numeric_limits<double>::infinity();  ///< last event (for the dead time)
     std::uint64_t hot_count = 0, hot_switches = 0;
     std::uint8_t hot_pol = 0, hot_active = 1;
+    std::uint16_t hot_chain = 0;  ///< PixelModel::hot_chains index: 0 the params', else the pixel's own
     /// Continuous model: what is left of the exponential budgets of eq. 12's ON and OFF clocks.
     double bg_clock_on = 0.0, bg_clock_off = 0.0;
 };
@@ -655,10 +682,22 @@ struct PixelModel {
     bool continuous = false;      ///< NoiseModel::Continuous
     double bg_on_hz = 0, bg_off_hz = 0;  ///< eq. 12's R_n per polarity
     double inv_i_max = 0;                ///< 1 / I_max of eq. 12
-    /// A hot pixel's chance to switch polarity after an event, from OFF [0] and from ON [1];
-    /// strict alternation (both 1) takes no random number.
-    double hot_switch[2] = {1.0, 1.0};
-    bool hot_strict = true;
+    /// A hot pixel's chain, as the comparator uses it: its telegraph's duty and mean burst, and
+    /// its chance to switch polarity after an event, from OFF [0] and from ON [1] (strict
+    /// alternation, both 1, takes no random number).
+    struct HotChainTerms {
+        HotPixelChain chain;
+        double switch_p[2] = {1.0, 1.0};
+        bool strict = true;
+        explicit HotChainTerms(const HotPixelChain& c) : chain(c) {
+            switch_p[1] = std::min(1.0, c.alternation / (2.0 * c.on_share));
+            switch_p[0] = std::min(1.0, c.alternation / (2.0 * (1.0 - c.on_share)));
+            strict = switch_p[0] >= 1.0 && switch_p[1] >= 1.0;
+        }
+    };
+    /// [0]: PixelParams' chain; [k]: the chains a sensor gave pixels of their own
+    /// (PixelState::hot_chain = k).
+    std::vector<HotChainTerms> hot_chains;
     bool leak_off = false;  ///< LeakPolarity::Off: the leak drifts d = y - ref down, to OFF
 
     explicit PixelModel(const PixelParams& params) : p(params) {
@@ -671,9 +710,7 @@ struct PixelModel {
         bg_on_hz = p.shot_noise_on_rate_hz.value_or(p.shot_noise_rate_hz);
         bg_off_hz = p.shot_noise_off_rate_hz.value_or(p.shot_noise_rate_hz);
         inv_i_max = 1.0 / p.shot_noise_i_max_a;
-        hot_switch[1] = std::min(1.0, p.hot_pixel_alternation / (2.0 * p.hot_pixel_on_share));
-        hot_switch[0] = std::min(1.0, p.hot_pixel_alternation / (2.0 * (1.0 - p.hot_pixel_on_share)));
-        hot_strict = hot_switch[0] >= 1.0 && hot_switch[1] >= 1.0;
+        hot_chains.assign(1, HotChainTerms(hot_chain_of(p)));
         leak_off = p.leak_polarity == LeakPolarity::Off;
     }
 
@@ -736,8 +773,10 @@ struct PixelModel {
 
     /// The properties of one pixel that do not change in a run (a pure function of seed and
     /// pixel): thresholds with their mismatch, leak and background rates with their spread,
-    /// and whether it is hot. hot_rate_hz >= 0 replaces the drawn hot rate (an explicit map).
-    void init_pixel(PixelState& s, Philox4x32Key key, std::uint32_t pixel, double hot_rate_hz = -1.0) const {
+    /// and whether it is hot. hot_rate_hz >= 0 replaces the drawn hot rate (an explicit map);
+    /// hot_chain picks the pixel's chain in hot_chains.
+    void init_pixel(PixelState& s, Philox4x32Key key, std::uint32_t pixel, double hot_rate_hz = -1.0,
+                    std::uint16_t hot_chain = 0) const {
         s.theta_on = theta_with_sigma(p.theta_on, key, pixel, PURPOSE_MISMATCH_ON);
         s.theta_off = theta_with_sigma(p.theta_off, key, pixel, PURPOSE_MISMATCH_OFF);
         const Philox4x32Counter a = philox4x32({0u, 0u, pixel, PURPOSE_PIXEL}, key);
@@ -762,8 +801,9 @@ struct PixelModel {
                            : 0.0;
         }
         // The chain's stationary polarity (the low bit, as before, at an even share).
-        s.hot_pol = static_cast<std::uint8_t>(p.hot_pixel_on_share == 0.5 ? (b[3] & 1u)
-                                                                          : uniform_open(b[3]) < p.hot_pixel_on_share);
+        s.hot_chain = hot_chain;
+        const double on_share = hot_chains[hot_chain].chain.on_share;
+        s.hot_pol = static_cast<std::uint8_t>(on_share == 0.5 ? (b[3] & 1u) : uniform_open(b[3]) < on_share);
     }
 
     /// The first sample of a run: the noise-free state starts at the steady state of the mean
@@ -854,9 +894,10 @@ struct PixelModel {
             // The telegraph's state and the clocks as they stand in the steady state: active
             // with probability duty, and (exponential waits being memoryless) fresh waits.
             const Philox4x32Counter h = philox4x32({2u, 0u, pixel, PURPOSE_INIT}, key);
-            const bool bursts = p.hot_pixel_duty < 1.0;
-            s.hot_active = !bursts || uniform_open(h[0]) < p.hot_pixel_duty;
-            if (bursts) s.hot_switch_t = t - std::log(uniform_open(h[1])) * hot_dwell_s(s.hot_active);
+            const double duty = hot_chains[s.hot_chain].chain.duty;
+            const bool bursts = duty < 1.0;
+            s.hot_active = !bursts || uniform_open(h[0]) < duty;
+            if (bursts) s.hot_switch_t = t - std::log(uniform_open(h[1])) * hot_dwell_s(s);
             if (s.hot_active) s.hot_event_t = t - std::log(uniform_open(w[3])) / s.hot_hz;
             s.next_hot_t = std::min(s.hot_event_t, s.hot_switch_t);
         }
@@ -912,9 +953,10 @@ struct PixelModel {
         g2 = normal_ziggurat(w1, more);
     }
 
-    /// Mean time a hot pixel stays active (or quiet) [s].
-    double hot_dwell_s(bool active) const {
-        return active ? p.hot_pixel_burst_s : p.hot_pixel_burst_s * (1.0 - p.hot_pixel_duty) / p.hot_pixel_duty;
+    /// Mean time a hot pixel stays in its present state, active or quiet [s].
+    double hot_dwell_s(const PixelState& s) const {
+        const HotPixelChain& c = hot_chains[s.hot_chain].chain;
+        return s.hot_active ? c.burst_s : c.burst_s * (1.0 - c.duty) / c.duty;
     }
 
     /// A hot pixel's events up to t1 (its own Poisson clock with dead time, polarities from
@@ -932,7 +974,8 @@ struct PixelModel {
                                                         static_cast<std::uint32_t>(s.hot_count >> 32), pixel, PURPOSE_HOT},
                                                        key);
                 // The next polarity: the same draw's second word decides a switch.
-                if (hot_strict || uniform_open(w[1]) < hot_switch[s.hot_pol]) s.hot_pol ^= 1u;
+                const HotChainTerms& chain = hot_chains[s.hot_chain];
+                if (chain.strict || uniform_open(w[1]) < chain.switch_p[s.hot_pol]) s.hot_pol ^= 1u;
                 s.hot_event_t += p.refractory_s - std::log(uniform_open(w[0])) / s.hot_hz;
             } else {
                 ++s.hot_switches;
@@ -942,7 +985,7 @@ struct PixelModel {
                                                        key);
                 const double now = s.hot_switch_t;
                 s.hot_active ^= 1u;
-                s.hot_switch_t = now - std::log(uniform_open(w[0])) * hot_dwell_s(s.hot_active);
+                s.hot_switch_t = now - std::log(uniform_open(w[0])) * hot_dwell_s(s);
                 s.hot_event_t = s.hot_active ? std::max(now, s.hot_last_t + p.refractory_s) -
                                                    std::log(uniform_open(w[1])) / s.hot_hz
                                              : std::numeric_limits<double>::infinity();

@@ -162,7 +162,8 @@ public:
         stopped_ = false;
         for (std::size_t i = 0; i < state_.size(); ++i) {
             state_[i] = PixelState{};
-            model_.init_pixel(state_[i], key_, static_cast<std::uint32_t>(i), hot_map_.empty() ? -1.0 : hot_map_[i]);
+            model_.init_pixel(state_[i], key_, static_cast<std::uint32_t>(i), hot_map_.empty() ? -1.0 : hot_map_[i],
+                              hot_chain_map_.empty() ? std::uint16_t{0} : hot_chain_map_[i]);
         }
         samples_ = 0;
         last_t_ = -std::numeric_limits<double>::infinity();
@@ -182,6 +183,41 @@ public:
                                             std::to_string(i / width_) + ", " + std::to_string(i % width_) + "]=" +
                                             detail::fmt(rates_hz[i]));
         hot_map_ = rates_hz;
+        reset();
+    }
+
+    /// Most pixels with a hot-pixel chain of their own (PixelState::hot_chain is 16 bits).
+    static constexpr std::size_t MAX_HOT_PIXEL_CHAINS = 65535;
+
+    /// Hot pixels with a telegraph and polarity chain of their own: pixels[k] (row-major
+    /// index) fires by chains[k] in place of the params' hot_pixel_duty, _burst_s, _on_share
+    /// and _alternation, whenever it is hot (by the draw or the explicit map). Empty = every
+    /// pixel back to the params' chain. Resets the sensor (a property of the pixels). A pixel
+    /// without one of its own draws exactly what it drew before.
+    void set_hot_pixel_chains(const std::vector<std::uint32_t>& pixels, const std::vector<HotPixelChain>& chains) {
+        if (pixels.size() != chains.size())
+            throw std::invalid_argument("hot pixel chains: pixels and chains must have the same length; got " +
+                                        std::to_string(pixels.size()) + " pixels and " + std::to_string(chains.size()) +
+                                        " chains");
+        if (pixels.size() > MAX_HOT_PIXEL_CHAINS)
+            throw std::invalid_argument("hot pixel chains: at most " + std::to_string(MAX_HOT_PIXEL_CHAINS) +
+                                        " pixels may have a chain of their own; got " + std::to_string(pixels.size()));
+        std::vector<std::uint16_t> chain_map(pixels.empty() ? 0 : state_.size(), 0);
+        for (std::size_t k = 0; k < pixels.size(); ++k) {
+            const std::string name = "hot_pixel_chains[" + std::to_string(k) + "].";
+            if (pixels[k] >= state_.size())
+                throw std::invalid_argument(name + "pixel must be a row-major index below " +
+                                            std::to_string(state_.size()) + "; got " + std::to_string(pixels[k]));
+            if (chain_map[pixels[k]] != 0)
+                throw std::invalid_argument(name + "pixel " + std::to_string(pixels[k]) + " (x, y) = (" +
+                                            std::to_string(pixels[k] % width_) + ", " +
+                                            std::to_string(pixels[k] / width_) + ") has a chain already");
+            validate_hot_chain(chains[k], name);
+            chain_map[pixels[k]] = static_cast<std::uint16_t>(k + 1);
+        }
+        model_.hot_chains.resize(1, model_.hot_chains.front());
+        for (const HotPixelChain& c : chains) model_.hot_chains.emplace_back(c);
+        hot_chain_map_ = std::move(chain_map);
         reset();
     }
 
@@ -884,6 +920,7 @@ private:
     std::size_t blocks_in_call_ = 0, samples_in_call_ = 0;
     std::vector<std::uint8_t> labels_;
     std::vector<double> hot_map_;
+    std::vector<std::uint16_t> hot_chain_map_;  ///< per pixel, its hot_chains index (empty: all 0)
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;
     std::atomic<std::size_t> events_in_call_{0};
     bool stopped_ = false;

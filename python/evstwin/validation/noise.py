@@ -193,14 +193,18 @@ class NoiseCalibration:
             share = float(min(1.0 - 1e-3, max(1e-3, sum(h.on for h in self.hot) / n.sum())))
             alternation = float(np.average([h.alternation for h in self.hot], weights=np.maximum(n - 1.0, 1e-9)))
             table["hot_pixel_on_share"] = _round(share)
-            table["hot_pixel_alternation"] = min(_round(alternation), 2.0 * min(table["hot_pixel_on_share"],
-                                                                                 1.0 - table["hot_pixel_on_share"]))
+            table["hot_pixel_alternation"] = min(_round(alternation), _at_most(2.0 * min(table["hot_pixel_on_share"],
+                                                                                          1.0 - table["hot_pixel_on_share"])))
         return table
 
     def hot_pixel_table(self) -> dict[str, Any]:
-        """``[hot_pixels] pixels = [[x, y, r], ...]``, coordinates relative to the window."""
+        """``[hot_pixels] pixels = [{x, y, rate_hz, duty, burst_s, on_share, alternation}, ...]``:
+        each hot pixel with its own telegraph and polarity chain (``evstwin.HotPixelChain``; real
+        hot pixels differ: the IMX636 recording has one ON 0.59 of its events and one 0.98),
+        coordinates relative to the window."""
         x0, y0 = self.roi[:2]
-        return {"pixels": [[h.x - x0, h.y - y0, _round(h.engine_rate_hz)] for h in self.hot]}
+        return {"pixels": [{"x": h.x - x0, "y": h.y - y0, "rate_hz": _round(h.engine_rate_hz), **_chain_of(h)}
+                           for h in self.hot]}
 
     def scenario(self) -> dict[str, Any]:
         """The scenario fragment as a dict (what :meth:`to_toml` writes under its header)."""
@@ -230,7 +234,8 @@ class NoiseCalibration:
             pixel += (f"# refractory_s = {_round(self.refractory_s)}  # measured (an upper bound on the dead "
                       "time); uncomment to use it\n")
         parts.append(pixel)
-        rows = "".join(f"    [{x}, {y}, {r!r}],\n" for x, y, r in s["hot_pixels"]["pixels"])
+        rows = "".join("    { " + ", ".join(f"{k} = {v!r}" for k, v in entry.items()) + " },\n"
+                       for entry in s["hot_pixels"]["pixels"])
         parts.append(f"[hot_pixels]\npixels = [\n{rows}]\n" if rows else "[hot_pixels]\npixels = []\n")
         return "\n".join(p.rstrip("\n") + "\n" for p in parts)
 
@@ -267,6 +272,8 @@ class NoiseCalibration:
             "  the median's); rate while active rho = 1 / mean interval below g;",
             "  duty = events / (rho duration); burst = q duty / (1 - duty), q = mean excess of the gaps over g;",
             "  engine rate r = rho / (1 - rho d), d the dead time",
+            "- [hot_pixels]: each hot pixel with its own chain (duty, burst_s, on_share = ON / all, kept in",
+            "  [1e-3, 1 - 1e-3], and alternation); [pixel] hot_pixel_* hold their medians, for drawn hot pixels",
             "- refractory: the k-th shortest of the n intervals of the hot and busiest pixels, k = max(1, n / 1000)",
             "- all measured background goes into eq. 12 (leak_rate_hz = 0): keep the thresholds high enough that",
             "  the filtered shot noise does not cross them in the dark (check: simulate this file, compare rates)",
@@ -322,6 +329,20 @@ class NoiseCalibration:
 
 def _round(v: float) -> float:
     return float(f"{v:.4g}")
+
+
+def _at_most(bound: float) -> float:
+    """A bound written in 12 digits: within the engine's relative 1e-12 of it, and readable."""
+    return float(f"{bound:.12g}")
+
+
+def _chain_of(h: HotPixel) -> dict[str, float]:
+    """One hot pixel's own chain as the engine takes it: its duty and bursts, its ON share
+    (kept within [1e-3, 1 - 1e-3]: a pixel seen firing one polarity alone may fire the other)
+    and its alternation (at most 2 min(s, 1 - s), what a chain with that share can switch)."""
+    share = _round(min(1.0 - 1e-3, max(1e-3, h.on / max(1, h.on + h.off))))
+    return {"duty": _round(max(1e-6, min(1.0, h.duty))), "burst_s": _round(min(1e6, max(1e-6, h.burst_s))),
+            "on_share": share, "alternation": min(_round(h.alternation), _at_most(2.0 * min(share, 1.0 - share)))}
 
 
 # --- Poisson-log-normal mixture --------------------------------------------------------------
