@@ -90,6 +90,25 @@ TEST(noise_coefficients_compose_and_reach_the_stationary_law) {
     CHECK_NEAR(far.l_yz * far.l_yz + far.l_yy * far.l_yy, syy, 1e-9 * syy);
 }
 
+TEST(a_fast_pole_over_a_long_interval_keeps_finite_noise_coefficients) {
+    // phi_yz = b (e^{-aT} - e^{-bT}) / (b - a), against that closed form in long double, on
+    // both sides of a = b and where (a - b) T passes 709: a 4.3 pA pixel's 1 kHz/pA pole
+    // (a = 26,830 /s) with a 2 kHz source follower over a 50 ms pre-roll sample gave
+    // 0 x inf = NaN, and the pixel never fired again.
+    const double D = 1e-4;
+    const double cases[][3] = {{26830.0, 12566.0, 0.05}, {3000.0, 1000.0, 1e-3}, {1000.0, 3000.0, 1e-3},
+                               {12566.0, 26830.0, 0.05}, {4.4e6, 12566.0, 1e-3}, {300.0, 62.8, 10.0}};
+    for (const auto& c : cases) {
+        const double a = c[0], b = c[1], T = c[2];
+        const NoiseCoeffs k = noise_coeffs(a, b, D, T);
+        const long double la = a, lb = b, lT = T;
+        const long double expect = lb * (std::exp(-la * lT) - std::exp(-lb * lT)) / (lb - la);
+        CHECK(std::isfinite(k.phi_yz) && std::isfinite(k.l_zz) && std::isfinite(k.l_yz) && std::isfinite(k.l_yy) &&
+              std::isfinite(k.bridge_var));
+        CHECK_NEAR(k.phi_yz, static_cast<double>(expect), 1e-12 * std::fabs(static_cast<double>(expect)) + 1e-300);
+    }
+}
+
 TEST(noise_coeffs_with_kept_source_follower_terms_are_the_same_bits) {
     // NoiseCache keeps sf_terms(b, T) per interval; the coefficients must not change by a bit,
     // for two poles (near-equal rates included), the source follower alone, and the pole alone.

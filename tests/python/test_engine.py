@@ -249,6 +249,29 @@ def test_photoreceptor_pole_makes_the_pixel_slow_in_the_dark() -> None:
     assert base / i_end * 1e6 - 2 <= slow <= base / i_start * 1e6 + 2
 
 
+def test_a_bright_pixel_with_a_fast_pole_keeps_firing_after_long_samples() -> None:
+    # The imx636-pointsource pixel (pole of 1 kHz at 1 pA, 2 kHz source follower, continuous
+    # noise) at ~6e7 photons/s sampled at 20 Hz, as its 12 s pre-roll is: the pole (26,800 /s)
+    # outruns the source follower by (a - b) T > 709 and the noise's cross term was NaN, so
+    # every pixel the star's core had crossed in the pre-roll stayed silent all run. Now the
+    # same pixel, after 2 s of such samples, fires a 4x step at 1 kHz like a fresh one: ON
+    # events floor(ln 4 / theta_on) or one more (its noise).
+    from evstwin.scenario import build
+
+    params = build("imx636-pointsource").params
+    slow = np.arange(-2.0, 0.0 + 1e-9, 0.05)
+    fast = np.arange(1, 101) * 1e-3
+    t = np.concatenate([slow, fast])
+    rate = np.where(t < 0.05, 6.2e7, 4 * 6.2e7)
+    sensor = Sensor(1, 1, params, seed=3)
+    ev, trace = sensor.run_probe(rate[:, None, None], t, [(0, 0)])
+    assert np.all(np.isfinite(trace["filtered"])) and np.all(np.isfinite(trace["reference"]))
+    after = ev[ev["t"] > 49_000]  # the light ramps linearly from the sample before the step, 49 ms
+    on = int(np.sum(after["p"] == 1))
+    assert math.floor(math.log(4) / params.theta_on) <= on <= math.floor(math.log(4) / params.theta_on) + 1
+    assert np.sum(after["p"] == 0) <= 1
+
+
 NOISY = PixelParams(threshold_sigma=0.05, leak_rate_hz=2.0, shot_noise_rate_hz=1.0, refractory_s=3e-4)
 
 

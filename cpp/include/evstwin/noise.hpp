@@ -87,6 +87,16 @@ inline void ou2_covariance(double a, double b, double D, double T, double& qzz, 
     qyy = g * c * c * (h2a - 2 * hab + h2b);
 }
 
+/// How much of n_z reaches n_y over T: b (e^{-aT} - e^{-bT}) / (b - a), exp_aT = e^{-aT}.
+/// Written from the slower rate's decay, so that no factor overflows: with a faster pole
+/// (a > b) the other form, b T e^{-aT} (e^{(a-b)T} - 1) / ((a-b)T), is 0 x inf = NaN once
+/// (a - b) T passes 709 (a bright pixel's pole at 20 Hz pre-roll sampling: every pixel over
+/// ~4 pA, for good).
+inline double cross_gain(double a, double b, double T, double exp_aT) {
+    if (a <= b) return b * T * exp_aT * one_minus_exp_over((b - a) * T);
+    return b * T * std::exp(-b * T) * one_minus_exp_over((a - b) * T);
+}
+
 /// Exact coefficients of the noise over an interval T.
 ///   pole_rate_per_s: a = 2 pi f_pr (0 = no photoreceptor pole)
 ///   sf_rate_per_s:   b = 2 pi f_sf (0 = no source follower)
@@ -102,7 +112,7 @@ inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const Sf
         if (std::fabs(b - a) < 1e-4 * (a + b)) a = b * (1.0 - 2e-4);
         k.phi_zz = std::exp(-a * T);
         k.phi_yy = kept ? sf->exp_bT : std::exp(-b * T);
-        k.phi_yz = b * T * k.phi_zz * one_minus_exp_over((b - a) * T);
+        k.phi_yz = cross_gain(a, b, T, k.phi_zz);
         double qzz, qzy, qyy;
         ou2_covariance(a, b, D, T, qzz, qzy, qyy, kept ? sf->ome_2bT : nan);
         if (qzz > 0) {
@@ -115,7 +125,7 @@ inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const Sf
         double hzz, hzy, hyy;
         ou2_covariance(a, b, D, h, hzz, hzy, hyy, kept ? sf->ome_2bh : nan);
         const double pzz = std::exp(-a * h), pyy = kept ? sf->exp_bh : std::exp(-b * h);
-        const double pyz = b * h * pzz * one_minus_exp_over((b - a) * h);
+        const double pyz = cross_gain(a, b, h, pzz);
         // P = Ph Qh (rows of Ph times Qh): [[pzz, 0], [pyz, pyy]] [[hzz, hzy], [hzy, hyy]]
         const double Pzz = pzz * hzz, Pzy = pzz * hzy;
         const double Pyz = pyz * hzz + pyy * hzy, Pyy = pyz * hzy + pyy * hyy;
