@@ -211,8 +211,15 @@ theta_off = 0.21
 
 [hot_pixels]
 # The recording's hot pixel, 1170 Hz while active (the preset's telegraph duty 0.13 and
-# 46 ms bursts apply): 1447 events in 10.77 s, measured by evstwin calibrate-noise.
-pixels = [[187, 261, 1170.0]]
+# 46 ms bursts apply): 1447 events in 10.77 s, measured by evstwin calibrate-noise. And its
+# leaky pixel in the dark corner: 113 events, 111 ON, all but 6 of them in one second (5.2 to
+# 6.3 s), with its own chain as `evstwin calibrate-noise RAW --roi 980,520,300,200` wrote it
+# (104.5 Hz while active, duty 0.10, bursts of 0.10 s: the rule splits that second at its
+# longest intervals; ON 0.98 of its events, 4 % alternating).
+pixels = [
+    [187, 261, 1170.0],
+    { x = 1224, y = 658, rate_hz = 104.5, duty = 0.1018, burst_s = 0.09983, on_share = 0.9823, alternation = 0.0354 },
+]
 
 """
 """The scenario's [pixel] and [hot_pixels] tables, shared with bench/imx636_halo_trial.py."""
@@ -222,7 +229,7 @@ HEADER = """\
 # The real recording ../shared/data/imx636_pointsource_evt3.raw (Prophesee EVK4, IMX636
 # 1280 x 720, 10.77 s, 1,218,618 events: 553,295 ON, 665,323 OFF) as a scenario: a bright
 # scintillating star with a seeing halo and diffraction spikes, two fainter field sources
-# that move with it, the sensor's hot pixel at (187, 261) and the imx636 preset's calibrated
+# that move with it, the sensor's hot and leaky pixels and the imx636 preset's calibrated
 # dark background. Written by `python bench/make_imx636_pointsource.py --gain {gain} --toml
 # OUT` (the numbers below were measured from the recording by that script; the README's
 # "A real point-source recording" gives how close it gets and what it leaves out).

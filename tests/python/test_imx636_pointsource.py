@@ -26,9 +26,14 @@ def test_listed_and_built() -> None:
     assert (scene.width, scene.height, scene.preset.name) == (1280, 720, "imx636")
     assert [t.label for t in scene.targets] == ["star", "companion1", "companion2", "ghost"]
     assert scene.duration_s == pytest.approx(10.77)
-    # the recording's hot pixel, as an explicit map (the preset's draw is replaced)
+    # the recording's hot pixel and its leaky one, as an explicit map (the preset's draw is
+    # replaced); the leaky pixel with its own chain (98 % ON, calibrate-noise's figures)
     assert scene.hot_pixel_rates_hz is not None
-    assert scene.hot_pixel_rates_hz[261, 187] == 1170.0 and np.count_nonzero(scene.hot_pixel_rates_hz) == 1
+    assert scene.hot_pixel_rates_hz[261, 187] == 1170.0 and scene.hot_pixel_rates_hz[658, 1224] == 104.5
+    assert np.count_nonzero(scene.hot_pixel_rates_hz) == 2
+    assert list(scene.hot_pixel_chains) == [(1224, 658)]
+    leaky = scene.hot_pixel_chains[(1224, 658)]
+    assert leaky.on_share == 0.9823 and leaky.duty == pytest.approx(0.1018)
     # the preset's calibrated dark background is kept
     assert scene.params.shot_noise_on_rate_hz == 2.2e-4 and scene.params.shot_noise_off_rate_hz == 1.69e-3
     # overridden thresholds stay a sensible contrast step (20-30 %), OFF below ON
