@@ -1,7 +1,11 @@
 """The IMX636 point-source recording against a twin with a scattered-light halo, image motion
 and a pre-roll (issue 10): ``python bench/imx636_halo_trial.py --write OUT.toml`` writes the
 trial scenario, ``python bench/imx636_halo_trial.py --radial TWIN [TWIN ...]`` prints the
-per-radius table below for the recording and for simulated files.
+per-radius table below for the recording and for simulated files, and ``python
+bench/imx636_halo_trial.py --hot-draws N`` the built-in scenario's hot and leaky pixels' event
+counts over N seeds (each alone: a one-pixel sensor with the scenario's pixel, its rate and its
+chain; no light, no other noise) against the recording's, since one run is one draw of a few
+bursts.
 
 The trial scenario is ``imx636-pointsource`` with:
 
@@ -170,6 +174,38 @@ def rings(path: str, twin: bool) -> None:
               + " ".join(f"{v:.3f}" for v in shares))
 
 
+def hot_draws(raw: str, n_seeds: int) -> None:
+    """Each listed hot pixel of the built-in scenario alone, over n_seeds seeds: its events in
+    the recording's duration (mean, sd, the share within 20 % of the real count)."""
+    from evstwin import Sensor
+    from evstwin.scenario import build
+
+    scene = build("imx636-pointsource")
+    assert scene.hot_pixel_rates_hz is not None
+    params = scene.params.replace(photon_shot_noise=False, dark_model="none", shot_noise_rate_hz=0.0,
+                                  shot_noise_on_rate_hz=0.0, shot_noise_off_rate_hz=0.0, leak_rate_hz=0.0)
+    t_s = np.linspace(0.0, scene.duration_s, int(scene.duration_s * 100) + 1)
+    light = np.full((t_s.size, 1, 1), 1e9)
+    t, x, y, p = load(raw, False)
+    print(f"hot pixels of imx636-pointsource alone over {n_seeds} seeds, {scene.duration_s:g} s "
+          "(real: all the recording's events at the pixel)")
+    for yy, xx in zip(*np.nonzero(scene.hot_pixel_rates_hz)):
+        chain = scene.hot_pixel_chains.get((int(xx), int(yy)))
+        counts = np.empty(n_seeds)
+        on = np.empty(n_seeds)
+        for seed in range(n_seeds):
+            sensor = Sensor(1, 1, params, seed=seed, hot_pixel_rates_hz=[[scene.hot_pixel_rates_hz[yy, xx]]],
+                            hot_pixel_chains=None if chain is None else {(0, 0): chain})
+            ev = sensor.run(light, t_s)
+            counts[seed], on[seed] = len(ev), int(ev["p"].sum())
+        here = (x == xx) & (y == yy)
+        real, real_on = int(here.sum()), int(p[here].sum())
+        within = np.mean(np.abs(counts / real - 1.0) <= 0.2)
+        print(f"  ({xx}, {yy}) {'own chain' if chain else 'preset chain'}: {counts.mean():.1f} +- {counts.std():.1f} "
+              f"events ({on.mean():.1f} ON), real {real} ({real_on} ON); within 20 % of it in "
+              f"{100 * within:.0f} % of the seeds")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--raw", default=RAW)
@@ -183,11 +219,14 @@ def main() -> None:
     ap.add_argument("--halo-fwhm", type=float, default=100.0)
     ap.add_argument("--halo-beta", type=float, default=1.5)
     ap.add_argument("--pre-roll", type=float, default=12.0)
+    ap.add_argument("--hot-draws", type=int, metavar="N", help="the hot pixels' counts over N seeds")
     ap.add_argument("--motion-scale", type=float, default=1.2,
                     help="the image motion before the slew times this (the centroid understates it)")
     a = ap.parse_args()
     if a.write:
         write_trial(a.write, a)
+    if a.hot_draws:
+        hot_draws(a.raw, a.hot_draws)
     if a.radial is not None:
         rings(a.raw, twin=False)
         for path in a.radial:
