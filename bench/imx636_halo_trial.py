@@ -223,6 +223,8 @@ def main() -> None:
     ap.add_argument("--motion-scale", type=float, default=1.2,
                     help="the image motion before the slew times this (the centroid understates it)")
     a = ap.parse_args()
+    if a.hot_draws is not None and a.hot_draws < 1:
+        ap.error(f"--hot-draws must be at least 1; got {a.hot_draws}")
     if a.write:
         write_trial(a.write, a)
     if a.hot_draws:

@@ -214,8 +214,9 @@ theta_off = 0.21
 # 46 ms bursts apply): 1447 events in 10.77 s, measured by evstwin calibrate-noise. And its
 # leaky pixel in the dark corner: 113 events, 111 ON, all but 6 of them in one second (5.2 to
 # 6.3 s), with its own chain as `evstwin calibrate-noise RAW --roi 980,520,300,200` wrote it
-# (104.5 Hz while active, duty 0.10, bursts of 0.10 s: the rule splits that second at its
-# longest intervals; ON 0.98 of its events, 4 % alternating).
+# (engine rate 104.5 Hz, 103.1 Hz while active after the 130 us dead time; duty 0.10, bursts
+# of 0.10 s: the rule splits that second at its longest intervals; ON 0.98 of its events, 4 %
+# alternating).
 pixels = [
     [187, 261, 1170.0],
     { x = 1224, y = 658, rate_hz = 104.5, duty = 0.1018, burst_s = 0.09983, on_share = 0.9823, alternation = 0.0354 },

@@ -1064,6 +1064,9 @@ MAX_HOT_PIXEL_RATE_HZ = 1e6
 """The engine's largest hot-pixel rate [Hz] (``Sensor::set_hot_pixel_rates``)."""
 
 
+MAX_HOT_PIXEL_CHAINS = int(_core.Sensor.MAX_HOT_PIXEL_CHAINS)
+"""Most pixels with a chain of their own (``Sensor::set_hot_pixel_chains``: a 16-bit index)."""
+
 HOT_PIXEL_CHAIN_KEYS = ("duty", "burst_s", "on_share", "alternation")
 """The keys of a ``[hot_pixels] pixels`` table entry that give the pixel a chain of its own."""
 
@@ -1095,11 +1098,16 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int,
         raise ScenarioError(f"hot_pixels.pixels must be an array of [x, y, rate_hz] or {{x, y, rate_hz, ...}}; got "
                             f"{pixels!r}")
     chains: dict[tuple[int, int], HotPixelChain] = {}
+    listed: dict[tuple[int, int], int] = {}
     for i, entry in enumerate(pixels):
         key = f"hot_pixels.pixels[{i}]"
         x, y, r, own = _hot_pixel_entry(key, entry)
         if not (0 <= x < width and 0 <= y < height):
             raise ScenarioError(f"{key}={entry!r} lies off the {width}x{height} sensor")
+        if (x, y) in listed:
+            raise ScenarioError(f"{key}: pixel (x, y) = ({x}, {y}) is listed twice, also as "
+                                f"hot_pixels.pixels[{listed[(x, y)]}]")
+        listed[(x, y)] = i
         if not 0.0 <= r <= MAX_HOT_PIXEL_RATE_HZ:
             raise ScenarioError(f"{key}: rate_hz must be in [0, {MAX_HOT_PIXEL_RATE_HZ:g}]; got {entry!r}")
         rates[y, x] = r
@@ -1114,10 +1122,13 @@ def _hot_pixel_map(table: dict[str, Any] | None, width: int, height: int,
                 _core.validate_hot_pixel_chain(fields["duty"], fields["burst_s"], fields["on_share"],
                                                fields["alternation"], f"{key}.")
             except ValueError as exc:
-                raise ScenarioError(str(exc)) from None
+                inherited = [f"{name} from pixel.hot_pixel_{name}" for name in HOT_PIXEL_CHAIN_KEYS
+                             if name not in own and not (name == "alternation" and "on_share" in own)]
+                raise ScenarioError(str(exc) + (f" ({', '.join(inherited)})" if inherited else "")) from None
             chains[(x, y)] = HotPixelChain(**fields)
-        else:
-            chains.pop((x, y), None)
+    if len(chains) > MAX_HOT_PIXEL_CHAINS:
+        raise ScenarioError(f"hot_pixels.pixels: at most {MAX_HOT_PIXEL_CHAINS} pixels may have a chain of their own; "
+                            f"got {len(chains)}")
     return rates, chains
 
 

@@ -112,6 +112,8 @@ class Sensor:
             self._set_hot_pixel_chains(hot_pixel_chains)
 
     def _set_hot_pixel_chains(self, chains: Mapping[tuple[int, int], HotPixelChain]) -> None:
+        if not isinstance(chains, Mapping):
+            raise TypeError(f"hot_pixel_chains must be a mapping {{(x, y): HotPixelChain}}; got {type(chains).__name__}")
         width, height = self._core.width, self._core.height
         if len(chains) > int(_core.Sensor.MAX_HOT_PIXEL_CHAINS):
             raise ValueError(f"hot_pixel_chains may hold at most {int(_core.Sensor.MAX_HOT_PIXEL_CHAINS)} pixels; got "

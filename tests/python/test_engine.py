@@ -251,18 +251,23 @@ def test_photoreceptor_pole_makes_the_pixel_slow_in_the_dark() -> None:
 
 def test_a_bright_pixel_with_a_fast_pole_keeps_firing_after_long_samples() -> None:
     # The imx636-pointsource pixel (pole of 1 kHz at 1 pA, 2 kHz source follower, continuous
-    # noise) at ~6e7 photons/s sampled at 20 Hz, as its 12 s pre-roll is: the pole (26,800 /s)
-    # outruns the source follower by (a - b) T > 709 and the noise's cross term was NaN, so
-    # every pixel the star's core had crossed in the pre-roll stayed silent all run. Now the
-    # same pixel, after 2 s of such samples, fires a 4x step at 1 kHz like a fresh one: ON
-    # events floor(ln 4 / theta_on) or one more (its noise).
+    # noise), bright, sampled at 20 Hz as its 12 s pre-roll is: once the pole outruns the
+    # source follower by (a - b) T > 709 the noise's cross term was 0 x inf = NaN, and every
+    # pixel the star's core had crossed in the pre-roll stayed silent all run. Here 2e8
+    # photons/s puts (a - b) T well past it; the pixel, after 2 s of such samples, fires a 4x
+    # step at 1 kHz like a fresh one: ON events floor(ln 4 / theta_on) or one more (its noise).
     from evstwin.scenario import build
 
     params = build("imx636-pointsource").params
+    level = 2e8
+    current_a = (level * params.electrons_per_photon + params.dark_rate_e_per_s) * E
+    a = 2 * math.pi * params.pr_cutoff_ref_hz * current_a / params.pr_ref_current_a
+    b = 2 * math.pi * params.cutoff_hz
+    assert (a - b) * 0.05 > 1000  # far past exp's overflow at 709
     slow = np.arange(-2.0, 0.0 + 1e-9, 0.05)
     fast = np.arange(1, 101) * 1e-3
     t = np.concatenate([slow, fast])
-    rate = np.where(t < 0.05, 6.2e7, 4 * 6.2e7)
+    rate = np.where(t < 0.05, level, 4 * level)
     sensor = Sensor(1, 1, params, seed=3)
     ev, trace = sensor.run_probe(rate[:, None, None], t, [(0, 0)])
     assert np.all(np.isfinite(trace["filtered"])) and np.all(np.isfinite(trace["reference"]))

@@ -298,11 +298,14 @@ def test_hot_pixels_flicker_in_bursts_with_the_duty_and_burst_length_given() -> 
 def test_a_hot_pixel_with_a_chain_of_its_own_fires_by_it_and_the_others_are_untouched() -> None:
     from evstwin import HotPixelChain
 
-    # Every pixel hot at 200 Hz with 0.1 ms dead time, the params' chain strict alternation.
-    # (1, 2) fires ON a share 0.9, each polarity drawn afresh (alternation 2 s (1 - s) = 0.18);
-    # (3, 0) flickers in bursts (duty 0.25). Every other pixel must fire exactly as without.
+    # Every pixel hot at 200 Hz with 0.1 ms dead time; the params' chain bursts (duty 0.3) and
+    # draws its polarities (ON 0.7, alternation 0.4), so every part of it is exercised.
+    # (1, 2) fires ON a share 0.9, each polarity drawn afresh (alternation 2 s (1 - s) = 0.18),
+    # always active; (3, 0) flickers in bursts (duty 0.25) in strict alternation. Every other
+    # pixel must fire exactly as without.
     params = PixelParams(photon_shot_noise=False, dark_model="none", shot_noise_rate_hz=0.0, leak_rate_hz=0.0,
-                         refractory_s=1e-4)
+                         refractory_s=1e-4, hot_pixel_duty=0.3, hot_pixel_burst_s=0.05, hot_pixel_alternation=0.4,
+                         hot_pixel_on_share=0.7)
     hot = np.full((4, 4), 200.0)
     t = np.arange(0, 3001) / 100.0
     frames = np.full((len(t), 4, 4), 1e9)
@@ -324,7 +327,8 @@ def test_a_hot_pixel_with_a_chain_of_its_own_fires_by_it_and_the_others_are_unto
     assert abs(len(share) - 30 * r_eff) < 5 * math.sqrt(30 * r_eff)
     assert abs(share.mean() - 0.9) < 5 * math.sqrt(0.09 / len(share)), share.mean()  # independent draws
     switched = np.mean(share[1:] != share[:-1])
-    assert abs(switched - 0.18) < 5 * math.sqrt(0.18 * 0.82 / len(share)), switched
+    # Successive switches are correlated (they share an event): their sd is ~1.33x the binomial's.
+    assert abs(switched - 0.18) < 5 * 1.33 * math.sqrt(0.18 * 0.82 / len(share)), switched
     bursty = at(own, 3, 0)
     expect = 30 * 0.25 * r_eff
     dispersion = 1 + 2 * r_eff * 0.75 ** 2 * 0.05
@@ -515,6 +519,23 @@ def test_bad_hot_pixel_tables_name_the_key(entry: dict, message: str) -> None:
 
     with pytest.raises(ScenarioError, match=message):
         build(_small_dark(hot_pixels={"pixels": [entry]}))
+
+
+def test_a_pixel_listed_twice_and_an_inherited_bad_chain_are_named() -> None:
+    from evstwin.scenario import ScenarioError, build
+
+    with pytest.raises(ScenarioError, match=r"hot_pixels.pixels\[2\]: pixel \(x, y\) = \(3, 4\) is listed twice, "
+                                            r"also as hot_pixels.pixels\[0\]"):
+        build(_small_dark(hot_pixels={"pixels": [[3, 4, 5.0], [1, 1, 5.0], {"x": 3, "y": 4, "rate_hz": 9.0}]}))
+    # An alternation of its own that the params' share (0.9) cannot keep: the message says where
+    # the share came from.
+    with pytest.raises(ScenarioError, match=r"alternation must be at most .* \(duty from pixel.hot_pixel_duty, "
+                                            r"burst_s from pixel.hot_pixel_burst_s, on_share from "
+                                            r"pixel.hot_pixel_on_share\)"):
+        build(_small_dark(pixel={"hot_pixel_alternation": 0.1, "hot_pixel_on_share": 0.9},
+                          hot_pixels={"pixels": [{"x": 1, "y": 1, "rate_hz": 5.0, "alternation": 0.5}]}))
+    with pytest.raises(TypeError, match=r"hot_pixel_chains must be a mapping \{\(x, y\): HotPixelChain\}; got list"):
+        Sensor(4, 3, hot_pixel_chains=[((0, 0), None)])  # type: ignore[arg-type]
 
 
 def test_a_hot_pixel_file_of_the_wrong_shape_is_refused(tmp_path) -> None:

@@ -273,7 +273,8 @@ class NoiseCalibration:
             "  duty = events / (rho duration); burst = q duty / (1 - duty), q = mean excess of the gaps over g;",
             "  engine rate r = rho / (1 - rho d), d the dead time",
             "- [hot_pixels]: each hot pixel with its own chain (duty, burst_s, on_share = ON / all, kept in",
-            "  [1e-3, 1 - 1e-3], and alternation); [pixel] hot_pixel_* hold their medians, for drawn hot pixels",
+            "  [1e-3, 1 - 1e-3], and alternation); [pixel] hot_pixel_* hold their medians (duty, burst) and",
+            "  event-weighted means (ON share, alternation), for drawn hot pixels",
             "- refractory: the k-th shortest of the n intervals of the hot and busiest pixels, k = max(1, n / 1000)",
             "- all measured background goes into eq. 12 (leak_rate_hz = 0): keep the thresholds high enough that",
             "  the filtered shot noise does not cross them in the dark (check: simulate this file, compare rates)",
@@ -339,7 +340,9 @@ def _at_most(bound: float) -> float:
 def _chain_of(h: HotPixel) -> dict[str, float]:
     """One hot pixel's own chain as the engine takes it: its duty and bursts, its ON share
     (kept within [1e-3, 1 - 1e-3]: a pixel seen firing one polarity alone may fire the other)
-    and its alternation (at most 2 min(s, 1 - s), what a chain with that share can switch)."""
+    and its alternation (at most 2 min(s, 1 - s), what a chain with that share can switch). A
+    pixel seen firing one polarity alone, never switching, gets alternation 0: its polarity is
+    then its initial draw (ON with probability on_share) for the whole run."""
     share = _round(min(1.0 - 1e-3, max(1e-3, h.on / max(1, h.on + h.off))))
     return {"duty": _round(max(1e-6, min(1.0, h.duty))), "burst_s": _round(min(1e6, max(1e-6, h.burst_s))),
             "on_share": share, "alternation": min(_round(h.alternation), _at_most(2.0 * min(share, 1.0 - share)))}
