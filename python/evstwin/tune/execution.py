@@ -148,9 +148,14 @@ class LocalExecutor:
 
         pool = self._pool if self._token == ctx.token and self._pool is not None else self._new_pool(ctx)
         attempts = {i: 0 for i in range(len(jobs))}
-        futures = {pool.submit(_run_installed_job, j.overrides, j.seed): i for i, j in enumerate(jobs)}
+        futures: dict[Any, int] = {}
         ok = False
         try:
+            # Submitted inside the try: the first submits spawn the workers (seconds on a loaded
+            # machine), and a Ctrl-C landing then must stop them too, not leave the interpreter
+            # waiting at exit for jobs of a minute or more.
+            for i, j in enumerate(jobs):
+                futures[pool.submit(_run_installed_job, j.overrides, j.seed)] = i
             while futures:
                 done, _ = wait(list(futures), return_when=FIRST_COMPLETED)
                 retry: list[int] = []
