@@ -2112,11 +2112,17 @@ struct PixelModel {
         nzs[m] = nz1;
         nys[m] = ny1;
         CounterStream normals(key, pixel, s.n, PURPOSE_REFINE);
+        double piece_bridge = 0.0;  // the pieces' bridge variance: noise_coeffs(a, b, D, h)'s, from step 1
         for (int step = m / 2; step >= 1; step /= 2) {
             // X_mid | X_0, X_1 for two halves of length T = step h: mean Phi X_0 + K (X_1 -
             // Phi^2 X_0), covariance Q - K Phi Q, with K = Q Phi^T (Phi Q Phi^T + Q)^-1.
             const double T = step * h;
-            const NoiseCoeffs q = noise_coeffs(a, b, D, T);
+            // Only the last level (T = h, the pieces' length) needs the bridge's variance.
+            NoiseCoeffs q = noise_coeffs_interval(a, b, D, T);
+            if (step == 1) {
+                noise_coeffs_bridge(q, a, b, D, T);
+                piece_bridge = q.bridge_var;
+            }
             const double Qzz = q.l_zz * q.l_zz, Qzy = q.l_zz * q.l_yz, Qyy = q.l_yz * q.l_yz + q.l_yy * q.l_yy;
             const double Pzz = q.phi_zz, Pyz = q.phi_yz, Pyy = q.phi_yy;  // Phi = [[Pzz, 0], [Pyz, Pyy]]
             // A = Q Phi^T
@@ -2149,7 +2155,6 @@ struct PixelModel {
         // (its end forced to the sample's own value), the comparator with the piece's bridge.
         const double pole_decay = std::exp(-a * h), pole_ramp = one_minus_exp_over(a * h);
         const double sf_decay = std::exp(-b * h), sf_ramp = one_minus_exp_over(b * h);
-        const double piece_bridge = noise_coeffs(a, b, D, h).bridge_var;
         double x_prev = s.x, z_prev = s.z, yd_prev = s.y - s.ny;
         for (int i = 1; i <= m; ++i) {
             double xi, zi, ydi;
