@@ -397,6 +397,10 @@ class _Runner:
         # comes out of the engine: its state carries over, so the chunking changes nothing.
         self.readout = None if scene.readout is None else Readout.from_params(scene.readout)
         self.readout_s = 0.0
+        # The big tables an engine call reads (the frames of a chunk, the hot pixels' fine
+        # rates), kept from call to call: fresh ones are memory the kernel must zero first
+        # (imx636-pointsource: ~0.35 GB a sub-sampled unit).
+        self._buffers: dict[str, np.ndarray] = {}
         # Base intervals per unit of the fine-sampling decision: about SUB_SAMPLED_UNIT_SAMPLES
         # fine samples at the run's fastest, so a pixel is not sampled finely long before or
         # after a source is near it (it is for the whole unit if a source touches it in it).
@@ -501,15 +505,16 @@ class _Runner:
                                         "flux_ph_s": f[keep, j]})
         return x, y, f
 
-    def frames(self, t: np.ndarray) -> np.ndarray:
-        """The photon rates on every pixel at the times t_s: (len(t), height, width) photons/s."""
+    def frames(self, t: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The photon rates on every pixel at the times t_s: (len(t), height, width) photons/s,
+        rendered into ``out`` (C-contiguous float64 of that shape) if given."""
         sc = self.scene
         if not self.moving:
             return np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
         x, y, f = self._sources(t)
         shape, cols = self._fine_groups[0]  # the scene's PSF (its core, with a halo) comes first
         frames = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
-                                   background_ph_s=self.static_map)
+                                   background_ph_s=self.static_map, out=out)
         if len(self._fine_groups) > 1:
             idx, val = self._contributions(x, y, f, self._fine_groups[1:])
             np.add.at(frames.reshape(-1), idx, val)
@@ -525,7 +530,8 @@ class _Runner:
 
     def _dense(self, t: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
-        frames = self.frames(t)
+        sc = self.scene
+        frames = self.frames(t, out=self._buffer("frames", (t.size, sc.height, sc.width)) if self.moving else None)
         s1 = time.perf_counter()
         events = self.sensor.run(frames, t)
         codes = self.sensor.last_labels() if self.labels else None
@@ -558,6 +564,15 @@ class _Runner:
                                        f[:, cols].reshape(-1), shape, offset=sample * npix)
         return parts
 
+    def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A C-contiguous float64 array of ``shape``, its memory reused from the last call with
+        this name (contents undefined). Only for tables an engine call reads and drops."""
+        size = math.prod(shape)
+        buf = self._buffers.get(name)
+        if buf is None or buf.size < size:
+            buf = self._buffers[name] = np.empty(size, np.float64)
+        return buf[:size].reshape(shape)
+
     def _with_halos(self, frames: np.ndarray, t_base: np.ndarray, t_fine: np.ndarray, hot: np.ndarray,
                     rates: np.ndarray) -> np.ndarray:
         """The base frames with the moving sources' halos added, and the halos added to the
@@ -569,7 +584,7 @@ class _Runner:
         sc = self.scene
         t_halo = np.concatenate([[t_base[0] - self.dt], t_base])
         x, y, f = self._sources(t_halo, truth=False)
-        out = np.empty(frames.shape, np.float64)
+        out = self._buffer("frames", frames.shape)
         at_hot = np.empty((t_halo.size, hot.size))
         halo = np.empty((sc.height, sc.width))
         for i in range(t_halo.size):  # one frame at a time: a unit may hold ~100 base samples
@@ -610,7 +625,7 @@ class _Runner:
         column = self._column
         column[hot] = np.arange(hot.size)
         # The rates of the hot pixels at the fine times: static light plus the moving sources.
-        rates = np.empty((n_t, hot.size), np.float64)
+        rates = self._buffer("rates", (n_t, hot.size))
         rates[:] = self.static_map.reshape(-1)[hot][None, :]
         flat_rates = rates.reshape(-1)
         for sample_of, pixel, val in parts:
