@@ -371,6 +371,11 @@ struct NoiseCache {
     /// decision, and the bridge's terms (an exp, two expm1 and five divisions) only for the
     /// pixels that might cross.
     bool bridge_ready = true;
+    /// When lazy fills pay (fill_noise_cache): +1 for a lazy fill no pixel had to complete and
+    /// for an eager one, -3 for a completion; lazy while >= 0. Over long intervals most pixels
+    /// need the bridge anyway, and then the split costs more than it saves (the bridge's terms
+    /// wait for the quiet test). Speed only: either way gives the same numbers.
+    int lazy_credit = 0;
 };
 
 /// What one pixel-sample update reports for a probe (diagnostic trace).
@@ -1892,13 +1897,15 @@ struct PixelModel {
         cache.pole_ramp = one_minus_exp_over(u);
         if (cache.sf.T != c.dt || cache.sf.b != sf_rate()) cache.sf = sf_terms(sf_rate(), c.dt);
         const double b = sf_rate();
+        if (lazy_bridge) cache.lazy_credit = std::min(cache.lazy_credit + 1, 6);  // the last fill needed no completion, or was eager
         cache.k = NoiseCoeffs{};
         cache.bridge_ready = true;
         if (cache.D > 0.0) {
             const PoleTerms pole{cache.a, c.dt, cache.pole_decay, cache.pole_ramp};
             cache.k = noise_coeffs_interval(cache.a, b, cache.D, c.dt, &cache.sf, &pole);
             // Twice q_yy bounds bridge_var (bridge_var_bounded): the bound's quiet test is safe.
-            cache.bridge_ready = !(lazy_bridge && bridge_var_bounded(cache.a, b, c.dt) && cache.k.q_yy > 0.0);
+            cache.bridge_ready = !(lazy_bridge && cache.lazy_credit >= 0 && bridge_var_bounded(cache.a, b, c.dt) &&
+                                   cache.k.q_yy > 0.0);
             if (cache.bridge_ready) noise_coeffs_bridge(cache.k, cache.a, b, cache.D, c.dt, &cache.sf, &pole);
         }
         cache.bridge_bound = bridge_bound_for(cache.bridge_ready ? cache.k.bridge_var : 2.0 * cache.k.q_yy, c);
@@ -1912,6 +1919,7 @@ struct PixelModel {
         noise_coeffs_bridge(cache.k, cache.a, sf_rate(), cache.D, c.dt, &cache.sf, &pole);
         cache.bridge_bound = bridge_bound_for(cache.k.bridge_var, c);
         cache.bridge_ready = true;
+        cache.lazy_credit = std::max(cache.lazy_credit - 4, -6);  // -3 net: the next fill adds 1
     }
     /// The quiet test's bound for a middle variance bridge_var (NoiseCache::bridge_bound), as
     /// step_continuous computes the bridge's variance over the whole interval; non-decreasing in it.
