@@ -10,9 +10,18 @@
 //                   of rates no other pixel shares
 //   fill            PixelModel::fill_noise_cache() for 200,000 distinct photon rates with the
 //                   pole: the noise coefficients of one new rate
+//   own-rates       what `evstwin simulate imx636-pointsource` does with a star and its halo:
+//                   every pixel of a 256 x 64 array at a photon rate of its own that changes
+//                   every sample (a smooth, moving glow over the dark current), the pole and a
+//                   2 kHz source follower; 20 units of one run_pixels() call (a 64 x 16 patch,
+//                   13 fine samples a base interval) and one run() call of 11 samples at 200 Hz
+//                   (the sub-sampled path). Prints the events' count and an FNV-1a digest.
+//   own-rates-pre-roll  the same array at 20 Hz in run() calls of 11 samples only, as the
+//                   scenario's 12 s pre-roll: intervals long enough for most pixels to need
+//                   the bridge's terms after all, and bright ones the refinement
 //
 //   g++ -std=c++17 -O3 -DNDEBUG -Icpp/include bench/kernel_micro.cpp -o /tmp/kernel_micro
-//   valgrind --tool=callgrind /tmp/kernel_micro fill      # or: run-pixels
+//   valgrind --tool=callgrind /tmp/kernel_micro fill      # or: run-pixels, own-rates
 //   /usr/bin/time -f "%U s" /tmp/kernel_micro short-calls 3
 #include <evstwin/evstwin.hpp>
 
@@ -87,12 +96,62 @@ int fill() {
     return 0;
 }
 
+int own_rates(bool pre_roll) {
+    evstwin::PixelParams p = mcreynolds_pixel();
+    p.cutoff_hz = 2000.0;
+    const std::size_t width = 256, height = 64, npix = width * height, base = 11, fine = 13, units = 20;
+    evstwin::Sensor sensor(static_cast<int>(width), static_cast<int>(height), p, 1, 1);
+    // A patch of 64 x 16 pixels is sampled finely (the star's core), the rest at the base rate.
+    std::vector<std::uint32_t> patch;
+    for (std::size_t y = 24; y < 40; ++y)
+        for (std::size_t x = 96; x < 160; ++x) patch.push_back(static_cast<std::uint32_t>(y * width + x));
+    const double dt = pre_roll ? 1.0 / 20.0 : 1.0 / 200.0;
+    // The glow on pixel (x, y) at time t: a wide bump moving 30 px/s across the array.
+    const auto glow = [&](std::size_t pixel, double t) {
+        const double x = static_cast<double>(pixel % width) - 60.0 - 30.0 * t, y = static_cast<double>(pixel / width) - 32.0;
+        return 3e4 + 5e5 / (1.0 + (x * x + y * y) / 900.0);
+    };
+    std::vector<double> frames(base * npix), t_base(base), rate(base * fine * patch.size()), t_fine(base * fine);
+    std::uint64_t digest = 1469598103934665603ull;
+    const auto mix = [&digest](std::uint64_t v) {
+        for (int b = 0; b < 8; ++b) digest = (digest ^ ((v >> (8 * b)) & 0xFFu)) * 1099511628211ull;
+    };
+    std::size_t n = 0;
+    const auto take = [&](const std::vector<evstwin::Event>& events) {
+        for (const auto& e : events) {
+            mix(static_cast<std::uint64_t>(e.t));
+            mix((static_cast<std::uint64_t>(e.y) << 32) | (static_cast<std::uint64_t>(e.x) << 8) | e.p);
+        }
+        n += events.size();
+    };
+    for (std::size_t i = 0; i < npix; ++i) frames[i] = glow(i, 0.0);
+    const double t0 = 0.0;
+    take(sensor.run(frames.data(), &t0, 1, nullptr, nullptr, true));
+    for (std::size_t u = 0; u < units; ++u) {
+        for (std::size_t k = 0; k < base; ++k) {
+            t_base[k] = static_cast<double>(u * base + k + 1) * dt;
+            for (std::size_t i = 0; i < npix; ++i) frames[k * npix + i] = glow(i, t_base[k]);
+            for (std::size_t f = 0; f < fine; ++f) {
+                const std::size_t j = k * fine + f;
+                t_fine[j] = f + 1 == fine ? t_base[k] : (static_cast<double>(u * base + k) + (f + 1.0) / fine) * dt;
+                for (std::size_t q = 0; q < patch.size(); ++q) rate[j * patch.size() + q] = glow(patch[q], t_fine[j]);
+            }
+        }
+        if (!pre_roll) take(sensor.run_pixels(patch.data(), patch.size(), rate.data(), t_fine.data(), t_fine.size()));
+        take(sensor.run(frames.data(), t_base.data(), base, nullptr, nullptr, true));
+    }
+    std::printf("%zu events, digest %016llx\n", n, static_cast<unsigned long long>(digest));
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
     if (argc == 3 && std::strcmp(argv[1], "short-calls") == 0) return short_calls(std::atoi(argv[2]));
     if (argc == 2 && std::strcmp(argv[1], "run-pixels") == 0) return run_pixels();
     if (argc == 2 && std::strcmp(argv[1], "fill") == 0) return fill();
-    std::fprintf(stderr, "usage: %s short-calls N | run-pixels | fill\n", argv[0]);
+    if (argc == 2 && std::strcmp(argv[1], "own-rates") == 0) return own_rates(false);
+    if (argc == 2 && std::strcmp(argv[1], "own-rates-pre-roll") == 0) return own_rates(true);
+    std::fprintf(stderr, "usage: %s short-calls N | run-pixels | fill | own-rates | own-rates-pre-roll\n", argv[0]);
     return 2;
 }

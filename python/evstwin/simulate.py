@@ -397,6 +397,10 @@ class _Runner:
         # comes out of the engine: its state carries over, so the chunking changes nothing.
         self.readout = None if scene.readout is None else Readout.from_params(scene.readout)
         self.readout_s = 0.0
+        # The big tables an engine call reads (the frames of a chunk, the hot pixels' fine
+        # rates), kept from call to call: fresh ones are memory the kernel must zero first
+        # (imx636-pointsource: ~0.35 GB a sub-sampled unit).
+        self._buffers: dict[str, np.ndarray] = {}
         # Base intervals per unit of the fine-sampling decision: about SUB_SAMPLED_UNIT_SAMPLES
         # fine samples at the run's fastest, so a pixel is not sampled finely long before or
         # after a source is near it (it is for the whole unit if a source touches it in it).
@@ -501,15 +505,16 @@ class _Runner:
                                         "flux_ph_s": f[keep, j]})
         return x, y, f
 
-    def frames(self, t: np.ndarray) -> np.ndarray:
-        """The photon rates on every pixel at the times t_s: (len(t), height, width) photons/s."""
+    def frames(self, t: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The photon rates on every pixel at the times t_s: (len(t), height, width) photons/s,
+        rendered into ``out`` (C-contiguous float64 of that shape) if given."""
         sc = self.scene
         if not self.moving:
             return np.broadcast_to(self.static_map, (t.size, sc.height, sc.width))
         x, y, f = self._sources(t)
         shape, cols = self._fine_groups[0]  # the scene's PSF (its core, with a halo) comes first
         frames = psf.render_frames(sc.width, sc.height, x[:, cols], y[:, cols], f[:, cols], shape,
-                                   background_ph_s=self.static_map)
+                                   background_ph_s=self.static_map, out=out)
         if len(self._fine_groups) > 1:
             idx, val = self._contributions(x, y, f, self._fine_groups[1:])
             np.add.at(frames.reshape(-1), idx, val)
@@ -525,7 +530,8 @@ class _Runner:
 
     def _dense(self, t: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
-        frames = self.frames(t)
+        sc = self.scene
+        frames = self.frames(t, out=self._buffer("frames", (t.size, sc.height, sc.width)) if self.moving else None)
         s1 = time.perf_counter()
         events = self.sensor.run(frames, t)
         codes = self.sensor.last_labels() if self.labels else None
@@ -539,6 +545,15 @@ class _Runner:
                        groups: Sequence[tuple[psf.PSFShape, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
         """Flat (sample * pixels + pixel) indices and photon rates of the (T, S) sources' windows,
         each group of columns through its PSF."""
+        parts = self._contribution_parts(x, y, f, groups)
+        if not parts:
+            return np.zeros(0, np.int64), np.zeros(0)
+        return np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts])
+
+    def _contribution_parts(self, x: np.ndarray, y: np.ndarray, f: np.ndarray,
+                            groups: Sequence[tuple[psf.PSFShape, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
+        """``_contributions`` as the renderer's chunks (each at most ``psf.render``'s chunk of
+        window pixels), in the order of their concatenation."""
         sc = self.scene
         npix = sc.width * sc.height
         parts: list[tuple[np.ndarray, np.ndarray]] = []
@@ -547,9 +562,16 @@ class _Runner:
             sample = np.repeat(np.arange(n_t, dtype=np.int64), n_s)
             parts += psf.contributions(sc.width, sc.height, x[:, cols].reshape(-1), y[:, cols].reshape(-1),
                                        f[:, cols].reshape(-1), shape, offset=sample * npix)
-        if not parts:
-            return np.zeros(0, np.int64), np.zeros(0)
-        return np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts])
+        return parts
+
+    def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A C-contiguous float64 array of ``shape``, its memory reused from the last call with
+        this name (contents undefined). Only for tables an engine call reads and drops."""
+        size = math.prod(shape)
+        buf = self._buffers.get(name)
+        if buf is None or buf.size < size:
+            buf = self._buffers[name] = np.empty(size, np.float64)
+        return buf[:size].reshape(shape)
 
     def _with_halos(self, frames: np.ndarray, t_base: np.ndarray, t_fine: np.ndarray, hot: np.ndarray,
                     rates: np.ndarray) -> np.ndarray:
@@ -562,7 +584,7 @@ class _Runner:
         sc = self.scene
         t_halo = np.concatenate([[t_base[0] - self.dt], t_base])
         x, y, f = self._sources(t_halo, truth=False)
-        out = np.empty(frames.shape, np.float64)
+        out = self._buffer("frames", frames.shape)
         at_hot = np.empty((t_halo.size, hot.size))
         halo = np.empty((sc.height, sc.width))
         for i in range(t_halo.size):  # one frame at a time: a unit may hold ~100 base samples
@@ -573,11 +595,12 @@ class _Runner:
                 np.add(frames[i - 1], halo, out=out[i - 1])
         if hot.size:
             # Fine sample j lies in base interval k = j // n_sub, a share (j % n_sub + 1) / n_sub in.
+            # One base interval at a time: the same arithmetic on each element, with temporaries
+            # of n_sub rows, not of the whole (fine samples, hot pixels) table.
             n_sub = t_fine.size // t_base.size
-            j = np.arange(t_fine.size)
-            k = j // n_sub
-            w = ((j % n_sub + 1) / n_sub)[:, None]
-            rates += (1.0 - w) * at_hot[k] + w * at_hot[k + 1]
+            w = ((np.arange(n_sub) + 1) / n_sub)[:, None]
+            for k in range(t_base.size):
+                rates[k * n_sub : (k + 1) * n_sub] += (1.0 - w) * at_hot[k] + w * at_hot[k + 1]
         return out
 
     def _sparse(self, t_fine: np.ndarray, t_base: np.ndarray) -> _Chunk:
@@ -586,24 +609,34 @@ class _Runner:
         npix = sc.width * sc.height
         x, y, f = self._sources(t_fine)
         n_t = x.shape[0]
-        idx, val = self._contributions(x, y, f, self._fine_groups)
-        sample_of = idx // npix
-        pixel = idx - sample_of * npix
+        # The windows' contributions chunk by chunk, never concatenated: a unit of a bright
+        # star's 257 px window holds ~3e7 of them, and each whole-unit temporary was ~0.25 GB
+        # of fresh memory for the kernel to zero (~15 % of imx636-pointsource's CPU).
         # Hot: lit by a moving window in this chunk, or still settling from an earlier one.
         # Marked on a flat mask (linear in the contributions, no sort).
         mask = self.hot_until > t_fine[0]
-        mask[pixel] = True
-        self.hot_until[pixel] = t_fine[-1] + self.settle_s
+        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        for idx, val in self._contribution_parts(x, y, f, self._fine_groups):
+            sample_of, pixel = np.divmod(idx, npix)
+            mask[pixel] = True
+            self.hot_until[pixel] = t_fine[-1] + self.settle_s
+            parts.append((sample_of, pixel, val))
         hot = np.flatnonzero(mask)
         column = self._column
         column[hot] = np.arange(hot.size)
         # The rates of the hot pixels at the fine times: static light plus the moving sources.
-        rates = np.empty((n_t, hot.size), np.float64)
+        rates = self._buffer("rates", (n_t, hot.size))
         rates[:] = self.static_map.reshape(-1)[hot][None, :]
-        if hot.size and idx.size:
+        flat_rates = rates.reshape(-1)
+        for sample_of, pixel, val in parts:
             # Scatter-add only where the windows are (a bincount over every hot pixel and
-            # sample would zero and add the whole table).
-            np.add.at(rates.reshape(-1), sample_of * hot.size + column[pixel], val)
+            # sample would zero and add the whole table); the chunks in order, each
+            # sequentially, add in the order one call on their concatenation would.
+            if val.size:
+                target = sample_of  # sample * hot pixels + column, in place
+                target *= hot.size
+                target += column[pixel]
+                np.add.at(flat_rates, target, val)
         # Base frames for everyone else: their light is static in this chunk (hot pixels
         # have passed these times and are skipped by the engine), but for the halos.
         frames = np.broadcast_to(self.static_map, (t_base.size, sc.height, sc.width))

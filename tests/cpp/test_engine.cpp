@@ -142,6 +142,61 @@ TEST(noise_coeffs_with_kept_source_follower_terms_are_the_same_bits) {
     CHECK(checked == 5 * 2 * 4 * 2 + 5 * 1 * 3 * 2);
 }
 
+TEST(noise_coeffs_with_kept_pole_terms_are_the_same_bits) {
+    // PixelModel passes its noise-free chain's exp(-a T) and one_minus_exp_over(a T) on
+    // (PoleTerms); noise_coeffs must give the bits it computes itself, and ignore terms of
+    // another a or T (near-equal rates move a off b: the kept terms no longer apply).
+    const auto same = [](const NoiseCoeffs& x, const NoiseCoeffs& y) {
+        return std::memcmp(&x, &y, sizeof(NoiseCoeffs)) == 0;
+    };
+    int checked = 0;
+    for (double T : {1e-5, 3.1e-4, 1e-3, 4e-3, 0.5})
+        for (double b : {62.83, 12566.4})
+            for (double a : {1e-3, 3.7, 62.83 * (1 + 1e-6), 2e4, 7.7e5})
+                for (double D : {1e-3, 55.0}) {
+                    const SfTerms sf = sf_terms(b, T);
+                    const PoleTerms pole{a, T, std::exp(-(a * T)), one_minus_exp_over(a * T)};
+                    CHECK(same(noise_coeffs(a, b, D, T, &sf, &pole), noise_coeffs(a, b, D, T)));
+                    const PoleTerms wrong{a, T, 0.5, 0.25};  // deliberately not a's terms
+                    const bool moved = detail::separated_pole_rate(a, b) != a;
+                    CHECK(same(noise_coeffs(a, b, D, T, &sf, &wrong), noise_coeffs(a, b, D, T)) == moved);
+                    NoiseCoeffs k = noise_coeffs_interval(a, b, D, T, &sf, &pole);
+                    CHECK(k.bridge_var == 0.0);
+                    noise_coeffs_bridge(k, a, b, D, T, &sf, &pole);
+                    CHECK(same(k, noise_coeffs(a, b, D, T)));
+                    ++checked;
+                }
+    CHECK(checked == 5 * 2 * 5 * 2);
+}
+
+TEST(bridge_var_is_below_twice_q_yy_wherever_bridge_var_bounded_says_so) {
+    // The block kernels test a pixel at a rate of its own for quiet against twice q_yy before
+    // computing bridge_var; that is exact only if the computed bridge_var never exceeds it.
+    // In exact arithmetic bridge_var <= q_yy; over a, b from 1e-6 to 1e8 /s and T from 1e-9 to
+    // 10 s, the computed ratio where bridge_var_bounded() holds, and that it fails where the
+    // closed forms lose it (a == b, a T tiny), which is why the guard is there.
+    double worst = 0.0;
+    int bounded = 0, unbounded_bad = 0;
+    for (int ia = 0; ia <= 56; ++ia)
+        for (int ib = 0; ib <= 56; ++ib)
+            for (int iT = 0; iT <= 40; ++iT) {
+                const double a = std::pow(10.0, -6.0 + 0.25 * ia), b = std::pow(10.0, -6.0 + 0.25 * ib);
+                const double T = std::pow(10.0, -9.0 + 0.25 * iT);
+                const NoiseCoeffs k = noise_coeffs(a, b, 1.0, T);
+                if (bridge_var_bounded(a, b, T)) {
+                    ++bounded;
+                    CHECK(k.q_yy > 0.0);
+                    worst = std::max(worst, k.bridge_var / k.q_yy);
+                } else if (!(k.bridge_var <= 2.0 * k.q_yy)) {
+                    ++unbounded_bad;
+                }
+            }
+    CHECK(bounded > 57 * 57 * 41 / 2);
+    CHECK(worst > 0.2);           // the bound is not vacuous: bridge_var comes close to q_yy
+    CHECK(worst <= 1.0 + 1e-6);   // and twice q_yy is never reached
+    CHECK(unbounded_bad > 0);     // outside the guard the closed forms do break it
+}
+
 TEST(leak_noise_hazard_integral_against_quadrature_of_its_rate) {
     // The closed forms (E1 by A&S 5.1.56, erfc) against a fine Simpson rule over the rate the
     // header documents, for one pole, two comparable poles and a << b, and additivity.

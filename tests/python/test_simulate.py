@@ -178,6 +178,33 @@ def test_same_seed_same_events_whatever_the_threads() -> None:
     np.testing.assert_allclose(np.hypot(truth["x_px"] - 32, truth["y_px"] - 24), 15.0)
 
 
+def test_reused_tables_give_the_events_of_fresh_ones(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The chunks' frames and the sub-sampled units' fine rates and haloed base frames reuse
+    # their memory from one engine call to the next (_Runner._buffer). With units of several
+    # sizes (a source that stops, then moves off fast), dense and sub-sampled chunks in turn
+    # and a halo, the events must be those of fresh tables, byte for byte.
+    import importlib
+
+    runner = importlib.import_module("evstwin.simulate")._Runner
+    s = spinning(100.0, noise=True, threshold_sigma=0.05)
+    s["optics"] = {"extra_blur_sigma_px": 0.6, "halo_fraction": 0.3, "halo_fwhm_px": 4.0, "halo_half_width_px": 40}
+    s["targets"].append({"kind": "tabulated", "t_s": [0.0, 0.1, 0.3, 0.5], "x_px": [10.0, 10.0, 10.0, 50.0],
+                         "y_px": [10.0, 10.0, 10.0, 40.0], "flux_ph_s": 1e9})
+    s["sampling"]["chunk_samples"] = 7
+    reused = simulate(s, seed=5)
+    shapes: list[tuple[int, ...]] = []
+
+    def fresh_buffer(self: object, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        shapes.append(shape)
+        return np.full(shape, np.nan)  # a table the code failed to overwrite would show
+
+    monkeypatch.setattr(runner, "_buffer", fresh_buffer)
+    fresh = simulate(s, seed=5)
+    assert reused.sub_sampled_chunks > 0 and len(fresh.events) > 500
+    assert len(set(shapes)) > 3  # tables of several shapes took turns in the same memory
+    assert reused.events.tobytes() == fresh.events.tobytes()
+
+
 @pytest.mark.parametrize("sparse", [True, False])
 def test_same_seed_same_events_whatever_the_chunking(sparse: bool) -> None:
     # The fine-sampling decision is made per fixed unit of base intervals, not per chunk, so

@@ -46,6 +46,9 @@ struct NoiseCoeffs {
     double l_zz = 0, l_yz = 0, l_yy = 0;
     /// Variance of n_y at the interval's middle given the whole state at both ends.
     double bridge_var = 0;
+    /// Q(T)'s yy entry, the innovation variance of n_y over T (two poles only; else 0): above
+    /// bridge_var (bridge_var_bounded()), so a pixel can be found quiet before bridge_var is known.
+    double q_yy = 0;
 };
 
 /// What noise_coeffs() computes from the source follower's rate b and the interval T alone:
@@ -72,12 +75,24 @@ inline SfTerms sf_terms(double b, double T) {
     return s;
 }
 
+/// The photoreceptor pole's own terms at (a, T), when the caller has computed them already
+/// (PixelModel's noise-free chain: exp(-a T) and one_minus_exp_over(a T)). noise_coeffs()
+/// needs the same two values: exp(-a T) is Phi's phi_zz, and one_minus_exp_over(2 a (T / 2))
+/// is one_minus_exp_over(a T) bit for bit (2 a and T / 2 are exact, so is their product's
+/// rounding the same as a T's). Used only where a is the caller's a (not moved off b).
+struct PoleTerms {
+    double a = -1.0, T = -1.0;
+    double exp_aT = 0, ome_aT = 0;  ///< exp(-a T), one_minus_exp_over(a T)
+};
+
 /// The innovation covariance of the two-pole system over T: (zz, zy, yy). a, b > 0.
-/// ome_2bT: one_minus_exp_over(2 b T) if the caller has it (SfTerms), else NaN.
+/// ome_2bT: one_minus_exp_over(2 b T) if the caller has it (SfTerms), else NaN; ome_2aT the same
+/// for one_minus_exp_over(2 a T).
 inline void ou2_covariance(double a, double b, double D, double T, double& qzz, double& qzy, double& qyy,
-                           double ome_2bT = std::numeric_limits<double>::quiet_NaN()) {
+                           double ome_2bT = std::numeric_limits<double>::quiet_NaN(),
+                           double ome_2aT = std::numeric_limits<double>::quiet_NaN()) {
     // v(s) = Phi(s) e_z = (e^{-as}, b (e^{-as} - e^{-bs}) / (b - a)); Q = D a^2 int_0^T v v^T.
-    const double h2a = T * one_minus_exp_over(2 * a * T);      // int e^{-2as}
+    const double h2a = T * (ome_2aT == ome_2aT ? ome_2aT : one_minus_exp_over(2 * a * T));  // int e^{-2as}
     const double hab = T * one_minus_exp_over((a + b) * T);    // int e^{-(a+b)s}
     const double h2b = T * (ome_2bT == ome_2bT ? ome_2bT : one_minus_exp_over(2 * b * T));  // int e^{-2bs}
     const double c = b / (b - a);
@@ -97,20 +112,40 @@ inline double cross_gain(double a, double b, double T, double exp_aT) {
     return b * T * std::exp(-b * T) * one_minus_exp_over((a - b) * T);
 }
 
-/// Exact coefficients of the noise over an interval T.
+namespace detail {
+/// The pole's rate as the two-pole closed form uses it: equal rates make it 0/0, so a pole
+/// within 1e-4 of b is moved by 1e-4 (far below what the bias currents are known to), which
+/// keeps every cancellation above 1e-8 relative.
+inline double separated_pole_rate(double a, double b) { return std::fabs(b - a) < 1e-4 * (a + b) ? b * (1.0 - 2e-4) : a; }
+}  // namespace detail
+
+/// Whether, for two poles at rates a, b > 0 over T, the computed bridge_var is known to lie
+/// below twice the computed q_yy. In exact arithmetic bridge_var <= q_yy always: conditioning
+/// on the far end only lowers a variance, so bridge_var <= Q(T / 2)_yy, and Q(t) = Sigma -
+/// Phi(t) Sigma Phi(t)^T grows with t (its derivative is Phi G G^T Phi^T >= 0). In floating
+/// point the closed forms cancel where a T or b T is tiny or a is near b; on a grid of a, b
+/// from 1e-6 to 1e8 /s and T from 1e-9 to 10 s (tests/cpp), the computed ratio stays <= 1
+/// wherever this holds, and reaches 1.2, or q_yy <= 0 < bridge_var, outside it.
+inline bool bridge_var_bounded(double a, double b, double T) {
+    return a > 0.0 && b > 0.0 && std::min(a, b) * T >= 1e-6 && std::fabs(b - a) >= 1e-3 * (a + b);
+}
+
+/// Exact coefficients of the noise over an interval T, all but the two-pole system's
+/// bridge_var (noise_coeffs_bridge() adds it; noise_coeffs() does both).
 ///   pole_rate_per_s: a = 2 pi f_pr (0 = no photoreceptor pole)
 ///   sf_rate_per_s:   b = 2 pi f_sf (0 = no source follower)
 ///   D: white-noise intensity of ln I [1/s]. At least one of a, b must be > 0.
 ///   sf: sf_terms(b, T), if the caller keeps them (the same coefficients, faster).
-inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const SfTerms* sf = nullptr) {
+///   pole: PoleTerms at (a, T), if the caller has them (the same coefficients, faster).
+inline NoiseCoeffs noise_coeffs_interval(double a, double b, double D, double T, const SfTerms* sf = nullptr,
+                                         const PoleTerms* pole = nullptr) {
     NoiseCoeffs k;
     const bool kept = sf != nullptr && sf->b == b && sf->T == T;
     const double nan = std::numeric_limits<double>::quiet_NaN();
     if (a > 0 && b > 0) {
-        // Equal rates make the closed form 0/0: move the pole by 1e-4 (far below what the
-        // bias currents are known to), which keeps every cancellation above 1e-8 relative.
-        if (std::fabs(b - a) < 1e-4 * (a + b)) a = b * (1.0 - 2e-4);
-        k.phi_zz = std::exp(-a * T);
+        a = detail::separated_pole_rate(a, b);
+        const bool pole_kept = pole != nullptr && pole->a == a && pole->T == T;
+        k.phi_zz = pole_kept ? pole->exp_aT : std::exp(-a * T);
         k.phi_yy = kept ? sf->exp_bT : std::exp(-b * T);
         k.phi_yz = cross_gain(a, b, T, k.phi_zz);
         double qzz, qzy, qyy;
@@ -120,26 +155,7 @@ inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const Sf
             k.l_yz = qzy / k.l_zz;
             k.l_yy = std::sqrt(std::max(0.0, qyy - k.l_yz * k.l_yz));
         }
-        // Cov(mid | ends) = Qh - Qh Ph^T (Ph Qh Ph^T + Qh)^-1 Ph Qh, half-interval Ph, Qh.
-        const double h = 0.5 * T;
-        double hzz, hzy, hyy;
-        ou2_covariance(a, b, D, h, hzz, hzy, hyy, kept ? sf->ome_2bh : nan);
-        const double pzz = std::exp(-a * h), pyy = kept ? sf->exp_bh : std::exp(-b * h);
-        const double pyz = cross_gain(a, b, h, pzz);
-        // P = Ph Qh (rows of Ph times Qh): [[pzz, 0], [pyz, pyy]] [[hzz, hzy], [hzy, hyy]]
-        const double Pzz = pzz * hzz, Pzy = pzz * hzy;
-        const double Pyz = pyz * hzz + pyy * hzy, Pyy = pyz * hzy + pyy * hyy;
-        // M = P Ph^T + Qh (symmetric)
-        const double Mzz = Pzz * pzz + hzz;
-        const double Mzy = Pzz * pyz + Pzy * pyy + hzy;
-        const double Myy = Pyz * pyz + Pyy * pyy + hyy;
-        const double det = Mzz * Myy - Mzy * Mzy;
-        if (det > 0) {
-            // Cov_yy = hyy - (Qh Ph^T)_y. M^-1 (Ph Qh)_.y, and (Qh Ph^T)_y. = (P_.y)^T.
-            const double iz = (Myy * Pzy - Mzy * Pyy) / det;  // (M^-1 P)_{z,y}
-            const double iy = (Mzz * Pyy - Mzy * Pzy) / det;  // (M^-1 P)_{y,y}
-            k.bridge_var = std::max(0.0, hyy - (Pzy * iz + Pyy * iy));
-        }
+        k.q_yy = qyy;
     } else {
         const double r = a > 0 ? a : b;  // one low-pass: a 1-D OU process of rate r
         const bool sf_only = kept && !(a > 0);  // r is b: its terms are kept
@@ -149,6 +165,46 @@ inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const Sf
         const double ph = sf_only ? sf->exp_half_bT : std::exp(-0.5 * r * T);
         k.bridge_var = qh / (1.0 + ph * ph);
     }
+    return k;
+}
+
+/// The two-pole system's bridge_var into k (noise_coeffs_interval()'s, the same a, b, D, T, sf
+/// and pole); nothing to do with one low-pass.
+inline void noise_coeffs_bridge(NoiseCoeffs& k, double a, double b, double D, double T, const SfTerms* sf = nullptr,
+                                const PoleTerms* pole = nullptr) {
+    if (!(a > 0 && b > 0)) return;
+    a = detail::separated_pole_rate(a, b);
+    const bool kept = sf != nullptr && sf->b == b && sf->T == T;
+    const bool pole_kept = pole != nullptr && pole->a == a && pole->T == T;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    // Cov(mid | ends) = Qh - Qh Ph^T (Ph Qh Ph^T + Qh)^-1 Ph Qh, half-interval Ph, Qh.
+    const double h = 0.5 * T;
+    double hzz, hzy, hyy;
+    ou2_covariance(a, b, D, h, hzz, hzy, hyy, kept ? sf->ome_2bh : nan, pole_kept ? pole->ome_aT : nan);
+    const double pzz = std::exp(-a * h), pyy = kept ? sf->exp_bh : std::exp(-b * h);
+    const double pyz = cross_gain(a, b, h, pzz);
+    // P = Ph Qh (rows of Ph times Qh): [[pzz, 0], [pyz, pyy]] [[hzz, hzy], [hzy, hyy]]
+    const double Pzz = pzz * hzz, Pzy = pzz * hzy;
+    const double Pyz = pyz * hzz + pyy * hzy, Pyy = pyz * hzy + pyy * hyy;
+    // M = P Ph^T + Qh (symmetric)
+    const double Mzz = Pzz * pzz + hzz;
+    const double Mzy = Pzz * pyz + Pzy * pyy + hzy;
+    const double Myy = Pyz * pyz + Pyy * pyy + hyy;
+    const double det = Mzz * Myy - Mzy * Mzy;
+    if (det > 0) {
+        // Cov_yy = hyy - (Qh Ph^T)_y. M^-1 (Ph Qh)_.y, and (Qh Ph^T)_y. = (P_.y)^T.
+        const double iz = (Myy * Pzy - Mzy * Pyy) / det;  // (M^-1 P)_{z,y}
+        const double iy = (Mzz * Pyy - Mzy * Pzy) / det;  // (M^-1 P)_{y,y}
+        k.bridge_var = std::max(0.0, hyy - (Pzy * iz + Pyy * iy));
+    }
+}
+
+/// Exact coefficients of the noise over an interval T (noise_coeffs_interval() and
+/// noise_coeffs_bridge(): arguments as there).
+inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const SfTerms* sf = nullptr,
+                                const PoleTerms* pole = nullptr) {
+    NoiseCoeffs k = noise_coeffs_interval(a, b, D, T, sf, pole);
+    noise_coeffs_bridge(k, a, b, D, T, sf, pole);
     return k;
 }
 

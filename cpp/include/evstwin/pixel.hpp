@@ -390,7 +390,19 @@ struct NoiseCache {
     /// p_on + p_off < 2 exp(-24) = 7.6e-11, below the smallest uniform there is, 2^-33 =
     /// 1.16e-10: the draw could not fire. 48 (1 + 1e-8) times the middle variance over the
     /// interval (the margin covers the rounding of the exponent's division).
+    /// While !bridge_ready: the same bound for twice k.q_yy, above it (bridge_var_bounded()).
     double bridge_bound = 0;
+    /// false: k.bridge_var is not computed yet, and bridge_bound is the upper bound from
+    /// k.q_yy (fill_noise_cache(..., lazy_bridge = true)); complete_noise_cache() computes it.
+    /// A pixel found quiet with the upper bound is quiet with the exact one: the same
+    /// decision, and the bridge's terms (an exp, two expm1 and five divisions) only for the
+    /// pixels that might cross.
+    bool bridge_ready = true;
+    /// When lazy fills pay (fill_noise_cache): +1 for a lazy fill no pixel had to complete and
+    /// for an eager one, -3 for a completion; lazy while >= 0. Over long intervals most pixels
+    /// need the bridge anyway, and then the split costs more than it saves (the bridge's terms
+    /// wait for the quiet test). Speed only: either way gives the same numbers.
+    int lazy_credit = 0;
 };
 
 /// What one pixel-sample update reports for a probe (diagnostic trace).
@@ -1413,12 +1425,17 @@ struct PixelModel {
         for (std::size_t j = 0; j < n; ++j) {
             PixelState& s = st[at(j)];
             const double r = static_cast<double>(rate[at(j)]);
-            if (r != cache.photon_rate) fill_noise_cache(cache, r, c);  // cache.dt is c.dt
+            // A new rate's numbers without the bridge's until a pixel needs them (NoiseCache::bridge_ready).
+            if (r != cache.photon_rate) fill_noise_cache(cache, r, c, true);  // cache.dt is c.dt
             double zj, yj, nzj, nyj;
             continuous_levels<SfOnly>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
             double d1;
-            const bool quiet = quiet_in_interval(s, yj, cache, c, clock_ran_out, d1);
+            bool quiet = quiet_in_interval(s, yj, cache, c, clock_ran_out, d1);
+            if (!quiet && !cache.bridge_ready) {
+                complete_noise_cache(cache, c);
+                quiet = quiet_in_interval(s, yj, cache, c, clock_ran_out, d1);
+            }
             if (quiet) {
                 settle_quiet(s, cache, zj, yj, nzj, nyj, d1);
                 s.t = c.t1;
@@ -1563,7 +1580,7 @@ struct PixelModel {
         double pick = probe[1] == probe[2] ? probe[1] : probe[0];
         for (double r : probe)
             if (r == common.photon_rate) pick = r;
-        if (pick != common.photon_rate) fill_noise_cache(common, pick, c);
+        noise_cache_for(common, pick, c);  // complete (bridge_var) even when another path filled it lazily
         const bool background = has_background(), noise = common.D > 0.0;
         QuietPass q;
         q.now = &now;
@@ -1596,15 +1613,22 @@ struct PixelModel {
             PixelState& s = st[j];
             h.give(s, j, now);
             const double r = static_cast<double>(rate[j]);
-            NoiseCache& cache = r == common.photon_rate ? common : other;  // common is for c.dt
-            noise_cache_for(cache, r, c);
+            const bool own_rate = r != common.photon_rate;  // common is complete, for c.dt
+            NoiseCache& cache = own_rate ? other : common;
+            // Another rate's numbers without the bridge's until a pixel needs them (NoiseCache::bridge_ready).
+            if (own_rate && (r != other.photon_rate || other.dt != c.dt)) fill_noise_cache(other, r, c, true);
             double zj, yj, nzj, nyj;
             continuous_levels<sf_only>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
             // A pixel at another rate was not tested by the pass: it may be quiet at its own (as
             // step_block_continuous() settles it), which saves continuous_finish()'s bridge.
             double d1;
-            if (&cache == &other && quiet_in_interval(s, yj, cache, c, clock_ran_out, d1)) {
+            bool quiet = own_rate && quiet_in_interval(s, yj, cache, c, clock_ran_out, d1);
+            if (own_rate && !quiet && !cache.bridge_ready) {
+                complete_noise_cache(cache, c);
+                quiet = quiet_in_interval(s, yj, cache, c, clock_ran_out, d1);
+            }
+            if (quiet) {
                 settle_quiet(s, cache, zj, yj, nzj, nyj, d1);
             } else {
                 pixel = ids[j];
@@ -1892,11 +1916,18 @@ struct PixelModel {
     double theta_with_sigma(double theta, Philox4x32Key key, std::uint32_t pixel, std::uint32_t purpose) const;
 
     /// The continuous model's numbers for (photon_rate, c.dt) into `cache`, unless it holds
-    /// them already (most pixels share the background's rate).
+    /// them already (most pixels share the background's rate); complete (bridge_ready).
     EVSTWIN_ALWAYS_INLINE void noise_cache_for(NoiseCache& cache, double photon_rate, const SampleConstants& c) const {
-        if (photon_rate != cache.photon_rate || c.dt != cache.dt) fill_noise_cache(cache, photon_rate, c);
+        if (photon_rate != cache.photon_rate || c.dt != cache.dt)
+            fill_noise_cache(cache, photon_rate, c);
+        else if (!cache.bridge_ready)
+            complete_noise_cache(cache, c);
     }
-    void fill_noise_cache(NoiseCache& cache, double photon_rate, const SampleConstants& c) const {
+    /// The numbers for (photon_rate, c.dt). lazy_bridge: leave the two-pole system's bridge_var
+    /// for later where bridge_var_bounded() allows (bridge_ready false, bridge_bound from
+    /// q_yy): for the callers that test quiet_in_interval() and call complete_noise_cache()
+    /// before anything else reads the bridge. Every value computed is the same as eagerly.
+    void fill_noise_cache(NoiseCache& cache, double photon_rate, const SampleConstants& c, bool lazy_bridge = false) const {
         const double mean_e = mean_electron_rate(photon_rate);
         cache.photon_rate = photon_rate;
         cache.dt = c.dt;
@@ -1908,11 +1939,35 @@ struct PixelModel {
         cache.pole_decay = std::exp(-u);
         cache.pole_ramp = one_minus_exp_over(u);
         if (cache.sf.T != c.dt || cache.sf.b != sf_rate()) cache.sf = sf_terms(sf_rate(), c.dt);
-        cache.k = cache.D > 0.0 ? noise_coeffs(cache.a, sf_rate(), cache.D, c.dt, &cache.sf) : NoiseCoeffs{};
-        // The bridge's middle variance over the whole interval, as step_continuous computes it.
-        cache.bridge_bound = 48.0 * (1.0 + 1e-8) * (0.25 * (4.0 * cache.k.bridge_var * c.inv_dt) * c.dt);
+        const double b = sf_rate();
+        if (lazy_bridge) cache.lazy_credit = std::min(cache.lazy_credit + 1, 6);  // the last fill needed no completion, or was eager
+        cache.k = NoiseCoeffs{};
+        cache.bridge_ready = true;
+        if (cache.D > 0.0) {
+            const PoleTerms pole{cache.a, c.dt, cache.pole_decay, cache.pole_ramp};
+            cache.k = noise_coeffs_interval(cache.a, b, cache.D, c.dt, &cache.sf, &pole);
+            // Twice q_yy bounds bridge_var (bridge_var_bounded): the bound's quiet test is safe.
+            cache.bridge_ready = !(lazy_bridge && cache.lazy_credit >= 0 && bridge_var_bounded(cache.a, b, c.dt) &&
+                                   cache.k.q_yy > 0.0);
+            if (cache.bridge_ready) noise_coeffs_bridge(cache.k, cache.a, b, cache.D, c.dt, &cache.sf, &pole);
+        }
+        cache.bridge_bound = bridge_bound_for(cache.bridge_ready ? cache.k.bridge_var : 2.0 * cache.k.q_yy, c);
         cache.bg_factor = background_factor(cache.current_a);
         cache.leak_hz = leak_rate_hz(photon_rate);
+    }
+    /// What fill_noise_cache(..., lazy_bridge = true) left: bridge_var and its exact bound.
+    void complete_noise_cache(NoiseCache& cache, const SampleConstants& c) const {
+        if (cache.bridge_ready) return;
+        const PoleTerms pole{cache.a, c.dt, cache.pole_decay, cache.pole_ramp};
+        noise_coeffs_bridge(cache.k, cache.a, sf_rate(), cache.D, c.dt, &cache.sf, &pole);
+        cache.bridge_bound = bridge_bound_for(cache.k.bridge_var, c);
+        cache.bridge_ready = true;
+        cache.lazy_credit = std::max(cache.lazy_credit - 4, -6);  // -3 net: the next fill adds 1
+    }
+    /// The quiet test's bound for a middle variance bridge_var (NoiseCache::bridge_bound), as
+    /// step_continuous computes the bridge's variance over the whole interval; non-decreasing in it.
+    static double bridge_bound_for(double bridge_var, const SampleConstants& c) {
+        return 48.0 * (1.0 + 1e-8) * (0.25 * (4.0 * bridge_var * c.inv_dt) * c.dt);
     }
 
     /// Advance one pixel over (c.t0, c.t1] with the continuous noise model (noise.hpp): the
@@ -2108,11 +2163,17 @@ struct PixelModel {
         nzs[m] = nz1;
         nys[m] = ny1;
         CounterStream normals(key, pixel, s.n, PURPOSE_REFINE);
+        double piece_bridge = 0.0;  // the pieces' bridge variance: noise_coeffs(a, b, D, h)'s, from step 1
         for (int step = m / 2; step >= 1; step /= 2) {
             // X_mid | X_0, X_1 for two halves of length T = step h: mean Phi X_0 + K (X_1 -
             // Phi^2 X_0), covariance Q - K Phi Q, with K = Q Phi^T (Phi Q Phi^T + Q)^-1.
             const double T = step * h;
-            const NoiseCoeffs q = noise_coeffs(a, b, D, T);
+            // Only the last level (T = h, the pieces' length) needs the bridge's variance.
+            NoiseCoeffs q = noise_coeffs_interval(a, b, D, T);
+            if (step == 1) {
+                noise_coeffs_bridge(q, a, b, D, T);
+                piece_bridge = q.bridge_var;
+            }
             const double Qzz = q.l_zz * q.l_zz, Qzy = q.l_zz * q.l_yz, Qyy = q.l_yz * q.l_yz + q.l_yy * q.l_yy;
             const double Pzz = q.phi_zz, Pyz = q.phi_yz, Pyy = q.phi_yy;  // Phi = [[Pzz, 0], [Pyz, Pyy]]
             // A = Q Phi^T
@@ -2145,7 +2206,6 @@ struct PixelModel {
         // (its end forced to the sample's own value), the comparator with the piece's bridge.
         const double pole_decay = std::exp(-a * h), pole_ramp = one_minus_exp_over(a * h);
         const double sf_decay = std::exp(-b * h), sf_ramp = one_minus_exp_over(b * h);
-        const double piece_bridge = noise_coeffs(a, b, D, h).bridge_var;
         double x_prev = s.x, z_prev = s.z, yd_prev = s.y - s.ny;
         for (int i = 1; i <= m; ++i) {
             double xi, zi, ydi;
