@@ -211,7 +211,7 @@ def _with_bar(runner: _Runner, scene: Scene, progress: bool) -> Iterator[_Chunk]
     from tqdm import tqdm
 
     bar = tqdm(total=round(scene.duration_s, 6), unit="s", desc=f"simulating {scene.scenario['name']}",
-               file=sys.stderr, bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s sensor time [{elapsed}<{remaining}]")
+               file=sys.stderr, bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s sensor time [{elapsed}<{remaining}{postfix}]")
     try:
         yield from runner.chunks(bar)
     finally:
@@ -444,7 +444,14 @@ class _Runner:
         chunk = self.scene.chunk_samples
         yield self._dense(np.array([self.t_start]))
         for j in range(1, self.n_pre + 1, chunk):
-            yield self._dense((np.arange(j, min(j + chunk, self.n_pre + 1)) - self.n_pre) * self.dt_pre)
+            stop = min(j + chunk, self.n_pre + 1)
+            yield self._dense((np.arange(j, stop) - self.n_pre) * self.dt_pre)
+            if bar is not None:
+                # The bar counts sensor time from t = 0; a long pre-roll (a minute for the
+                # IMX636 frame's 12 s) says where it is beside it, not as a bar stuck at 0.
+                done = (stop - 1) * self.dt_pre
+                bar.set_postfix_str(f"pre-roll {done:.1f}/{self.n_pre * self.dt_pre:.1f} s"
+                                    if stop <= self.n_pre else "")
         a = 0
         while a < self.n_base:
             u0 = a - a % self.unit

@@ -396,6 +396,17 @@ def test_a_pre_roll_starts_the_recording_where_a_longer_run_would_be() -> None:
     assert b.meta["truth"]["led"]["t_s"][0] == 0.0 and b.meta["pre_roll_s"] == 2 * period
 
 
+def test_the_progress_bar_says_where_a_pre_roll_is(capsys: pytest.CaptureFixture[str]) -> None:
+    # The bar counts sensor time from t = 0, so during a long pre-roll it sat at 0; it now
+    # says how far the pre-roll has got, and stops saying so once the run proper begins.
+    rolled = spinning(1000.0, max_shift_px=1e3, cutoff_hz=200.0)
+    rolled["duration_s"] = 0.1
+    rolled["sampling"].update(pre_roll_s=0.5, chunk_samples=100)
+    simulate(rolled, progress=True)
+    err = capsys.readouterr().err
+    assert "pre-roll 0.4/0.5 s" in err and "pre-roll 0.5/0.5 s" not in err, err[-400:]
+
+
 def test_pre_roll_must_be_a_non_negative_number() -> None:
     s = spinning(1000.0)
     s["sampling"]["pre_roll_s"] = -1.0
