@@ -114,6 +114,7 @@ class LocalExecutor:
             raise ValueError(f"workers must be an integer >= 0; got {workers!r}")
         self.workers = workers
         self._pool: Any = None
+        self._children_before: set[Any] = set()
         self._token: str | None = None
 
     @property
@@ -126,6 +127,7 @@ class LocalExecutor:
 
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         self.close()
+        self._children_before = set(multiprocessing.active_children())
         self._pool = ProcessPoolExecutor(
             max_workers=self.workers,
             mp_context=multiprocessing.get_context(method),
@@ -208,18 +210,26 @@ class LocalExecutor:
             ok = True
         finally:
             if not ok:  # Ctrl-C, or the caller stopped early: no worker may outlive us
-                for fut in futures:
-                    fut.cancel()
+                # Not cancelled first: Python 3.11's pool manager, finding the workers dead,
+                # sets BrokenProcessPool on every pending future and dies with
+                # InvalidStateError on a cancelled one, part-way through its cleanup.
                 self.kill()
 
     def kill(self) -> None:
         """Stop now: terminate the worker processes (their jobs are lost) and drop the pool.
         SIGINT that reaches only this process would otherwise leave the workers finishing
         their jobs, and the interpreter waiting for them at exit."""
+        import multiprocessing
+
         pool = self._pool
         if pool is None:
             return
-        processes = list(getattr(pool, "_processes", {}).values())  # no public handle on them
+        # The pool's workers (no public handle on them) and any child started since the pool
+        # was made: a worker still being spawned when Ctrl-C came is not in the pool's table
+        # yet, and the interpreter joins every child at exit, job or no job.
+        processes = list(getattr(pool, "_processes", {}).values())
+        processes += [p for p in multiprocessing.active_children()
+                      if p not in processes and p not in self._children_before]
         for proc in processes:
             if proc.is_alive():
                 proc.terminate()
@@ -227,7 +237,7 @@ class LocalExecutor:
             proc.join(timeout=5)
             if proc.is_alive():
                 proc.kill()
-        pool.shutdown(wait=False, cancel_futures=True)
+        pool.shutdown(wait=False)
         self._pool = None
         self._token = None
 
