@@ -663,6 +663,10 @@ def test_sigint_to_the_main_process_alone_stops_the_sweep_and_its_workers(tmp_pa
         [sys.executable, "-m", "evstwin", "sweep", "--scenario", str(tmp_path / "s.toml"), "--grid",
          "pixel.theta_on=0.15,0.2,0.25,0.3", "--objective", "noise", "--workers", "2", "--out", str(out)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        # Ctrl-C as a terminal delivers it: a test run started in the background by a
+        # non-interactive shell (`bash .ci/run &`) ignores SIGINT, and its children inherit
+        # that, so the sweep would rightly never see the signal.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         deadline = time.monotonic() + 60
