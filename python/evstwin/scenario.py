@@ -525,9 +525,8 @@ class Scene:
     pre_roll_s: float = 0.0
     """sampling.pre_roll_s [s]: the sensor starts watching the scene this long before t = 0
     (rounded up to whole pre-roll samples, ``pre_roll_samples``) and its events before t = 0
-    are dropped, so that every
-    pixel starts the recording with its history: the reference where its last event left it,
-    its noise, leak and hot-pixel phases (``simulate``)."""
+    are dropped, so that every pixel starts the recording with its history: the reference
+    where its last event left it, its noise, leak and hot-pixel phases (``simulate``)."""
     pre_roll_rate_hz: float | None = None
     """sampling.pre_roll_rate_hz: the pre-roll's sampling rate [Hz] (None: rate_hz). Whole
     frames, no sub-sampling: a pre-roll only sets the pixels' state, and with the continuous

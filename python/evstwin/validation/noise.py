@@ -190,11 +190,9 @@ class NoiseCalibration:
             # Polarities: the event-weighted ON share and alternation of the hot pixels, the
             # engine's two-state chain (kept within what a chain with that share can switch).
             n = np.array([h.on + h.off for h in self.hot], float)
-            share = float(min(1.0 - 1e-3, max(1e-3, sum(h.on for h in self.hot) / n.sum())))
             alternation = float(np.average([h.alternation for h in self.hot], weights=np.maximum(n - 1.0, 1e-9)))
-            table["hot_pixel_on_share"] = _round(share)
-            table["hot_pixel_alternation"] = min(_round(alternation), _at_most(2.0 * min(table["hot_pixel_on_share"],
-                                                                                          1.0 - table["hot_pixel_on_share"])))
+            table["hot_pixel_on_share"], table["hot_pixel_alternation"] = _polarity_chain(
+                sum(h.on for h in self.hot), int(n.sum()), alternation)
         return table
 
     def hot_pixel_table(self) -> dict[str, Any]:
@@ -343,9 +341,16 @@ def _chain_of(h: HotPixel) -> dict[str, float]:
     and its alternation (at most 2 min(s, 1 - s), what a chain with that share can switch). A
     pixel seen firing one polarity alone, never switching, gets alternation 0: its polarity is
     then its initial draw (ON with probability on_share) for the whole run."""
-    share = _round(min(1.0 - 1e-3, max(1e-3, h.on / max(1, h.on + h.off))))
+    share, alternation = _polarity_chain(h.on, h.on + h.off, h.alternation)
     return {"duty": _round(max(1e-6, min(1.0, h.duty))), "burst_s": _round(min(1e6, max(1e-6, h.burst_s))),
-            "on_share": share, "alternation": min(_round(h.alternation), _at_most(2.0 * min(share, 1.0 - share)))}
+            "on_share": share, "alternation": alternation}
+
+
+def _polarity_chain(on: int, events: int, alternation: float) -> tuple[float, float]:
+    """(ON share, alternation) as the engine's chain takes them, in 4 digits: the share of ON
+    events kept in [1e-3, 1 - 1e-3], the alternation at most 2 min(s, 1 - s)."""
+    share = _round(min(1.0 - 1e-3, max(1e-3, on / max(1, events))))
+    return share, min(_round(alternation), _at_most(2.0 * min(share, 1.0 - share)))
 
 
 # --- Poisson-log-normal mixture --------------------------------------------------------------
