@@ -2,6 +2,8 @@
 and a pre-roll (issue 10): ``python bench/imx636_halo_trial.py --write OUT.toml`` writes the
 trial scenario, ``python bench/imx636_halo_trial.py --radial TWIN [TWIN ...]`` prints the
 per-radius table below for the recording and for simulated files, and ``python
+bench/imx636_halo_trial.py --sectors TWIN [TWIN ...]`` the net log change by direction about
+the star (the halo's symmetry check below), and ``python
 bench/imx636_halo_trial.py --hot-draws N`` the built-in scenario's hot and leaky pixels' event
 counts over N seeds (each alone: a one-pixel sensor with the scenario's pixel, its rate and its
 chain; no light, no other noise) against the recording's, since one run is one draw of a few
@@ -22,6 +24,14 @@ The trial scenario is ``imx636-pointsource`` with:
 The table: for rings about the star's mid-run position (outside the ghost's window, before the
 slew at 10.47 s), the ON and OFF events per pixel per second and the share of pixels with 0, 1,
 2-3, 4-7 and 8+ events (the bins the issue's goal counts are 0-1, 2-3, ... events).
+
+The sectors: each pixel's net log change over the steady run, theta_on N_on - theta_off N_off
+(the built-in scenario's thresholds), averaged by ring and by 45-degree sector measured from
+the star's drift direction (0 = ahead, 180 = behind), outside the ghost's window and 22 px
+clear of the companions' tracks. A halo that is point-symmetric about the star and moves with
+it gives a pixel ahead the opposite change of its mirror behind: the "ahead + behind" column
+is 0 up to noise (and the thresholds' error), whatever the halo's radial profile. Also printed:
+the centroid of the events within 25 and 40 px of the star's mid-run position.
 """
 
 from __future__ import annotations
@@ -43,6 +53,9 @@ RAW = "../shared/data/imx636_pointsource_evt3.raw"
 WIDTH, HEIGHT = 1280, 720
 STEADY_END_S = 10.47
 RING_EDGES_PX = (0, 5, 10, 20, 30, 45, 60, 80, 100, 130, 160, 200, 250, 300, 400, 500, 700, 2000)
+SECTOR_RINGS_PX = (40, 60, 80, 100, 120, 145)
+# The two fainter field sources, from the star, all along the run (the built-in scenario's).
+COMPANION_OFFSETS_PX = ((80.54, -52.90), (-91.40, 67.67))
 BUILTIN_GHOST_PH_S = 1.8e9
 """The ghost's flux [photons/s] (0.3 of the star's 6e9 before the halo; set by hand for the
 ghost window's count with the preset's assumed dark current, see the ghost's note)."""
@@ -174,6 +187,44 @@ def rings(path: str, twin: bool) -> None:
               + " ".join(f"{v:.3f}" for v in shares))
 
 
+def sectors(path: str, twin: bool) -> None:
+    from evstwin.scenario import build
+
+    params = build("imx636-pointsource").params
+    t, x, y, p = load(path, twin)
+    keep = t < STEADY_END_S
+    xi, yi, p = x[keep].astype(np.int64), y[keep].astype(np.int64), p[keep]
+    on = np.bincount(yi[p == 1] * WIDTH + xi[p == 1], minlength=WIDTH * HEIGHT)
+    off = np.bincount(yi[p == 0] * WIDTH + xi[p == 0], minlength=WIDTH * HEIGHT)
+    net = params.theta_on * on - params.theta_off * off
+    xs, ys = np.meshgrid(np.arange(WIDTH), np.arange(HEIGHT))
+    xs, ys = xs.ravel(), ys.ravel()
+    mid = STEADY_END_S / 2
+    cx, cy = STAR_T0_PX[0] + STAR_V_PX_S[0] * mid, STAR_T0_PX[1] + STAR_V_PX_S[1] * mid
+    r = np.hypot(xs - cx, ys - cy)
+    drift = np.arctan2(STAR_V_PX_S[1], STAR_V_PX_S[0])
+    angle = np.degrees(np.arctan2(ys - cy, xs - cx) - drift) % 360.0
+    use = ~in_window(xs, ys, GHOST_WINDOW)
+    for ox, oy in COMPANION_OFFSETS_PX:
+        for tt in np.linspace(0.0, STEADY_END_S, 30):
+            use &= np.hypot(xs - (STAR_T0_PX[0] + ox + STAR_V_PX_S[0] * tt),
+                            ys - (STAR_T0_PX[1] + oy + STAR_V_PX_S[1] * tt)) > 22.0
+    print(f"=== {path}: net log change theta_on N_on - theta_off N_off per pixel "
+          f"(theta {params.theta_on:g}/{params.theta_off:g}), t < {STEADY_END_S} s, by 45-degree sector "
+          "from the drift direction")
+    print(f"{'r [px]':>9s} " + " ".join(f"{a:>6d}" for a in range(0, 360, 45)) + "   ahead+behind")
+    for lo, hi in zip(SECTOR_RINGS_PX[:-1], SECTOR_RINGS_PX[1:]):
+        ring = use & (r >= lo) & (r < hi)
+        means = [float(net[ring & (np.abs((angle - a + 180.0) % 360.0 - 180.0) < 22.5)].mean()) for a in range(0, 360, 45)]
+        print(f"{lo:4d}-{hi:<4d} " + " ".join(f"{v:+6.2f}" for v in means) + f"   {means[0] + means[4]:+6.2f}")
+    total = on + off
+    for radius in (25, 40):
+        m = r < radius
+        w = total[m].sum()
+        print(f"  centroid of the events within {radius} px: ({(total[m] * xs[m]).sum() / w - cx:+.2f}, "
+              f"{(total[m] * ys[m]).sum() / w - cy:+.2f}) px from the star's mid-run position")
+
+
 def hot_draws(raw: str, n_seeds: int) -> None:
     """Each listed hot pixel of the built-in scenario alone, over n_seeds seeds: its events in
     the recording's duration (mean, sd, the share within 20 % of the real count)."""
@@ -219,6 +270,8 @@ def main() -> None:
     ap.add_argument("--halo-fwhm", type=float, default=100.0)
     ap.add_argument("--halo-beta", type=float, default=1.5)
     ap.add_argument("--pre-roll", type=float, default=12.0)
+    ap.add_argument("--sectors", nargs="*", metavar="TWIN",
+                    help="print the net log change by direction for the recording and these files")
     ap.add_argument("--hot-draws", type=int, metavar="N", help="the hot pixels' counts over N seeds")
     ap.add_argument("--motion-scale", type=float, default=1.2,
                     help="the image motion before the slew times this (the centroid understates it)")
@@ -233,6 +286,10 @@ def main() -> None:
         rings(a.raw, twin=False)
         for path in a.radial:
             rings(path, twin=True)
+    if a.sectors is not None:
+        sectors(a.raw, twin=False)
+        for path in a.sectors:
+            sectors(path, twin=True)
 
 
 if __name__ == "__main__":
