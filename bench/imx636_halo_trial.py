@@ -54,8 +54,6 @@ WIDTH, HEIGHT = 1280, 720
 STEADY_END_S = 10.47
 RING_EDGES_PX = (0, 5, 10, 20, 30, 45, 60, 80, 100, 130, 160, 200, 250, 300, 400, 500, 700, 2000)
 SECTOR_RINGS_PX = (40, 60, 80, 100, 120, 145)
-# The two fainter field sources, from the star, all along the run (the built-in scenario's).
-COMPANION_OFFSETS_PX = ((80.54, -52.90), (-91.40, 67.67))
 BUILTIN_GHOST_PH_S = 1.8e9
 """The ghost's flux [photons/s] (0.3 of the star's 6e9 before the halo; set by hand for the
 ghost window's count with the preset's assumed dark current, see the ghost's note)."""
@@ -188,9 +186,11 @@ def rings(path: str, twin: bool) -> None:
 
 
 def sectors(path: str, twin: bool) -> None:
+    """Print the net log change by ring and direction from the drift (module docstring)."""
     from evstwin.scenario import build
 
-    params = build("imx636-pointsource").params
+    scene = build("imx636-pointsource")
+    params = scene.params
     t, x, y, p = load(path, twin)
     keep = t < STEADY_END_S
     xi, yi, p = x[keep].astype(np.int64), y[keep].astype(np.int64), p[keep]
@@ -205,10 +205,11 @@ def sectors(path: str, twin: bool) -> None:
     drift = np.arctan2(STAR_V_PX_S[1], STAR_V_PX_S[0])
     angle = np.degrees(np.arctan2(ys - cy, xs - cx) - drift) % 360.0
     use = ~in_window(xs, ys, GHOST_WINDOW)
-    for ox, oy in COMPANION_OFFSETS_PX:
-        for tt in np.linspace(0.0, STEADY_END_S, 30):
-            use &= np.hypot(xs - (STAR_T0_PX[0] + ox + STAR_V_PX_S[0] * tt),
-                            ys - (STAR_T0_PX[1] + oy + STAR_V_PX_S[1] * tt)) > 22.0
+    times = np.linspace(0.0, STEADY_END_S, 30)
+    for target in scene.targets:
+        if target.label.startswith("companion"):  # the two fainter field sources' tracks
+            for cx_px, cy_px in zip(*target.position_px(times)):
+                use &= np.hypot(xs - cx_px, ys - cy_px) > 22.0
     print(f"=== {path}: net log change theta_on N_on - theta_off N_off per pixel "
           f"(theta {params.theta_on:g}/{params.theta_off:g}), t < {STEADY_END_S} s, by 45-degree sector "
           "from the drift direction")
