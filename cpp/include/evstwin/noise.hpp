@@ -106,11 +106,10 @@ inline void ou2_covariance(double a, double b, double D, double T, double& qzz, 
 /// Written from the slower rate's decay, so that no factor overflows: with a faster pole
 /// (a > b) the other form, b T e^{-aT} (e^{(a-b)T} - 1) / ((a-b)T), is 0 x inf = NaN once
 /// (a - b) T passes 709 (a bright pixel's pole at 20 Hz pre-roll sampling: every pixel over
-/// ~4 pA, for good). exp_bT: exp(-b T) if the caller has it (SfTerms), else NaN.
-inline double cross_gain(double a, double b, double T, double exp_aT,
-                         double exp_bT = std::numeric_limits<double>::quiet_NaN()) {
+/// ~4 pA, for good).
+inline double cross_gain(double a, double b, double T, double exp_aT) {
     if (a <= b) return b * T * exp_aT * one_minus_exp_over((b - a) * T);
-    return b * T * (exp_bT == exp_bT ? exp_bT : std::exp(-b * T)) * one_minus_exp_over((a - b) * T);
+    return b * T * std::exp(-b * T) * one_minus_exp_over((a - b) * T);
 }
 
 namespace detail {
@@ -148,7 +147,7 @@ inline NoiseCoeffs noise_coeffs_interval(double a, double b, double D, double T,
         const bool pole_kept = pole != nullptr && pole->a == a && pole->T == T;
         k.phi_zz = pole_kept ? pole->exp_aT : std::exp(-a * T);
         k.phi_yy = kept ? sf->exp_bT : std::exp(-b * T);
-        k.phi_yz = cross_gain(a, b, T, k.phi_zz, kept ? sf->exp_bT : nan);
+        k.phi_yz = cross_gain(a, b, T, k.phi_zz);
         double qzz, qzy, qyy;
         ou2_covariance(a, b, D, T, qzz, qzy, qyy, kept ? sf->ome_2bT : nan);
         if (qzz > 0) {
@@ -183,7 +182,7 @@ inline void noise_coeffs_bridge(NoiseCoeffs& k, double a, double b, double D, do
     double hzz, hzy, hyy;
     ou2_covariance(a, b, D, h, hzz, hzy, hyy, kept ? sf->ome_2bh : nan, pole_kept ? pole->ome_aT : nan);
     const double pzz = std::exp(-a * h), pyy = kept ? sf->exp_bh : std::exp(-b * h);
-    const double pyz = cross_gain(a, b, h, pzz, kept ? sf->exp_bh : nan);
+    const double pyz = cross_gain(a, b, h, pzz);
     // P = Ph Qh (rows of Ph times Qh): [[pzz, 0], [pyz, pyy]] [[hzz, hzy], [hzy, hyy]]
     const double Pzz = pzz * hzz, Pzy = pzz * hzy;
     const double Pyz = pyz * hzz + pyy * hzy, Pyy = pyz * hzy + pyy * hyy;
