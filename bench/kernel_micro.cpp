@@ -1,4 +1,4 @@
-// Three small loads of the C++ engine behind figures in the README's "Speed" section, for
+// Small loads of the C++ engine behind figures in the README's "Speed" section, for
 // callgrind instruction counts or `/usr/bin/time` CPU seconds (one thread):
 //
 //   short-calls N   mcreynolds' pixel (photoreceptor pole, the paper's leak and background,
@@ -8,6 +8,12 @@
 //   run-pixels      run_pixels() on 4096 pixels, 39 fine samples a call, 20 calls, 15 % of them
 //                   at photon rates of their own (a moving source's window): the per-pixel cost
 //                   of rates no other pixel shares
+//   sub-sampled     what `evstwin simulate mcreynolds` does in a sub-sampled unit: run_pixels()
+//                   on 4096 pixels (every 7th of the first 28,672; 15 % of them at rates of
+//                   their own) over 143 fine samples ending exactly on the unit's last base
+//                   sample, then run() on the whole dark 346 x 260 array over the unit's 11
+//                   base samples at 250 Hz, where those pixels stand ahead (held); 20 units.
+//                   Prints the events' count and an FNV-1a digest.
 //   fill            PixelModel::fill_noise_cache() for 200,000 distinct photon rates with the
 //                   pole: the noise coefficients of one new rate
 //   own-rates       what `evstwin simulate imx636-pointsource` does with a star and its halo:
@@ -83,6 +89,50 @@ int run_pixels() {
     return 0;
 }
 
+std::uint64_t digest_of(const std::vector<evstwin::Event>& events, std::uint64_t digest) {
+    const auto mix = [&digest](std::uint64_t v) {
+        for (int b = 0; b < 8; ++b) digest = (digest ^ ((v >> (8 * b)) & 0xFFu)) * 1099511628211ull;
+    };
+    for (const auto& e : events) {
+        mix(static_cast<std::uint64_t>(e.t));
+        mix((static_cast<std::uint64_t>(e.y) << 32) | (static_cast<std::uint64_t>(e.x) << 8) | e.p);
+    }
+    return digest;
+}
+
+int sub_sampled() {
+    const int width = 346, height = 260;
+    evstwin::Sensor sensor(width, height, mcreynolds_pixel(), 1, 1);
+    const std::size_t m = 4096, base = 11, fine = 13, units = 20;
+    std::vector<std::uint32_t> px(m);
+    for (std::size_t j = 0; j < m; ++j) px[j] = static_cast<std::uint32_t>(j * 7);
+    std::vector<float> dark(static_cast<std::size_t>(width) * height, 0.0f);
+    const double t0 = 0.0;
+    std::uint64_t digest = 1469598103934665603ull;
+    std::size_t n = 0;
+    const auto take = [&](const std::vector<evstwin::Event>& events) {
+        digest = digest_of(events, digest);
+        n += events.size();
+    };
+    take(sensor.run(dark.data(), &t0, 1, nullptr, nullptr, true));
+    std::vector<double> rate(base * fine * m), t_fine(base * fine), t_base(base);
+    for (std::size_t u = 0; u < units; ++u) {
+        for (std::size_t k = 0; k < base; ++k) {
+            t_base[k] = static_cast<double>(u * base + k + 1) / 250.0;
+            for (std::size_t f = 0; f < fine; ++f) {
+                const std::size_t i = k * fine + f;
+                t_fine[i] = f + 1 == fine ? t_base[k] : (static_cast<double>(u * base + k) + (f + 1.0) / fine) / 250.0;
+                for (std::size_t j = 0; j < m; ++j)
+                    rate[i * m + j] = (j % 100 < 85) ? 0.0 : 1e6 * (1.0 + std::sin(0.01 * j + 0.1 * (u * base * fine + i)));
+            }
+        }
+        take(sensor.run_pixels(px.data(), m, rate.data(), t_fine.data(), t_fine.size()));
+        take(sensor.run(dark.data(), t_base.data(), base, nullptr, nullptr, true));
+    }
+    std::printf("%zu events, digest %016llx\n", n, static_cast<unsigned long long>(digest));
+    return 0;
+}
+
 int fill() {
     const evstwin::PixelModel model(mcreynolds_pixel());
     const evstwin::SampleConstants c = model.constants(0.0, 1.0 / 3250.0);
@@ -149,9 +199,10 @@ int own_rates(bool pre_roll) {
 int main(int argc, char** argv) {
     if (argc == 3 && std::strcmp(argv[1], "short-calls") == 0) return short_calls(std::atoi(argv[2]));
     if (argc == 2 && std::strcmp(argv[1], "run-pixels") == 0) return run_pixels();
+    if (argc == 2 && std::strcmp(argv[1], "sub-sampled") == 0) return sub_sampled();
     if (argc == 2 && std::strcmp(argv[1], "fill") == 0) return fill();
     if (argc == 2 && std::strcmp(argv[1], "own-rates") == 0) return own_rates(false);
     if (argc == 2 && std::strcmp(argv[1], "own-rates-pre-roll") == 0) return own_rates(true);
-    std::fprintf(stderr, "usage: %s short-calls N | run-pixels | fill | own-rates | own-rates-pre-roll\n", argv[0]);
+    std::fprintf(stderr, "usage: %s short-calls N | run-pixels | sub-sampled | fill | own-rates | own-rates-pre-roll\n", argv[0]);
     return 2;
 }

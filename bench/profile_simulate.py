@@ -81,6 +81,9 @@ def main() -> None:
     print(f"{args.scenario}, {args.duration:g} s, {args.threads} thread(s): {total:.2f} s CPU, "
           f"{time.perf_counter() - w0:.2f} s wall, {len(result.events)} events, "
           f"{result.pixel_updates:.3g} pixel-updates")
+    engine = sum(v for k, v in cpu_s.items() if k.startswith("Sensor."))
+    print(f"  {'all but the engine calls':24s} {total - engine:8.2f} s CPU ({100 * (total - engine) / total:4.1f} %): "
+          "the scene layer, the runner's steps, the readout")
     for key in sorted(cpu_s, key=lambda k: -cpu_s[k]):
         per = f", {updates[key]:.3g} updates, {cpu_s[key] / updates[key] * 1e9:.1f} ns CPU an update" if updates[key] else ""
         print(f"  {key:24s} {cpu_s[key]:8.2f} s CPU ({100 * cpu_s[key] / total:4.1f} %), {calls[key]} calls{per}; "

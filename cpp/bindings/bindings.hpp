@@ -12,6 +12,7 @@ namespace py = pybind11;
 void register_pixel(py::module_& m);
 void register_sensor(py::module_& m);
 void register_readout(py::module_& m);
+void register_psf(py::module_& m);
 
 /// Move a std::vector into a NumPy array that owns it (freed with the array).
 template <class T>

@@ -51,4 +51,5 @@ PYBIND11_MODULE(_core, m) {
     register_pixel(m);
     register_sensor(m);
     register_readout(m);
+    register_psf(m);
 }

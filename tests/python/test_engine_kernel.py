@@ -78,13 +78,15 @@ def same(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> 
 
 
 def run_calls(params: PixelParams, kind: str, per_pixel: bool, threads: int, chunks: list[int],
-              sparse: bool) -> tuple[np.ndarray, np.ndarray]:
+              sparse: bool, every: int = 7, ahead: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Events and labels of a run cut into `chunks`, through the kernel or the per-pixel path,
-    with (sparse) a finer sampling of some pixels between the chunks (run_pixels)."""
+    with (sparse) a finer sampling of every `every`-th pixel between the chunks (run_pixels):
+    to 1.5 base intervals past the chunk's end, or (ahead > 0) exactly to the base sample
+    `ahead` samples into the next chunk."""
     dtype = np.float32 if kind == "spot32" else np.float64
     t, rate = scene(kind if kind in ("dark", "gradient", "bright") else "spot", 160, 3, dtype)
     sensor = Sensor(W, H, params, seed=5, num_threads=threads)
-    sub = np.arange(0, W * H, 7, dtype=np.uint32)
+    sub = np.arange(0, W * H, every, dtype=np.uint32)
     events, labels = [], []
     edges = [0, *np.cumsum(chunks)]
     for a, b in zip(edges[:-1], edges[1:]):
@@ -98,6 +100,8 @@ def run_calls(params: PixelParams, kind: str, per_pixel: bool, threads: int, chu
             # Past the next base sample: the next run skips it for these pixels, then advances
             # them from their own time (not the block's), so the block leaves the kernel once.
             tt = t[b - 1] + np.linspace(1e-5, 1.5 * (t[b + 1] - t[b - 1]), 9)
+            if ahead:
+                tt = np.concatenate([np.linspace(t[b - 1], t[b + ahead], 9, endpoint=False)[1:], [t[b + ahead]]])
             rr = np.ascontiguousarray(rate[b].reshape(-1)[sub] * (1 + 0.5 * np.sin(np.arange(9)))[:, None], dtype)
             events.append(sensor.run_pixels(sub, rr, tt))
             labels.append(sensor.last_labels())
@@ -124,6 +128,22 @@ def test_block_kernel_with_sparse_calls_threads_and_chunks(name: str) -> None:
     plain = run_calls(params, "spot", per_pixel=False, threads=1, chunks=[160], sparse=False)
     for threads, chunks in [(2, [160]), (1, [1, 40, 119]), (2, [80, 80])]:
         assert same(run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=False), plain)
+
+
+@pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "leak_light_off_pole"])
+@pytest.mark.parametrize("every", [1, 2, 3, 7])
+def test_block_kernel_with_pixels_held_past_samples(name: str, every: int) -> None:
+    """Pixels that run_pixels took exactly to a base sample a few samples into the next call
+    (so the vector kernel carries them, held, and takes them in again mid-call) and blocks
+    where 1/7 to all of the pixels stand ahead: the per-pixel path's events and labels."""
+    params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
+    chunks = [50, 6, 104]
+    ref = run_calls(params, "spot", per_pixel=True, threads=1, chunks=chunks, sparse=True, every=every, ahead=3)
+    assert len(ref[0]) > 0
+    for threads in (1, 2):
+        got = run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=True, every=every,
+                        ahead=3)
+        assert same(got, ref), f"{name}, every {every}th pixel held, {threads} threads"
 
 
 @pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "fast", "sampled", "leak_light_off",

@@ -549,3 +549,102 @@ def test_the_fit_groups_see_a_core_and_its_halo_together() -> None:
     flux = source_flux_map(sc)
     expect = render_points(sc.width, sc.height, 30.3, 20.6, 1e6, sc.psf)
     np.testing.assert_allclose(flux, expect, rtol=1e-12, atol=1e-9)
+
+
+# -- the C++ loops of KernelPSF (evstwin/stamp.hpp) against the NumPy code they replaced --------
+
+
+def _numpy_phase_mix(table: np.ndarray, q: np.ndarray, p: np.ndarray, a: np.ndarray, b: np.ndarray,
+                     flux: np.ndarray) -> np.ndarray:
+    """KernelPSF.contributions' weights as NumPy computed them before the C++ loop."""
+    a3, b3 = a[:, None, None], b[:, None, None]
+    w = ((1.0 - b3) * ((1.0 - a3) * table[q, p] + a3 * table[q, p + 1])
+         + b3 * ((1.0 - a3) * table[q + 1, p] + a3 * table[q + 1, p + 1]))
+    w *= flux[:, None, None]
+    return w
+
+
+def _numpy_add_dense(shape: KernelPSF, image: np.ndarray, x: float, y: float, flux: float) -> None:
+    """KernelPSF.add_dense as NumPy computed it before the C++ loop: a term at a time."""
+    k, h, table = shape.subpixel, shape.half_width_px, shape.table
+    cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
+    tx, ty = (x - cx + 0.5) * k, (y - cy + 0.5) * k
+    p, q = min(max(math.floor(tx), 0), k - 1), min(max(math.floor(ty), 0), k - 1)
+    a, b = tx - p, ty - q
+    height, width = image.shape
+    x0, y0 = cx - h, cy - h
+    xs, ys, xe, ye = max(0, x0), max(0, y0), min(width, x0 + 2 * h + 1), min(height, y0 + 2 * h + 1)
+    if xs >= xe or ys >= ye:
+        return
+    rows, cols = slice(ys - y0, ye - y0), slice(xs - x0, xe - x0)
+    out = image[ys:ye, xs:xe]
+    for (qq, pp), w in (((q, p), (1.0 - a) * (1.0 - b)), ((q, p + 1), a * (1.0 - b)),
+                        ((q + 1, p), (1.0 - a) * b), ((q + 1, p + 1), a * b)):
+        if w != 0.0:
+            out += (flux * w) * table[qq, pp, rows, cols]
+
+
+def test_the_phase_mix_is_the_numpy_expression_bit_for_bit() -> None:
+    # Values over 30 decades and weights at 0, just below 1 and between, so that any other
+    # order of the products and sums (or a fused multiply-add) would round differently.
+    from evstwin import _core
+
+    rng = np.random.default_rng(4)
+    table = np.ascontiguousarray(10.0 ** rng.uniform(-30, 0, (5, 5, 9, 9)))
+    n = 400
+    q, p = rng.integers(0, 4, n).astype(np.intp), rng.integers(0, 4, n).astype(np.intp)
+    a, b = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    a[:20], b[20:40], a[40:60] = 0.0, 0.0, np.nextafter(1.0, 0.0)
+    flux = 10.0 ** rng.uniform(0, 12, n)
+    got = _core.bilinear_phase_mix(table, q, p, a, b, flux)
+    want = _numpy_phase_mix(table, q, p, a, b, flux)
+    assert got.shape == (n, 9, 9) and got.tobytes() == want.tobytes()
+    # Off by one ulp somewhere would show: the test can fail.
+    assert not np.array_equal(got, _numpy_phase_mix(table, q, p, a, b, flux * (1 + 2**-52)))
+
+
+@pytest.mark.parametrize(("x", "y"), [(60.3, 50.77), (3.2, 97.5), (-20.0, 40.0), (119.5, 0.25), (60.0, 50.0),
+                                      (59.5, 49.5), (500.0, 50.0)])
+def test_add_dense_is_the_term_by_term_sum_bit_for_bit(x: float, y: float) -> None:
+    # Inside, clipped at the edges, on a phase (a or b exactly 0: fewer terms), and off the image.
+    rng = np.random.default_rng(5)
+    for shape in (halo_psf(6.0, 1.5, 40), moffat_psf(3.0, 2.5, 0.0, 8, 12)):
+        base = rng.uniform(0.0, 50.0, (100, 120))
+        got, want = base.copy(), base.copy()
+        shape.add_dense(got, x, y, 3.7e6)
+        _numpy_add_dense(shape, want, x, y, 3.7e6)
+        assert got.tobytes() == want.tobytes()
+    # A float32 image (no C++ loop) and a view with a row stride take the same sums.
+    shape = halo_psf(6.0, 1.5, 40)
+    wide = rng.uniform(0.0, 5.0, (100, 300))
+    got, want = wide.copy(), wide.copy()
+    shape.add_dense(got[:, 50:170], x, y, 3.7e6)
+    _numpy_add_dense(shape, want[:, 50:170], x, y, 3.7e6)
+    assert got.tobytes() == want.tobytes()
+    got32, want32 = wide[:, :120].astype(np.float32), wide[:, :120].astype(np.float32)
+    shape.add_dense(got32, x, y, 3.7e6)
+    _numpy_add_dense(shape, want32, x, y, 3.7e6)
+    assert got32.tobytes() == want32.tobytes()
+
+
+def test_the_psf_loops_refuse_bad_input() -> None:
+    from evstwin import _core
+
+    table = np.zeros((3, 3, 5, 5))
+    one = np.zeros(1)
+    with pytest.raises(ValueError, match=r"q and p must lie in \[0, 1\]; got q\[0\]=2"):
+        _core.bilinear_phase_mix(table, np.array([2], np.intp), np.array([0], np.intp), one, one, one)
+    with pytest.raises(ValueError, match="one length"):
+        _core.bilinear_phase_mix(table, np.array([0, 0], np.intp), np.array([0], np.intp), one, one, one)
+    with pytest.raises(ValueError, match="phases, phases, side, side"):
+        _core.bilinear_phase_mix(np.zeros((3, 2, 5, 5)), np.array([0], np.intp), np.array([0], np.intp), one, one, one)
+    image = np.zeros((4, 6))
+    with pytest.raises(ValueError, match=r"terms\[0\] must have the image's shape \(4, 6\); got \(4, 5\)"):
+        _core.add_scaled_terms(image, [np.zeros((4, 5))], [1.0])
+    with pytest.raises(ValueError, match="at most 4"):
+        _core.add_scaled_terms(image, [image] * 5, [1.0] * 5)
+    with pytest.raises(ValueError, match="contiguous rows"):
+        _core.add_scaled_terms(image[:, ::2], [np.zeros((4, 3))], [1.0])
+    image.flags.writeable = False
+    with pytest.raises(ValueError, match="writeable"):
+        _core.add_scaled_terms(image, [np.zeros((4, 6))], [1.0])

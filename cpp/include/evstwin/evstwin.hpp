@@ -9,4 +9,5 @@
 #include "rng.hpp"
 #include "sensor.hpp"
 #include "simd.hpp"
+#include "stamp.hpp"
 #include "version.hpp"

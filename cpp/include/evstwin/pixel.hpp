@@ -478,9 +478,11 @@ struct BlockSoA {
             bg_on_hz[j] = st[j].bg_on_hz; bg_off_hz[j] = st[j].bg_off_hz;
         }
     }
-    /// Back into the states, which all stand at t_s now.
-    void store(PixelState* st, std::size_t m, double t_s) const {
+    /// Back into the states, which all stand at t_s now; but for the pixels flagged in held
+    /// (nullptr: none), whose states are left as they are (step_block_soa's held pixels).
+    void store(PixelState* st, std::size_t m, double t_s, const std::uint8_t* held = nullptr) const {
         for (std::size_t j = 0; j < m; ++j) {
+            if (held && held[j]) continue;
             give(st[j], j, now());
             st[j].t = t_s;
         }
@@ -529,11 +531,15 @@ inline std::size_t next_flagged(const std::uint8_t* flag, std::size_t from, std:
     return n;
 }
 
-/// The first index i in [from, n) with flag[i] != 0 (n if none), for 64-bit flags.
-inline std::size_t next_flagged(const std::uint64_t* flag, std::size_t from, std::size_t n) {
-    for (std::size_t i = from; i < n; ++i)
-        if (flag[i]) return i;
-    return n;
+/// The indices i in [0, n) with flag[i] != 0 into list, in order; returns how many. Without
+/// branches: as cheap for a block whose pixels are all flagged as for one where none is.
+inline std::size_t list_flagged(const std::uint64_t* __restrict flag, std::size_t n, std::uint32_t* __restrict list) {
+    std::size_t m = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        list[m] = static_cast<std::uint32_t>(i);
+        m += flag[i] != 0;
+    }
+    return m;
 }
 
 /// The configurations the quiet pass is compiled for: the exact source follower alone (the
@@ -1235,19 +1241,27 @@ struct PixelModel {
         const std::uint64_t* __restrict sample = h.now().n.data();
         std::uint64_t* __restrict words = h.spare_words.data();
         std::uint64_t* __restrict kept_for = h.spare_sample.data();
-        std::size_t kept = 0, even = 0;
-        for (std::size_t j = 0; j < n; ++j) {
-            kept += static_cast<std::size_t>((sample[j] & 1u) & (kept_for[j] == sample[j]));
-            even += static_cast<std::size_t>(!(sample[j] & 1u));
-        }
-        if (kept == n) {
+        // Which case, with early exits: a block of pixels sub-sampled apart fails both tests
+        // at its first pixels of the other parity.
+        const auto all_kept = [&] {
+            for (std::size_t j = 0; j < n; ++j)
+                if ((kept_for[j] != sample[j]) | !(sample[j] & 1u)) return false;
+            return true;
+        };
+        const auto all_even = [&] {
+            for (std::size_t j = 0; j < n; ++j)
+                if (sample[j] & 1u) return false;
+            return true;
+        };
+        const bool first_odd = n > 0 && (sample[0] & 1u);
+        if (first_odd && all_kept()) {
             for (std::size_t j = 0; j < n; ++j) {
                 w0[j] = static_cast<std::uint32_t>(words[j]);
                 w1[j] = static_cast<std::uint32_t>(words[j] >> 32);
             }
             return;
         }
-        if (even == n) {
+        if (!first_odd && all_even()) {
             std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
             for (std::size_t j = 0; j < n; ++j) {
                 const std::uint64_t pair = sample[j] >> 1;
@@ -1539,19 +1553,29 @@ struct PixelModel {
     /// rate), the per-pixel path on the array-of-structures state from the start of the
     /// interval (levels, clocks, continuous_finish, hot events). The same events as
     /// step_block_continuous(). Needs has_soa_kernel().
-    /// Returns how many pixels took the per-pixel path.
+    ///
+    /// held (n_held local indices, nullptr if none): pixels that sit in the arrays but are not
+    /// advanced (they stand past this sample: run_pixels sampled them finely). The passes run
+    /// over them too, on their stale arrays, and their results are dropped: they never take the
+    /// per-pixel path, their states in st are not touched, and the arrays' copy of them is
+    /// garbage until the caller takes them in again (BlockSoA::take) or stores the block
+    /// without them (BlockSoA::store's held). Their random words are counter-based (a function
+    /// of the pixel, the sample and the purpose), so drawing some that are dropped changes no
+    /// other pixel's. Returns how many pixels took the per-pixel path.
     template <class Real, class Emit>
     std::size_t step_block_soa(BlockSoA& h, PixelState* st, const std::uint32_t* ids, std::size_t n, const Real* rate,
                                const SampleConstants& c, Philox4x32Key key, BlockScratch& scratch, Emit&& emit,
-                               std::uint32_t& pixel) const {
-        if (p.pr_pole) return step_block_soa_impl<QuietChain::PoleSf>(h, st, ids, n, rate, c, key, scratch, emit, pixel);
-        return step_block_soa_impl<QuietChain::SfOnly>(h, st, ids, n, rate, c, key, scratch, emit, pixel);
+                               std::uint32_t& pixel, const std::uint32_t* held = nullptr, std::size_t n_held = 0) const {
+        if (p.pr_pole)
+            return step_block_soa_impl<QuietChain::PoleSf>(h, st, ids, n, rate, c, key, scratch, emit, pixel, held, n_held);
+        return step_block_soa_impl<QuietChain::SfOnly>(h, st, ids, n, rate, c, key, scratch, emit, pixel, held, n_held);
     }
 
     template <QuietChain Chain, class Real, class Emit>
     EVSTWIN_ALWAYS_INLINE std::size_t step_block_soa_impl(BlockSoA& h, PixelState* st, const std::uint32_t* ids, std::size_t n,
                                                    const Real* rate, const SampleConstants& c, Philox4x32Key key,
-                                                   BlockScratch& scratch, Emit&& emit, std::uint32_t& pixel) const {
+                                                   BlockScratch& scratch, Emit&& emit, std::uint32_t& pixel,
+                                                   const std::uint32_t* held, std::size_t n_held) const {
         constexpr bool sf_only = Chain == QuietChain::SfOnly;
         scratch.resize(n);
         BlockSoA::Levels& now = h.now();
@@ -1603,12 +1627,18 @@ struct PixelModel {
         q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
         detail::quiet_pass<Chain>(q, rate, noise, background);
         std::uint64_t* busy = h.busy.data();
-        if (q.bridge_stage) bridge_stage(h, ids, n, common, c, key, scratch);
+        for (std::size_t i = 0; i < n_held; ++i) busy[held[i]] = 0;  // dropped, whatever the pass found
+        // The pixels the pass did not settle, listed once for the two stages below.
+        std::uint32_t* flagged = scratch.busy_at.data();
+        const std::size_t n_flagged = list_flagged(busy, n, flagged);
+        if (q.bridge_stage) bridge_stage(h, ids, flagged, n_flagged, common, c, key, scratch);
         // The busy pixels, from their state at c.t0 (now), as step_continuous() does; their new
         // state goes to next, beside the quiet ones'.
         NoiseCache& other = scratch.noise_other;
         std::size_t n_busy = 0;
-        for (std::size_t j = next_flagged(busy, 0, n); j < n; j = next_flagged(busy, j + 1, n)) {
+        for (std::size_t f = 0; f < n_flagged; ++f) {
+            const std::size_t j = flagged[f];
+            if (!busy[j]) continue;  // settled by the bridge stage
             ++n_busy;
             PixelState& s = st[j];
             h.give(s, j, now);
@@ -1649,7 +1679,8 @@ struct PixelModel {
     /// the smallest uniform, its uniform, all in one Philox batch; a pixel whose draw fires is
     /// handed to the per-pixel path (h.busy 2), which draws the same uniform again and places
     /// the event; the others are settled (h.busy 0).
-    void bridge_stage(BlockSoA& h, const std::uint32_t* ids, std::size_t n, const NoiseCache& common,
+    void bridge_stage(BlockSoA& h, const std::uint32_t* ids, const std::uint32_t* flagged, std::size_t n_flagged,
+                      const NoiseCache& common,
                       const SampleConstants& c, Philox4x32Key key, BlockScratch& scratch) const {
         const BlockSoA::Levels& now = h.now();
         const BlockSoA::Levels& next = h.next();
@@ -1662,7 +1693,8 @@ struct PixelModel {
         std::uint32_t* at = scratch.need_at.data();
         double* p_fire = scratch.noise_d.data();
         std::size_t m = 0;
-        for (std::size_t j = next_flagged(busy, 0, n); j < n; j = next_flagged(busy, j + 1, n)) {
+        for (std::size_t f = 0; f < n_flagged; ++f) {
+            const std::size_t j = flagged[f];
             if (busy[j] != 1) continue;
             const double s_y = now.y[j], ref = now.ref[j], th_on = h.theta_on[j], th_off = h.theta_off[j];
             const double g = (next.y[j] - s_y) * c.inv_dt + leak_slope(h.leak_spread[j], th_on, th_off, common.leak_hz);

@@ -80,6 +80,11 @@ class Sensor {
 public:
     /// Pixels per block: the unit of parallel work and of event bookkeeping.
     static constexpr std::size_t BLOCK = 256;
+    /// run()'s vector kernel takes a block where at least this many quarters of its pixels
+    /// advance at a sample (the others stand past it, sampled finely by run_pixels): it runs
+    /// over the whole block, so below that the array-of-structures kernel over the pixels
+    /// that advance costs less. Speed only: either gives the same events.
+    static constexpr std::size_t SOA_MIN_ACTIVE_QUARTERS = 2;
     /// Shortest sample interval accepted [s]: below it 1/dt and the crossing times lose meaning.
     static constexpr double MIN_DT_S = 1e-12;
     /// Largest photon rate accepted [photons/s on a pixel]; with no dark current, positive
@@ -642,20 +647,52 @@ private:
         // before any other path touches it and at the end.
         bool in_soa = false;
         double soa_t = 0.0;
+        // Pixels in the arrays that stand past the samples so far (run_pixels sampled them
+        // finely; step_block_soa's held ones): their states stay in state_, untouched, until
+        // a sample starts at their time and they are taken into the arrays.
+        std::uint8_t held[BLOCK];
+        std::uint32_t held_at[BLOCK];
+        std::size_t n_held = 0;
         // Where most of a block's pixels need the per-pixel path (an event-heavy scene), copying
         // them out of the arrays and back costs more than the vector pass saves: the block goes
         // on with the array-of-structures kernel for the rest of the call. The same events.
         bool soa_pays = soa_kernel;
         const auto leave_soa = [&] {
-            if (in_soa) scratch.soa.store(state_.data() + lo, hi - lo, soa_t);
+            if (in_soa) scratch.soa.store(state_.data() + lo, hi - lo, soa_t, n_held ? held : nullptr);
             in_soa = false;
+            n_held = 0;
         };
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
             std::size_t n_active = hi - lo;
             bool eligible = kernel && synced;
-            if (kernel && !synced) {
+            if (kernel && !synced && in_soa) {
+                // The arrays' pixels stand at c.t0 (soa_t); the held ones at their own times.
+                eligible = true;
+                for (std::size_t q = 0; q < n_held; ++q) {
+                    const PixelState& s = state_[lo + held_at[q]];
+                    eligible &= ((s.t == c.t0) & (s.n > 0)) | (s.t >= c.t1);
+                }
+                if (eligible) {
+                    // Those that stand at c.t0 now join the arrays.
+                    std::size_t still = 0;
+                    for (std::size_t q = 0; q < n_held; ++q) {
+                        const std::size_t j = held_at[q];
+                        if (state_[lo + j].t == c.t0) {
+                            scratch.soa.take(state_[lo + j], j, scratch.soa.now());
+                            held[j] = 0;
+                        } else {
+                            held_at[still++] = static_cast<std::uint32_t>(j);
+                        }
+                    }
+                    n_held = still;
+                    n_active = hi - lo - n_held;
+                } else {
+                    leave_soa();  // and scan the states below
+                }
+            }
+            if (kernel && !synced && !in_soa) {
                 // Eligible when every pixel either stands at t0 or has already passed t1 (a
                 // pixel sub-sampled by run_pixels): the latter are skipped.
                 eligible = true;
@@ -668,13 +705,23 @@ private:
                     n_active += at_t0;
                 }
             }
-            if (eligible && soa_pays && n_active == hi - lo) {
-                if (!in_soa) scratch.soa.load(state_.data() + lo, hi - lo);
+            // The arrays pay while most of the block advances: the passes run over the held
+            // pixels too, and are dropped for them.
+            if (eligible && soa_pays && (in_soa || SOA_MIN_ACTIVE_QUARTERS * (hi - lo) <= 4 * n_active)) {
+                if (!in_soa) {
+                    scratch.soa.load(state_.data() + lo, hi - lo);
+                    if (n_active < hi - lo) {
+                        std::fill(held, held + (hi - lo), std::uint8_t{1});
+                        for (std::size_t q = 0; q < n_active; ++q) held[active[q]] = 0;
+                        for (std::size_t j = 0; j < hi - lo; ++j)
+                            if (held[j]) held_at[n_held++] = static_cast<std::uint32_t>(j);
+                    }
+                }
                 in_soa = true;
                 const std::size_t n_busy = model_.step_block_soa(scratch.soa, state_.data() + lo, ids, hi - lo, row + lo,
-                                                                 c, key_, scratch, emit, pixel);
+                                                                 c, key_, scratch, emit, pixel, held_at, n_held);
                 soa_t = c.t1;
-                synced = true;
+                synced = n_held == 0;
                 if (2 * n_busy > hi - lo) {
                     soa_pays = false;
                     leave_soa();

@@ -150,7 +150,7 @@ def _scatter(
         vy = (rows >= 0) & (rows < height)
         idx = rows[:, :, None] * width + cols[:, None, :]
         if offset is not None:
-            idx = idx + offset[s][:, None, None]
+            idx += offset[s][:, None, None]  # in place: no second window-sized temporary
         if vx.all() and vy.all():  # every window fully on the sensor: no masking
             out.append((idx.reshape(-1), w.reshape(-1)))
         else:
