@@ -14,8 +14,12 @@ py::array_t<double> bilinear_phase_mix(py::array_t<double, py::array::c_style> t
                                        py::array_t<double, py::array::c_style> a, py::array_t<double, py::array::c_style> b,
                                        py::array_t<double, py::array::c_style> flux) {
     if (table.ndim() != 4 || table.shape(0) != table.shape(1) || table.shape(2) != table.shape(3) || table.shape(0) < 2)
-        throw py::value_error("table must be a (phases, phases, side, side) array with phases >= 2; got ndim=" +
-                              std::to_string(table.ndim()));
+    {
+        std::string shape = "(";
+        for (py::ssize_t d = 0; d < table.ndim(); ++d) shape += (d ? ", " : "") + std::to_string(table.shape(d));
+        throw py::value_error("table must be a (phases, phases, side, side) array with phases >= 2; got shape " + shape +
+                              ")");
+    }
     const py::ssize_t n = q.size();
     if (q.ndim() != 1 || p.ndim() != 1 || a.ndim() != 1 || b.ndim() != 1 || flux.ndim() != 1 || p.size() != n ||
         a.size() != n || b.size() != n || flux.size() != n)
@@ -60,7 +64,7 @@ void add_scaled_terms(py::array image, const std::vector<py::array>& terms, cons
     const double* t[4] = {};
     std::ptrdiff_t ts[4] = {};
     for (std::size_t k = 0; k < terms.size(); ++k) {
-        ts[k] = row_stride(terms[k], "terms[k]");
+        ts[k] = row_stride(terms[k], ("terms[" + std::to_string(k) + "]").c_str());
         if (terms[k].shape(0) != image.shape(0) || terms[k].shape(1) != image.shape(1))
             throw py::value_error("terms[" + std::to_string(k) + "] must have the image's shape (" +
                                   std::to_string(image.shape(0)) + ", " + std::to_string(image.shape(1)) + "); got (" +

@@ -713,8 +713,6 @@ TEST(hot_pixel_chains_of_their_own_leave_every_other_draw_alone) {
     CHECK(again.size() == b.size() && std::memcmp(again.data(), b.data(), b.size() * sizeof(Event)) == 0);
 }
 
-TEST_MAIN()
-
 // stamp.hpp: the PSF renderer's two loops, on values a hand can check (each sum and product
 // exact in binary), and a term with a zero coefficient is not read at all (0 x NaN would be NaN).
 TEST(psf_stamp_loops_by_hand) {
@@ -742,3 +740,5 @@ TEST(psf_stamp_loops_by_hand) {
     CHECK(image[0][0] == 5.0 && image[0][1] == 7.0 && image[0][2] == 9.0);     // 1 + 2 t0 + 4 * 0.5
     CHECK(image[1][0] == 13.0 && image[1][1] == 15.0 && image[1][2] == 17.0);  // 1 + 2 t0 + 4
 }
+
+TEST_MAIN()

@@ -625,6 +625,26 @@ def test_add_dense_is_the_term_by_term_sum_bit_for_bit(x: float, y: float) -> No
     shape.add_dense(got32, x, y, 3.7e6)
     _numpy_add_dense(shape, want32, x, y, 3.7e6)
     assert got32.tobytes() == want32.tobytes()
+    # Rows 164 bytes apart (unaligned doubles on every other row): the NumPy path, same sums.
+    buf = np.zeros(100 * 164 + 8, np.uint8)
+    odd = np.ndarray((100, 20), np.float64, buffer=buf, strides=(164, 8))
+    odd[:] = wide[:, :20]
+    want_odd = wide[:, :20].copy()
+    shape.add_dense(odd, x, y, 3.7e6)
+    _numpy_add_dense(shape, want_odd, x, y, 3.7e6)
+    assert np.array_equal(odd, want_odd)
+
+
+def test_add_scaled_terms_takes_views_with_negative_row_strides() -> None:
+    from evstwin import _core
+
+    rng = np.random.default_rng(11)
+    table = rng.uniform(-1.0, 1.0, (6, 7))
+    image = rng.uniform(0.0, 1.0, (12, 7))
+    want = image.copy()
+    want[::-2] += 0.5 * table[::-1]
+    _core.add_scaled_terms(image[::-2], [table[::-1]], [0.5])
+    assert image.tobytes() == want.tobytes()
 
 
 def test_the_psf_loops_refuse_bad_input() -> None:
@@ -645,6 +665,10 @@ def test_the_psf_loops_refuse_bad_input() -> None:
         _core.add_scaled_terms(image, [image] * 5, [1.0] * 5)
     with pytest.raises(ValueError, match="contiguous rows"):
         _core.add_scaled_terms(image[:, ::2], [np.zeros((4, 3))], [1.0])
+    with pytest.raises(ValueError, match=r"terms\[1\] must have contiguous rows"):
+        _core.add_scaled_terms(image[:, :3], [np.zeros((4, 3)), np.zeros((4, 6))[:, ::2]], [1.0, 1.0])
+    with pytest.raises(ValueError, match=r"got shape \(3, 2, 5, 5\)"):
+        _core.bilinear_phase_mix(np.zeros((3, 2, 5, 5)), np.array([0], np.intp), np.array([0], np.intp), one, one, one)
     image.flags.writeable = False
     with pytest.raises(ValueError, match="writeable"):
         _core.add_scaled_terms(image, [np.zeros((4, 6))], [1.0])

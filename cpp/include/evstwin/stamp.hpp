@@ -37,7 +37,8 @@ inline void bilinear_phase_mix(const double* table, std::size_t phases, std::siz
 /// image[i, j] = (((image + c[0] T0) + c[1] T1) + ...)[i, j] over the terms with c[k] != 0, in
 /// order: the same as adding c[k] T_k to the image one term at a time. n_terms <= 4; rows x
 /// cols elements; row strides in elements (the image and each term may be a view of a wider
-/// array; columns are contiguous).
+/// array; columns are contiguous). A term must not overlap the image (NumPy's out += c T would
+/// buffer it; this reads each term element after earlier rows were written).
 inline void add_scaled_terms(double* image, std::ptrdiff_t image_stride, const double* const* terms,
                              const std::ptrdiff_t* term_strides, const double* coef, std::size_t n_terms,
                              std::size_t rows, std::size_t cols) {
@@ -53,23 +54,26 @@ inline void add_scaled_terms(double* image, std::ptrdiff_t image_stride, const d
             ++m;
         }
     for (std::size_t r = 0; r < rows; ++r) {
-        double* o = image + static_cast<std::ptrdiff_t>(r) * image_stride;
+        // Row pointers first, in signed arithmetic: a view's row stride may be negative.
         const std::ptrdiff_t rr = static_cast<std::ptrdiff_t>(r);
+        double* o = image + rr * image_stride;
+        const double* r0 = m > 0 ? t[0] + rr * ts[0] : nullptr;
+        const double* r1 = m > 1 ? t[1] + rr * ts[1] : nullptr;
+        const double* r2 = m > 2 ? t[2] + rr * ts[2] : nullptr;
+        const double* r3 = m > 3 ? t[3] + rr * ts[3] : nullptr;
         switch (m) {
             case 1:
-                for (std::size_t j = 0; j < cols; ++j) o[j] = o[j] + c[0] * t[0][rr * ts[0] + j];
+                for (std::size_t j = 0; j < cols; ++j) o[j] = o[j] + c[0] * r0[j];
                 break;
             case 2:
-                for (std::size_t j = 0; j < cols; ++j) o[j] = (o[j] + c[0] * t[0][rr * ts[0] + j]) + c[1] * t[1][rr * ts[1] + j];
+                for (std::size_t j = 0; j < cols; ++j) o[j] = (o[j] + c[0] * r0[j]) + c[1] * r1[j];
                 break;
             case 3:
-                for (std::size_t j = 0; j < cols; ++j)
-                    o[j] = ((o[j] + c[0] * t[0][rr * ts[0] + j]) + c[1] * t[1][rr * ts[1] + j]) + c[2] * t[2][rr * ts[2] + j];
+                for (std::size_t j = 0; j < cols; ++j) o[j] = ((o[j] + c[0] * r0[j]) + c[1] * r1[j]) + c[2] * r2[j];
                 break;
             case 4:
                 for (std::size_t j = 0; j < cols; ++j)
-                    o[j] = (((o[j] + c[0] * t[0][rr * ts[0] + j]) + c[1] * t[1][rr * ts[1] + j]) + c[2] * t[2][rr * ts[2] + j]) +
-                           c[3] * t[3][rr * ts[3] + j];
+                    o[j] = (((o[j] + c[0] * r0[j]) + c[1] * r1[j]) + c[2] * r2[j]) + c[3] * r3[j];
                 break;
             default:
                 break;

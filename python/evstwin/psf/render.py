@@ -390,7 +390,9 @@ class PSFShape:
         """(flat index, photons/s) chunks of every in-sensor window pixel of every source.
 
         x, y, flux: 1-D float64 arrays of the same length (validated); offset: int64 per
-        source added to the flat index (the frame of each source in ``render_frames``)."""
+        source added to the flat index (the frame of each source in ``render_frames``). The
+        arrays returned are the caller's: ``simulate`` overwrites the indices in place, so a
+        shape must not return arrays it keeps."""
         raise NotImplementedError
 
     @property

@@ -143,7 +143,8 @@ class KernelPSF(PSFShape):
             if w != 0.0:
                 terms.append(table[qq, pp, rows, cols])
                 coef.append(flux * w)
-        if out.dtype == np.float64 and out.strides[-1] == out.itemsize:
+        if (out.dtype == np.float64 and out.flags.aligned and out.strides[-1] == out.itemsize
+                and out.strides[0] % out.itemsize == 0):
             # out += coef[0] terms[0], then coef[1] terms[1], ..., as one pass over the window
             # (NumPy's was two a term, with a window-sized temporary each): the same bits.
             _core.add_scaled_terms(out, terms, coef)
