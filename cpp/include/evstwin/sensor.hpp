@@ -424,9 +424,9 @@ private:
 
     /// A call's photon rates checked in parts of RATE_CHECK_PART values, spread over the call's
     /// threads at the start of its parallel region (for_each_block). A memory-bound pass, but
-    /// serial it was ~7 % of a 2-thread reference-load call (250 samples of 346 x 260 float
-    /// rates, 90 MB) and 5 % of mcreynolds' run_pixels calls (README, "Sixth round"); in the
-    /// region it needs no second fork and join. first_bad(): the first bad index in the
+    /// serial it was 5 % of mcreynolds' run_pixels calls on 2 threads, and the reference load
+    /// (250 samples of 346 x 260 float rates a call, 90 MB) runs 3.6 % faster on 2 threads
+    /// without it (README, "Sixth round"); in the region it needs no second fork and join. first_bad(): the first bad index in the
     /// whole array (the parts' first, in order), `total` if none, whatever the threads.
     static constexpr std::size_t RATE_CHECK_PART = std::size_t{1} << 16;
     template <class Real>
