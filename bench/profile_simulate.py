@@ -5,7 +5,9 @@
 Wraps ``Sensor.run`` (split into the pre-roll's calls and the run's own), ``Sensor.run_pixels``
 and the sub-sampled path's steps of ``simulate``'s runner, and prints for each the process CPU
 time (all threads), the pixel-updates and CPU per update of the engine calls, and the minor
-page faults and system time (fresh memory the kernel zeroes) of each step. Steps nest:
+page faults and system time (fresh memory the kernel zeroes) of each step, its wall time, and
+with --threads > 1 the engine calls' CPU on the calling thread against the others' (their
+difference: the calls' serial work and imbalance between the threads). Steps nest:
 ``_sparse`` holds ``_with_halos``, ``Sensor.run_pixels`` and a ``Sensor.run``. CPU time, not
 wall time: on a shared machine it is the steadier figure.
 """
@@ -31,6 +33,8 @@ calls: collections.Counter[str] = collections.Counter()
 updates: collections.Counter[str] = collections.Counter()
 faults: collections.Counter[str] = collections.Counter()
 sys_s: dict[str, float] = collections.defaultdict(float)
+wall_s: dict[str, float] = collections.defaultdict(float)
+main_s: dict[str, float] = collections.defaultdict(float)
 
 
 def timed(owner: Any, name: str, kind: Callable[..., tuple[str, int]] | None = None) -> None:
@@ -40,10 +44,13 @@ def timed(owner: Any, name: str, kind: Callable[..., tuple[str, int]] | None = N
 
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         key, n = kind(*args) if kind else (name, 0)
-        c0, r0 = time.process_time(), resource.getrusage(resource.RUSAGE_SELF)
+        w0, m0, c0 = time.perf_counter(), time.thread_time(), time.process_time()
+        r0 = resource.getrusage(resource.RUSAGE_SELF)
         out = original(*args, **kwargs)
         r1 = resource.getrusage(resource.RUSAGE_SELF)
         cpu_s[key] += time.process_time() - c0
+        main_s[key] += time.thread_time() - m0
+        wall_s[key] += time.perf_counter() - w0
         sys_s[key] += r1.ru_stime - r0.ru_stime
         faults[key] += r1.ru_minflt - r0.ru_minflt
         calls[key] += 1
@@ -86,8 +93,16 @@ def main() -> None:
           "the scene layer, the runner's steps, the readout")
     for key in sorted(cpu_s, key=lambda k: -cpu_s[k]):
         per = f", {updates[key]:.3g} updates, {cpu_s[key] / updates[key] * 1e9:.1f} ns CPU an update" if updates[key] else ""
-        print(f"  {key:24s} {cpu_s[key]:8.2f} s CPU ({100 * cpu_s[key] / total:4.1f} %), {calls[key]} calls{per}; "
-              f"{faults[key]} minor faults, {sys_s[key]:.2f} s system")
+        print(f"  {key:24s} {cpu_s[key]:8.2f} s CPU ({100 * cpu_s[key] / total:4.1f} %), {wall_s[key]:.2f} s wall, "
+              f"{calls[key]} calls{per}; {faults[key]} minor faults, {sys_s[key]:.2f} s system")
+        if args.threads > 1 and updates[key]:
+            # The calling thread does the call's serial parts (checks, set-up, the layout of the
+            # output) and its share of the blocks; the others only their share. So its CPU less
+            # theirs is the serial work plus the blocks' imbalance: what keeps the call from
+            # halving on two free cores. CPU, so the neighbours' load does not enter it.
+            others = cpu_s[key] - main_s[key]
+            print(f"  {'':24s} calling thread {main_s[key]:.2f} s CPU, the other threads {others:.2f} s: "
+                  f"serial work and imbalance ~{main_s[key] - others / (args.threads - 1):.2f} s")
 
 
 if __name__ == "__main__":

@@ -769,3 +769,40 @@ def test_sizes_and_arguments_out_of_range_are_value_errors() -> None:
     with pytest.raises(TypeError, match=r"pixels must be \(x, y\) pairs of integers; got pixels\[0\]=\(1.5, 0\)"):
         sensor.run_probe(rate, [1.0], [(1.5, 0)])  # type: ignore[list-item]
     assert sensor.samples_seen == 0
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_rate_check_in_parts_names_the_first_bad_rate_and_moves_nothing(threads: int) -> None:
+    # The rates are checked in parts of 65,536 values spread over the call's threads (the
+    # engine's RateCheck): 256 x 256 pixels and 5 samples make 5 parts and a call worth a
+    # parallel region. Whichever part a thread checks first, the message names the first bad
+    # value in C order, and no pixel moves.
+    w = h = 256
+    t = [0.0, 1e-3, 2e-3, 3e-3, 4e-3]
+    good = np.full((5, h, w), 1e9)
+    sensor = Sensor(w, h, NOISY, seed=4, num_threads=threads)
+    bad = good.copy()
+    bad[4, 0, 0] = np.nan         # part 4
+    bad[3, 10, 7] = -2.0          # part 3: the first
+    with pytest.raises(ValueError, match=r"got photon_rate\[3, 10, 7\]=-2"):
+        sensor.run(bad, t)
+    bad[1, 255, 255] = np.inf     # the last value of part 1: now the first
+    with pytest.raises(ValueError, match=r"got photon_rate\[1, 255, 255\]=inf"):
+        sensor.run(bad, t)
+    assert sensor.samples_seen == 0
+    events = sensor.run(good, t)
+    assert events.tobytes() == Sensor(w, h, NOISY, seed=4, num_threads=threads).run(good, t).tobytes()
+
+    # run_pixels: 40,000 listed pixels (in no order: 3 is odd, so 3 j mod 2^16 never repeats)
+    # x 5 samples, 4 parts (the last one short).
+    pixels = np.arange(40_000) * 3 % (w * h)
+    fine_t = [5e-3, 6e-3, 7e-3, 8e-3, 9e-3]
+    fine = np.full((5, pixels.size), 2e9)
+    fine_bad = fine.copy()
+    fine_bad[4, 39_999] = 1e21    # part 3, the last value of all
+    fine_bad[2, 30_000] = np.nan  # part 2: the first
+    with pytest.raises(ValueError, match=r"got photon_rate\[2, 30000\]=nan"):
+        sensor.run_pixels(pixels, fine_bad, fine_t)
+    again = Sensor(w, h, NOISY, seed=4, num_threads=threads)
+    again.run(good, t)
+    assert sensor.run_pixels(pixels, fine, fine_t).tobytes() == again.run_pixels(pixels, fine, fine_t).tobytes()
