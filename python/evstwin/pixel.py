@@ -200,10 +200,10 @@ class HotPixelChain:
     2 on_share (1 - on_share): each event's polarity drawn afresh."""
 
     def __post_init__(self) -> None:
-        for name in ("duty", "burst_s", "on_share", "alternation"):
-            value = getattr(self, name)
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, numbers.Real):
-                raise TypeError(f"HotPixelChain.{name} must be a number; got {name}={value!r}")
+                raise TypeError(f"HotPixelChain.{f.name} must be a number; got {f.name}={value!r}")
         _core.validate_hot_pixel_chain(float(self.duty), float(self.burst_s), float(self.on_share),
                                        float(self.alternation), "HotPixelChain.")
 

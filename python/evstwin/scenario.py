@@ -97,7 +97,7 @@ from .optics import PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M, Optics
 from .pixel import HotPixelChain, PixelParams
 from .presets import PRESETS, BiasSet, SensorPreset, get_bias_set, get_preset
 from .readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S, ReadoutParams
-from .sensor import MAX_MAX_EVENTS
+from .sensor import MAX_HOT_PIXEL_CHAINS, MAX_MAX_EVENTS
 from .sky import scene as sky_scene
 from .sky.atmosphere import (
     ATMOSPHERE_KEYS,
@@ -1063,10 +1063,7 @@ MAX_HOT_PIXEL_RATE_HZ = 1e6
 """The engine's largest hot-pixel rate [Hz] (``Sensor::set_hot_pixel_rates``)."""
 
 
-MAX_HOT_PIXEL_CHAINS = int(_core.Sensor.MAX_HOT_PIXEL_CHAINS)
-"""Most pixels with a chain of their own (``Sensor::set_hot_pixel_chains``: a 16-bit index)."""
-
-HOT_PIXEL_CHAIN_KEYS = ("duty", "burst_s", "on_share", "alternation")
+HOT_PIXEL_CHAIN_KEYS = tuple(f.name for f in dataclasses.fields(HotPixelChain))
 """The keys of a ``[hot_pixels] pixels`` table entry that give the pixel a chain of its own."""
 
 

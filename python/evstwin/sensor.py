@@ -38,6 +38,9 @@ DEFAULT_MAX_EVENTS: int = int(_core.Sensor.DEFAULT_MAX_EVENTS)
 MAX_MAX_EVENTS = 2**32 - 1
 """Largest ``max_events`` (the engine sorts one call's events with 32-bit indices)."""
 
+MAX_HOT_PIXEL_CHAINS: int = int(_core.Sensor.MAX_HOT_PIXEL_CHAINS)
+"""Most pixels with a chain of their own (``Sensor::set_hot_pixel_chains``: a 16-bit index)."""
+
 
 def simd_levels() -> list[str]:
     """The SIMD levels of the engine's batched loops (Philox, the ziggurat) that this processor
@@ -115,8 +118,8 @@ class Sensor:
         if not isinstance(chains, Mapping):
             raise TypeError(f"hot_pixel_chains must be a mapping {{(x, y): HotPixelChain}}; got {type(chains).__name__}")
         width, height = self._core.width, self._core.height
-        if len(chains) > int(_core.Sensor.MAX_HOT_PIXEL_CHAINS):
-            raise ValueError(f"hot_pixel_chains may hold at most {int(_core.Sensor.MAX_HOT_PIXEL_CHAINS)} pixels; got "
+        if len(chains) > MAX_HOT_PIXEL_CHAINS:
+            raise ValueError(f"hot_pixel_chains may hold at most {MAX_HOT_PIXEL_CHAINS} pixels; got "
                              f"{len(chains)}")
         pixels = []
         for key, chain in chains.items():

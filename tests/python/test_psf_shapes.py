@@ -565,23 +565,14 @@ def _numpy_phase_mix(table: np.ndarray, q: np.ndarray, p: np.ndarray, a: np.ndar
 
 
 def _numpy_add_dense(shape: KernelPSF, image: np.ndarray, x: float, y: float, flux: float) -> None:
-    """KernelPSF.add_dense as NumPy computed it before the C++ loop: a term at a time."""
-    k, h, table = shape.subpixel, shape.half_width_px, shape.table
-    cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
-    tx, ty = (x - cx + 0.5) * k, (y - cy + 0.5) * k
-    p, q = min(max(math.floor(tx), 0), k - 1), min(max(math.floor(ty), 0), k - 1)
-    a, b = tx - p, ty - q
-    height, width = image.shape
-    x0, y0 = cx - h, cy - h
-    xs, ys, xe, ye = max(0, x0), max(0, y0), min(width, x0 + 2 * h + 1), min(height, y0 + 2 * h + 1)
-    if xs >= xe or ys >= ye:
+    """KernelPSF.add_dense as NumPy summed it before the C++ loop: its terms, one at a time."""
+    window = shape.dense_terms(image.shape, x, y, flux)
+    if window is None:
         return
-    rows, cols = slice(ys - y0, ye - y0), slice(xs - x0, xe - x0)
-    out = image[ys:ye, xs:xe]
-    for (qq, pp), w in (((q, p), (1.0 - a) * (1.0 - b)), ((q, p + 1), a * (1.0 - b)),
-                        ((q + 1, p), (1.0 - a) * b), ((q + 1, p + 1), a * b)):
-        if w != 0.0:
-            out += (flux * w) * table[qq, pp, rows, cols]
+    rows, cols, terms, coef = window
+    out = image[rows, cols]
+    for term, c in zip(terms, coef):
+        out += c * term
 
 
 def test_the_phase_mix_is_the_numpy_expression_bit_for_bit() -> None:

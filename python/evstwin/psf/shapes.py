@@ -117,6 +117,29 @@ class KernelPSF(PSFShape):
 
         return _scatter(width, height, x, y, flux, self.half_width_px, weights, offset)
 
+    def dense_terms(self, shape: tuple[int, ...], x: float, y: float,
+                    flux: float) -> tuple[slice, slice, list[np.ndarray], list[float]] | None:
+        """The (rows, cols) slices of a (height, width) image a source at (x, y) covers, and the
+        table slices and coefficients ``add_dense`` adds there, in its order (the phases with a
+        non-zero bilinear weight); None if the window misses the image."""
+        k, h, table = self.subpixel, self.half_width_px, self.table
+        cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
+        tx, ty = (x - cx + 0.5) * k, (y - cy + 0.5) * k
+        p, q = min(max(math.floor(tx), 0), k - 1), min(max(math.floor(ty), 0), k - 1)
+        a, b = tx - p, ty - q
+        height, width = shape
+        x0, y0 = cx - h, cy - h
+        xs, ys, xe, ye = max(0, x0), max(0, y0), min(width, x0 + 2 * h + 1), min(height, y0 + 2 * h + 1)
+        if xs >= xe or ys >= ye:
+            return None
+        rows, cols = slice(ys - y0, ye - y0), slice(xs - x0, xe - x0)
+        terms, coef = [], []
+        for (qq, pp), w in (((q, p), (1.0 - a) * (1.0 - b)), ((q, p + 1), a * (1.0 - b)),
+                            ((q + 1, p), (1.0 - a) * b), ((q + 1, p + 1), a * b)):
+            if w != 0.0:
+                terms.append(table[qq, pp, rows, cols])
+                coef.append(flux * w)
+        return slice(ys, ye), slice(xs, xe), terms, coef
 
     def add_dense(self, image: np.ndarray, x: float, y: float, flux: float) -> None:
         """Add one source to a (height, width) image in place: the values ``contributions``
@@ -125,24 +148,11 @@ class KernelPSF(PSFShape):
         flat indices and bincount of the general path."""
         if not flux > 0.0:
             return
-        k, h, table = self.subpixel, self.half_width_px, self.table
-        cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
-        tx, ty = (x - cx + 0.5) * k, (y - cy + 0.5) * k
-        p, q = min(max(math.floor(tx), 0), k - 1), min(max(math.floor(ty), 0), k - 1)
-        a, b = tx - p, ty - q
-        height, width = image.shape
-        x0, y0 = cx - h, cy - h
-        xs, ys, xe, ye = max(0, x0), max(0, y0), min(width, x0 + 2 * h + 1), min(height, y0 + 2 * h + 1)
-        if xs >= xe or ys >= ye:
+        window = self.dense_terms(image.shape, x, y, flux)
+        if window is None:
             return
-        rows, cols = slice(ys - y0, ye - y0), slice(xs - x0, xe - x0)
-        out = image[ys:ye, xs:xe]
-        terms, coef = [], []
-        for (qq, pp), w in (((q, p), (1.0 - a) * (1.0 - b)), ((q, p + 1), a * (1.0 - b)),
-                            ((q + 1, p), (1.0 - a) * b), ((q + 1, p + 1), a * b)):
-            if w != 0.0:
-                terms.append(table[qq, pp, rows, cols])
-                coef.append(flux * w)
+        rows, cols, terms, coef = window
+        out = image[rows, cols]
         if (out.dtype == np.float64 and out.flags.aligned and out.strides[-1] == out.itemsize
                 and out.strides[0] % out.itemsize == 0):
             # out += coef[0] terms[0], then coef[1] terms[1], ..., as one pass over the window
