@@ -293,6 +293,8 @@ public:
         start_call(nblocks, n_samples);
 
         CollectPlan plan;
+        plan.t_s = t_s;
+        plan.t_before = last_t_;
         guarded_for_each_block(
             nblocks, npix * n_samples, rate_check,
             [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
@@ -889,6 +891,12 @@ private:
         std::vector<std::size_t> base;    ///< sample k's events go to [base[k], base[k + 1])
         bool pixel_ordered = true;
         detail::PixelDivider row{1};      ///< pixel -> (x, y) without a division
+        /// run()'s sample times and the time before the first (nullptr: not known, run_pixels):
+        /// sample k's events lie in [t_s[k - 1], t_s[k]], so its microseconds lie between those
+        /// times' (round_us is monotone), which collect_sample() takes as the counting sort's
+        /// range without a pass to find it.
+        const double* t_s = nullptr;
+        double t_before = 0.0;
     };
 
     /// The call's events in output order: by time in microseconds; within one microsecond,
@@ -953,6 +961,7 @@ private:
             labels[j] = e.label;
         };
         const auto first = [this, k](std::uint32_t b) { return k == 0 ? 0u : block_sample_ends_[b][k - 1]; };
+        if (plan.pixel_ordered && plan.t_s && counting_sort_in_interval(plan, k, sort, put, first)) return;
         std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
         for (const std::uint32_t b : plan.busy) {
             const RawEvent* out = block_events_[b].data();
@@ -990,6 +999,41 @@ private:
             });
             for (std::size_t e = 0; e < n_k; ++e) put(e, sample_events[e]);
         }
+    }
+
+    /// collect_sample()'s counting sort over the microseconds of sample k's interval (plan.t_s),
+    /// without the pass that finds the events' own range: one pass counts, one puts. Returns
+    /// false, having written nothing, where that range is unknown (no previous time), too wide
+    /// for the events (as collect_sample() decides on the events' own range), or an event lies
+    /// outside it (none does: the guard keeps the slots in bounds); collect_sample() then sorts
+    /// as before. Either way the same order: by t_us, then block and place in the block.
+    template <class Put, class First>
+    bool counting_sort_in_interval(const CollectPlan& plan, std::size_t k, SortScratch& sort, Put& put,
+                                   First& first) const {
+        const double t0 = k == 0 ? plan.t_before : plan.t_s[k - 1];
+        if (!std::isfinite(t0)) return false;
+        const std::size_t n_k = plan.base[k + 1] - plan.base[k];
+        const std::int64_t lo = round_us(t0), hi = round_us(plan.t_s[k]);
+        const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
+        if (!(hi >= lo && span <= 4 * n_k + 4096)) return false;
+        std::vector<std::uint32_t>& slots = sort.slots;
+        slots.assign(span + 2, 0);
+        for (const std::uint32_t b : plan.busy) {
+            const RawEvent* out = block_events_[b].data();
+            const std::uint32_t end = block_sample_ends_[b][k];
+            for (std::uint32_t e = first(b); e < end; ++e) {
+                const std::uint64_t d = static_cast<std::uint64_t>(out[e].t_us) - static_cast<std::uint64_t>(lo);
+                if (d > span) return false;
+                ++slots[d + 1];
+            }
+        }
+        for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
+        for (const std::uint32_t b : plan.busy) {
+            const RawEvent* out = block_events_[b].data();
+            const std::uint32_t end = block_sample_ends_[b][k];
+            for (std::uint32_t e = first(b); e < end; ++e) put(slots[static_cast<std::size_t>(out[e].t_us - lo)]++, out[e]);
+        }
+        return true;
     }
 
     /// Keep the blocks' memory for the next call, unless a flood made it large.
