@@ -2275,12 +2275,14 @@ struct PixelModel {
         const double dn = ny_t - s.noise_at_event;
         const double dl = s.level_at_event - (y_t - d);  // how far the reference has leaked
         const double ds = d - dn - dl;
-        if (pol == ON) {
-            if (dl >= ds && dl >= dn) return LABEL_LEAK;
-            return dn > ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
-        }
-        if (-dl >= -ds && -dl >= -dn) return LABEL_LEAK;
-        return -dn > -ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
+        // The changes' signs turned to the crossing's direction (a negation is exact), and the
+        // label picked by arithmetic on the comparisons: these are the event path's least
+        // predictable branches.
+        const double sign = pol == ON ? 1.0 : -1.0;
+        const double sl = sign * dl, ss = sign * ds, sn = sign * dn;
+        const unsigned leak = static_cast<unsigned>(sl >= ss) & static_cast<unsigned>(sl >= sn);
+        const unsigned shot = static_cast<unsigned>(sn > ss);
+        return static_cast<std::uint8_t>(leak * LABEL_LEAK + (1u - leak) * (shot * LABEL_SHOT_NOISE + (1u - shot) * LABEL_SIGNAL));
     }
 
     /// The comparator over (t0, t1]: the level difference d(t) = y(t) - ref(t) is linear in
