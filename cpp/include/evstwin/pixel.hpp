@@ -360,7 +360,10 @@ private:
 /// the first block of the bridge's random words and whether (and at which level) it fires.
 struct BridgePre {
     Philox4x32Counter words{};
-    bool known = false;  ///< false: compare_bridged draws as usual
+    /// compare_bridged()'s test of whether the bridge applies (a bridge variance, time left after
+    /// the refractory period, the line inside both levels there and at the end), made ahead:
+    /// false, no draw; true, `fires` and `on` are the draw's decision.
+    bool known = false;
     bool fires = false, on = false;
 };
 
@@ -2113,14 +2116,18 @@ struct PixelModel {
                                                double leak_g, double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
                                                std::uint32_t pixel, std::uint32_t purpose, Emit& emit,
                                                const BridgePre* pre = nullptr) const {
-        if (bridge_var > 0.0) {
+        // `pre` (bridge_decisions): its `known` is the two tests below, made on the same state
+        // and values, and `fires` the draw's decision; the branches test its bytes, which are
+        // at hand long before the levels' arithmetic is done (a mispredicted branch costs less).
+        const bool decided = pre != nullptr;
+        if (decided ? (pre->known & pre->fires) : bridge_var > 0.0) {
             const double t_start = std::max(c.t0, s.refr_until);
-            if (t_start < c.t1) {
+            if (decided || t_start < c.t1) {
                 const double g = (y - s.y) * c.inv_dt + leak_g;
                 const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
                 const double d_end = (s.y - s.ref) + g * c.dt;
                 const double th_on = s.theta_on, th_off = s.theta_off;
-                if (d_start < th_on && d_start > -th_off && d_end < th_on && d_end > -th_off) {
+                if (decided || ((d_start < th_on) & (d_start > -th_off) & (d_end < th_on) & (d_end > -th_off))) {
                     // The variance rate of the bridge that has this middle variance over dt.
                     const double sigma2 = 4.0 * bridge_var * c.inv_dt;
                     const double span = c.t1 - t_start;
@@ -2131,13 +2138,11 @@ struct PixelModel {
                     // drawn whatever p is: a counter-based draw changes nothing else, and where
                     // p_on + p_off <= 2^-33 no uniform (uniform_open) lies below it.
                     // `pre`: the same words and decision, made ahead in a batch (bridge_decisions).
-                    const bool ahead = pre && pre->known;
-                    PrefilledStream more(key, pixel, s.n, purpose, ahead ? &pre->words : nullptr);
+                    PrefilledStream more(key, pixel, s.n, purpose, decided ? &pre->words : nullptr);
                     const double u = more.uniform();
-                    bool on = ahead && pre->on;
-                    const bool fires = ahead ? pre->fires
-                                             : detail::bridge_fires(u, th_on - d_start, th_on - d_end, th_off + d_start,
-                                                                    th_off + d_end, mid, on);
+                    bool on = decided && pre->on;
+                    const bool fires = decided || detail::bridge_fires(u, th_on - d_start, th_on - d_end, th_off + d_start,
+                                                                       th_off + d_end, mid, on);
                     if (fires) {
                         const double u0 = on ? th_on - d_start : th_off + d_start;
                         const double u1 = on ? th_on - d_end : th_off + d_end;
