@@ -368,6 +368,13 @@ struct BridgePre {
     /// false, no draw; true, `fires` and `on` are the draw's decision.
     bool known = false;
     bool fires = false, on = false;
+    /// Where it fires and its normal took the ziggurat's common path (one word): the crossing
+    /// time tc that compare_bridged() would draw from the same words, and 1 / (tc - c.t0),
+    /// 1 / (c.t1 - tc), its two pieces' inverse lengths (the same expressions). Drawn in a
+    /// batch, so these divisions and the square root overlap across pixels instead of standing
+    /// in each event's chain.
+    bool timed = false;
+    double tc = 0.0, inv_first_dt = 0.0, inv_second_dt = 0.0;
 };
 
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
@@ -1160,7 +1167,8 @@ struct PixelModel {
         std::vector<std::uint32_t> ctr0, ctr1, ctr2, need_at, r0, r1, r2, r3;
         std::vector<std::uint8_t> slow1, slow2;
         std::vector<BridgePre> bridge_pre;  ///< step_block_continuous' bridge decisions of the busy pixels
-        std::vector<double> bridge_args;    ///< bridge_decisions' five numbers a pixel
+        std::vector<double> bridge_args;    ///< bridge_decisions' numbers, ARGS a pixel
+        std::vector<std::uint32_t> fired;   ///< bridge_decisions' pixels whose draw fires
         double cached_rate = -1.0, cached_x = 0.0;
         // The photoreceptor pole's decay and ramp depend on the current only through the
         // electron count of the interval: kept per count for the current dt.
@@ -1180,6 +1188,7 @@ struct PixelModel {
                 ctr0.resize(n); ctr1.resize(n); ctr2.resize(n); need_at.resize(n);
                 r0.resize(n); r1.resize(n); r2.resize(n); r3.resize(n); slow1.resize(n); slow2.resize(n);
                 bridge_pre.resize(n);
+                fired.resize(n);
             }
         }
     };
@@ -1507,7 +1516,7 @@ struct PixelModel {
         std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
         std::uint32_t* at = scratch.need_at.data();
         std::vector<double>& q = scratch.bridge_args;
-        if (q.size() < 5 * n) q.resize(5 * n);
+        if (q.size() < ARGS * n) q.resize(ARGS * n);
         std::size_t m = 0;
         for (std::size_t b = 0; b < n; ++b) {
             const PixelState& s = st[busy_at[b]];
@@ -1521,12 +1530,15 @@ struct PixelModel {
                                 (d_end < th_on) & (d_end > -th_off);
             const double sigma2 = 4.0 * bvar[b] * c.inv_dt;
             const double span = c.t1 - t_start;
-            double* a = q.data() + 5 * m;
+            double* a = q.data() + ARGS * m;
             a[0] = th_on - d_start;
             a[1] = th_on - d_end;
             a[2] = th_off + d_start;
             a[3] = th_off + d_end;
             a[4] = 0.25 * sigma2 * span;
+            a[5] = sigma2;
+            a[6] = span;
+            a[7] = t_start;
             c0[m] = static_cast<std::uint32_t>(s.n);
             c1[m] = static_cast<std::uint32_t>(s.n >> 32);
             c2[m] = ids[busy_at[b]];
@@ -1536,16 +1548,39 @@ struct PixelModel {
         if (m == 0) return;
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, m, r0, r1, r2, r3);
+        std::uint32_t* fired = scratch.fired.data();
+        std::size_t n_fired = 0;
         for (std::size_t k = 0; k < m; ++k) {
             BridgePre& r = pre[at[k]];
-            const double* a = q.data() + 5 * k;
+            const double* a = q.data() + ARGS * k;
             bool on = false;
             r.fires = detail::bridge_fires(uniform_open(r0[k]), a[0], a[1], a[2], a[3], a[4], on);
             r.on = on;
             r.words = {r0[k], r1[k], r2[k], r3[k]};
             r.known = true;
+            r.timed = false;
+            fired[n_fired] = static_cast<std::uint32_t>(k);
+            n_fired += r.fires;
+        }
+        // The crossing times of those that fire, as compare_bridged() draws them: the normal
+        // from the second word (where the ziggurat's common path takes it; else compare_bridged
+        // draws as usual), the uniform from the third, the same arithmetic on the same values.
+        for (std::size_t f = 0; f < n_fired; ++f) {
+            const std::size_t k = fired[f];
+            BridgePre& r = pre[at[k]];
+            double g_time;
+            if (!normal_ziggurat_common(r1[k], g_time)) continue;
+            const double* a = q.data() + ARGS * k;
+            const double u0 = r.on ? a[0] : a[2];
+            const double u1 = r.on ? a[1] : a[3];
+            r.tc = a[7] + bridge_first_passage_sample(u0, u1, a[5], a[6], g_time, uniform_open(r2[k]));
+            r.inv_first_dt = 1.0 / (r.tc - c.t0);
+            r.inv_second_dt = 1.0 / (c.t1 - r.tc);
+            r.timed = true;
         }
     }
+    /// bridge_decisions' numbers a pixel (BlockScratch::bridge_args).
+    static constexpr std::size_t ARGS = 8;
 
     /// Whether step_block_soa() handles this configuration: the continuous model with the exact
     /// source follower, behind the photoreceptor pole or not.
@@ -2141,17 +2176,25 @@ struct PixelModel {
                     // drawn whatever p is: a counter-based draw changes nothing else, and where
                     // p_on + p_off <= 2^-33 no uniform (uniform_open) lies below it.
                     // `pre`: the same words and decision, made ahead in a batch (bridge_decisions).
-                    PrefilledStream more(key, pixel, s.n, purpose, decided ? &pre->words : nullptr);
-                    const double u = more.uniform();
                     bool on = decided && pre->on;
-                    const bool fires = decided || detail::bridge_fires(u, th_on - d_start, th_on - d_end, th_off + d_start,
-                                                                       th_off + d_end, mid, on);
+                    bool fires = decided;
+                    double tc = 0.0;
+                    if (decided && pre->timed) {
+                        tc = pre->tc;  // bridge_decisions drew it, from the same words
+                    } else {
+                        PrefilledStream more(key, pixel, s.n, purpose, decided ? &pre->words : nullptr);
+                        const double u = more.uniform();
+                        if (!decided)
+                            fires = detail::bridge_fires(u, th_on - d_start, th_on - d_end, th_off + d_start, th_off + d_end,
+                                                         mid, on);
+                        if (fires) {
+                            const double u0 = on ? th_on - d_start : th_off + d_start;
+                            const double u1 = on ? th_on - d_end : th_off + d_end;
+                            const double g_time = normal_ziggurat(more.word(), [&more] { return more.word(); });
+                            tc = t_start + bridge_first_passage_sample(u0, u1, sigma2, span, g_time, more.uniform());
+                        }
+                    }
                     if (fires) {
-                        const double u0 = on ? th_on - d_start : th_off + d_start;
-                        const double u1 = on ? th_on - d_end : th_off + d_end;
-                        const double g_time = normal_ziggurat(more.word(), [&more] { return more.word(); });
-                        const double tc = t_start + bridge_first_passage_sample(u0, u1, sigma2, span, g_time,
-                                                                                more.uniform());
                         if (tc > c.t0 && tc < c.t1) {
                             // Split the interval at the crossing: a virtual sample there, just
                             // past the level, so the comparator fires at tc; then on to y.
@@ -2164,9 +2207,10 @@ struct PixelModel {
                             SampleConstants first = c, second = c;
                             first.t1 = second.t0 = tc;
                             first.dt = tc - c.t0;
-                            first.inv_dt = 1.0 / first.dt;
                             second.dt = c.t1 - tc;
-                            second.inv_dt = 1.0 / second.dt;
+                            const bool timed = decided && pre->timed;
+                            first.inv_dt = timed ? pre->inv_first_dt : 1.0 / first.dt;
+                            second.inv_dt = timed ? pre->inv_second_dt : 1.0 / second.dt;
                             const bool noise_first = noise_pol >= 0 && t_noise <= tc;
                             compare(s, y_c, ny_c, first, leak_g, noise_first ? noise_pol : -1, t_noise, emit);
                             s.y = y_c;
