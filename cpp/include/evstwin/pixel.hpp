@@ -188,6 +188,12 @@ inline double exp_neg_bracket(double e) {
     return p * two_k;
 }
 
+/// std::floor(x), by truncation where x is in (0, 2^52) (elsewhere the library's): there the
+/// truncation is the floor, and the default SSE2 target has no rounding instruction.
+inline double floor_positive(double x) {
+    return (x > 0.0) & (x < 4503599627370496.0) ? static_cast<double>(static_cast<std::int64_t>(x)) : std::floor(x);
+}
+
 /// Whether a uniform u in (0, 1) fires a Brownian bridge that crosses the ON level with
 /// probability bridge_crossing_probability(on0, on1, mid) = p_on and the OFF one with p_off
 /// (u < p_on + p_off), and at which (on: u < p_on): the decisions compare_bridged() takes,
@@ -2381,7 +2387,7 @@ struct PixelModel {
                 tb = s.refr_until;
             }
             if (db >= th_on) {
-                const double n = std::floor(db / th_on);
+                const double n = detail::floor_positive(db / th_on);
                 const double d = db;
                 db -= n * th_on;
                 fire(tb, ON, d, db, -1);
@@ -2389,7 +2395,7 @@ struct PixelModel {
                 continue;
             }
             if (db <= -th_off) {
-                const double n = std::floor(-db / th_off);
+                const double n = detail::floor_positive(-db / th_off);
                 const double d = db;
                 db += n * th_off;
                 fire(tb, OFF, d, db, -1);
