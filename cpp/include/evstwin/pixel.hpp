@@ -2371,7 +2371,10 @@ struct PixelModel {
         const double y0 = s.y, ny0 = s.ny;
         // An event at t with the difference d there, leaving the difference d_after: emit it
         // and remember where it left the pixel.
-        auto fire = [&](double t, int pol, double d, double d_after, int label) {
+        // Inlined at each of its four calls (GCC's attribute; elsewhere a plain lambda): left to
+        // the compiler, whether it was depended on the code around it, and an out-of-line copy
+        // cost an event more.
+        auto fire = [&](double t, int pol, double d, double d_after, int label) EVSTWIN_LAMBDA_ALWAYS_INLINE {
             const double f = (t - c.t0) * c.inv_dt;
             const double y_t = y0 + f * (y1 - y0), ny_t = ny0 + f * (ny1 - ny0);
             if (label < 0) label = crossing_label(s, pol, d, y_t, ny_t);

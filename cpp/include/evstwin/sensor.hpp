@@ -538,6 +538,12 @@ private:
         std::uint32_t pixel;
         std::uint8_t p;
         std::uint8_t label;  ///< EventLabel: why it fired
+        RawEvent() = default;
+        /// For emplace_back: the fields stored straight into the list. push_back of a braced
+        /// record built it on the stack with four small stores and copied it with one 16-byte
+        /// load, which the processor cannot forward from them (a stall on every event).
+        RawEvent(std::int64_t t_us_, std::uint32_t pixel_, std::uint8_t p_, std::uint8_t label_)
+            : t_us(t_us_), pixel(pixel_), p(p_), label(label_) {}
     };
 
     /// A block's event list, taken out of block_events_ while the block runs and put back
@@ -681,7 +687,7 @@ private:
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
-            out.push_back({round_us(t), pixel, static_cast<std::uint8_t>(pol), label});
+            out.emplace_back(round_us(t), pixel, static_cast<std::uint8_t>(pol), label);
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
@@ -808,7 +814,7 @@ private:
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
-            out.push_back({round_us(t), pixel, static_cast<std::uint8_t>(pol), label});
+            out.emplace_back(round_us(t), pixel, static_cast<std::uint8_t>(pol), label);
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
