@@ -1457,6 +1457,7 @@ struct PixelModel {
         NoiseCache& cache = scratch.noise;
         if (cache.dt != c.dt) cache.photon_rate = std::numeric_limits<double>::quiet_NaN();  // refill below
         std::size_t n_busy = 0;
+        BridgeBatch bridge = bridge_batch(scratch, SfOnly ? n : 0);
         for (std::size_t j = 0; j < n; ++j) {
             PixelState& s = st[at(j)];
             const double r = static_cast<double>(rate[at(j)]);
@@ -1486,6 +1487,9 @@ struct PixelModel {
                 y[n_busy] = yj;
                 nz[n_busy] = nzj;
                 ny[n_busy] = nyj;
+                if (SfOnly)
+                    bridge_prepare(s, v.ids[at(j)], static_cast<std::uint32_t>(n_busy), yj, cache.leak_hz,
+                                   cache.k.bridge_var, c, bridge);
                 ++n_busy;
             }
         }
@@ -1494,7 +1498,7 @@ struct PixelModel {
         BridgePre* pre = nullptr;
         if (SfOnly && n_busy > 0) {
             pre = scratch.bridge_pre.data();
-            bridge_decisions(st, v.ids, busy_at, n_busy, y, leak, bvar, c, key, scratch, pre);
+            bridge_decisions(bridge, n_busy, c, key, scratch, pre);
         }
         for (std::size_t b = 0; b < n_busy; ++b) {
             PixelState& s = st[busy_at[b]];
@@ -1507,50 +1511,66 @@ struct PixelModel {
         }
     }
 
-    /// compare_bridged()'s decision, made ahead for n busy pixels of a block (local indices
-    /// busy_at, global ids[], new levels y1, leak rates leak_hz, bridge variances bvar; the
-    /// state still at c.t0): where the line stays inside both levels, the bridge's first
-    /// Philox block (one vectorised batch), its uniform and whether it fires, and at which
-    /// level (detail::bridge_fires). compare_bridged then reads them instead of drawing: the
-    /// long chain of a scalar Philox call, two divisions and two exps no longer stands
-    /// between a pixel's state and its comparator's first unpredictable branch. The same
-    /// expressions on the same state (continuous_finish's background_fire changes only the
-    /// clocks), so the same decisions.
-    void bridge_decisions(const PixelState* st, const std::uint32_t* ids, const std::uint32_t* busy_at, std::size_t n,
-                          const double* y1, const double* leak_hz, const double* bvar, const SampleConstants& c,
-                          Philox4x32Key key, BlockScratch& scratch, BridgePre* pre) const {
-        std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
-        std::uint32_t* at = scratch.need_at.data();
-        std::vector<double>& q = scratch.bridge_args;
-        if (q.size() < ARGS * n) q.resize(ARGS * n);
+    /// bridge_decisions' inputs, filled by bridge_prepare() for each busy pixel in the pass that
+    /// finds it busy (its state is at hand there): the draws' counters and arguments (ARGS
+    /// numbers a pixel) of the m pixels whose line stays inside both levels, and their places
+    /// among the busy ones.
+    struct BridgeBatch {
+        double* args;
+        std::uint32_t *c0, *c1, *c2, *at;
         std::size_t m = 0;
-        for (std::size_t b = 0; b < n; ++b) {
-            const PixelState& s = st[busy_at[b]];
-            pre[b].known = false;
-            const double t_start = std::max(c.t0, s.refr_until);
-            const double g = (y1[b] - s.y) * c.inv_dt + leak_slope(s, leak_hz[b]);
-            const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
-            const double d_end = (s.y - s.ref) + g * c.dt;
-            const double th_on = s.theta_on, th_off = s.theta_off;
-            const bool inside = (bvar[b] > 0.0) & (t_start < c.t1) & (d_start < th_on) & (d_start > -th_off) &
-                                (d_end < th_on) & (d_end > -th_off);
-            const double sigma2 = 4.0 * bvar[b] * c.inv_dt;
-            const double span = c.t1 - t_start;
-            double* a = q.data() + ARGS * m;
-            a[0] = th_on - d_start;
-            a[1] = th_on - d_end;
-            a[2] = th_off + d_start;
-            a[3] = th_off + d_end;
-            a[4] = 0.25 * sigma2 * span;
-            a[5] = sigma2;
-            a[6] = span;
-            a[7] = t_start;
-            c0[m] = static_cast<std::uint32_t>(s.n);
-            c1[m] = static_cast<std::uint32_t>(s.n >> 32);
-            c2[m] = ids[busy_at[b]];
-            at[m] = static_cast<std::uint32_t>(b);
-            m += inside;
-        }
+    };
+    static BridgeBatch bridge_batch(BlockScratch& scratch, std::size_t n) {
+        if (scratch.bridge_args.size() < ARGS * n) scratch.bridge_args.resize(ARGS * n);
+        return {scratch.bridge_args.data(), scratch.ctr0.data(), scratch.ctr1.data(), scratch.ctr2.data(),
+                scratch.need_at.data(), 0};
+    }
+    /// bridge_decisions' test and arguments for the b-th busy pixel (global index id, new level
+    /// y1, leak rate leak_hz, bridge variance bvar; the state still at c.t0): compare_bridged()'s
+    /// expressions on the same values.
+    EVSTWIN_ALWAYS_INLINE void bridge_prepare(const PixelState& s, std::uint32_t id, std::uint32_t b, double y1,
+                                              double leak_hz, double bvar, const SampleConstants& c,
+                                              BridgeBatch& bb) const {
+        const double t_start = std::max(c.t0, s.refr_until);
+        const double g = (y1 - s.y) * c.inv_dt + leak_slope(s, leak_hz);
+        const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
+        const double d_end = (s.y - s.ref) + g * c.dt;
+        const double th_on = s.theta_on, th_off = s.theta_off;
+        const bool inside = (bvar > 0.0) & (t_start < c.t1) & (d_start < th_on) & (d_start > -th_off) &
+                            (d_end < th_on) & (d_end > -th_off);
+        const double sigma2 = 4.0 * bvar * c.inv_dt;
+        const double span = c.t1 - t_start;
+        const std::size_t m = bb.m;
+        double* a = bb.args + ARGS * m;
+        a[0] = th_on - d_start;
+        a[1] = th_on - d_end;
+        a[2] = th_off + d_start;
+        a[3] = th_off + d_end;
+        a[4] = 0.25 * sigma2 * span;
+        a[5] = sigma2;
+        a[6] = span;
+        a[7] = t_start;
+        bb.c0[m] = static_cast<std::uint32_t>(s.n);
+        bb.c1[m] = static_cast<std::uint32_t>(s.n >> 32);
+        bb.c2[m] = id;
+        bb.at[m] = b;
+        bb.m = m + inside;
+    }
+
+    /// compare_bridged()'s decision, made ahead for the n busy pixels of a block whose tests
+    /// and arguments bridge_prepare() put in bb (the state still at c.t0): where the line stays
+    /// inside both levels, the bridge's first Philox block (one vectorised batch), its uniform
+    /// and whether it fires, and at which level (detail::bridge_fires). compare_bridged then
+    /// reads them instead of drawing: the long chain of a scalar Philox call, two divisions and
+    /// two exps no longer stands between a pixel's state and its comparator's first
+    /// unpredictable branch. The same expressions on the same state (continuous_finish's
+    /// background_fire changes only the clocks), so the same decisions.
+    void bridge_decisions(const BridgeBatch& bb, std::size_t n, const SampleConstants& c, Philox4x32Key key,
+                          BlockScratch& scratch, BridgePre* pre) const {
+        for (std::size_t b = 0; b < n; ++b) pre[b].known = false;
+        const std::size_t m = bb.m;
+        const std::uint32_t *c0 = bb.c0, *c1 = bb.c1, *c2 = bb.c2, *at = bb.at;
+        const double* q = bb.args;
         if (m == 0) return;
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, m, r0, r1, r2, r3);
@@ -1558,7 +1578,7 @@ struct PixelModel {
         std::size_t n_fired = 0;
         for (std::size_t k = 0; k < m; ++k) {
             BridgePre& r = pre[at[k]];
-            const double* a = q.data() + ARGS * k;
+            const double* a = q + ARGS * k;
             bool on = false;
             r.fires = detail::bridge_fires(uniform_open(r0[k]), a[0], a[1], a[2], a[3], a[4], on);
             r.on = on;
@@ -1576,7 +1596,7 @@ struct PixelModel {
             BridgePre& r = pre[at[k]];
             double g_time;
             if (!normal_ziggurat_common(r1[k], g_time)) continue;
-            const double* a = q.data() + ARGS * k;
+            const double* a = q + ARGS * k;
             const double u0 = r.on ? a[0] : a[2];
             const double u1 = r.on ? a[1] : a[3];
             r.tc = a[7] + bridge_first_passage_sample(u0, u1, a[5], a[6], g_time, uniform_open(r2[k]));
