@@ -85,6 +85,15 @@ public:
     /// over the whole block, so below that the array-of-structures kernel over the pixels
     /// that advance costs less. Speed only: either gives the same events.
     static constexpr std::size_t SOA_MIN_ACTIVE_QUARTERS = 2;
+    /// run() leaves the vector kernel for the rest of a call in a block where more than this
+    /// many quarters of its pixels took the per-pixel path at a sample (an event-heavy scene):
+    /// then copying them out of the arrays and back costs more than the vector pass saves.
+    /// Measured with bench/engine_driver.cpp (continuous 130 CUTOFF_HZ, one thread, user+sys):
+    /// a quarter, against the half it was, is as fast at 20-40 Hz (0.40 / 0.81-0.83 /
+    /// 0.91-0.94 s against 0.40 / 0.81-0.82 / 0.94-0.95 s) and faster at 45-60 Hz (1.00-1.01
+    /// against 1.06 s at 45 Hz, 1.04-1.06 against 1.15-1.16 s at 50 Hz); an eighth loses at
+    /// 20-30 Hz (0.45 / 0.84-0.85 s). Speed only: either kernel gives the same events.
+    static constexpr std::size_t SOA_MAX_BUSY_QUARTERS = 1;
     /// Shortest sample interval accepted [s]: below it 1/dt and the crossing times lose meaning.
     static constexpr double MIN_DT_S = 1e-12;
     /// Largest photon rate accepted [photons/s on a pixel]; with no dark current, positive
@@ -705,9 +714,10 @@ private:
         std::uint8_t held[BLOCK];
         std::uint32_t held_at[BLOCK];
         std::size_t n_held = 0;
-        // Where most of a block's pixels need the per-pixel path (an event-heavy scene), copying
-        // them out of the arrays and back costs more than the vector pass saves: the block goes
-        // on with the array-of-structures kernel for the rest of the call. The same events.
+        // Where many of a block's pixels need the per-pixel path (an event-heavy scene;
+        // SOA_MAX_BUSY_QUARTERS), copying them out of the arrays and back costs more than the
+        // vector pass saves: the block goes on with the array-of-structures kernel for the rest
+        // of the call. The same events.
         bool soa_pays = soa_kernel;
         const auto leave_soa = [&] {
             if (in_soa) scratch.soa.store(state_.data() + lo, hi - lo, soa_t, n_held ? held : nullptr);
@@ -774,7 +784,7 @@ private:
                                                                  c, key_, scratch, emit, pixel, held_at, n_held);
                 soa_t = c.t1;
                 synced = n_held == 0;
-                if (2 * n_busy > hi - lo) {
+                if (4 * n_busy > SOA_MAX_BUSY_QUARTERS * (hi - lo)) {
                     soa_pays = false;
                     leave_soa();
                 }
