@@ -629,6 +629,37 @@ TEST(exp_neg_bracket_is_within_1e_8_of_exp) {
     CHECK(detail::exp_neg_bracket(0.0) == 1.0);
 }
 
+TEST(floor_positive_and_select_give_the_library_floor_and_the_chosen_bits) {
+    // floor_positive (the comparator's merged-levels count) against std::floor, bit for bit: on
+    // integers and their neighbours, halves, a random spread of magnitudes, and where it hands
+    // over to the library (0, -0, negatives, 2^52 and above, infinities, NaN).
+    const auto same_bits = [](double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; };
+    std::vector<double> xs = {0.0, -0.0, 0.5, 1.0, 1.5, 2.0, 1e-300, 4503599627370495.5, 4503599627370496.0,
+                              4503599627370497.0, 1e300, -0.5, -1.0, -2.5,
+                              std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+    for (double k = 1.0; k < 1e15; k *= 3.7) {
+        xs.push_back(k);
+        xs.push_back(std::nextafter(k, 0.0));
+        xs.push_back(std::nextafter(k, 1e300));
+    }
+    std::uint64_t state = 12345;
+    for (int i = 0; i < 100000; ++i) {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        xs.push_back(std::ldexp(static_cast<double>(state >> 11), -53) * std::pow(10.0, static_cast<double>(i % 20) - 4.0));
+    }
+    int wrong = 0;
+    for (const double x : xs) wrong += !same_bits(detail::floor_positive(x), std::floor(x));
+    CHECK(wrong == 0);
+    CHECK(std::isnan(detail::floor_positive(std::numeric_limits<double>::quiet_NaN())));
+    // select: the chosen value's bits, whatever they are (signed zeros, infinities, NaN).
+    const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+    CHECK(same_bits(detail::select(true, -0.0, 0.0), -0.0));
+    CHECK(same_bits(detail::select(false, -0.0, 0.0), 0.0));
+    CHECK(same_bits(detail::select(true, inf, nan), inf));
+    CHECK(std::isnan(detail::select(false, inf, nan)));
+    CHECK(same_bits(detail::select(false, 1.0, -3.25), -3.25));
+}
+
 TEST(bridge_fires_decides_as_the_exact_probabilities) {
     // Whether the bridge fires and at which level, against u < p_on + p_off and u < p_on with
     // bridge_crossing_probability, for random bridges and uniforms, and for uniforms placed

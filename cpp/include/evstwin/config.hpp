@@ -27,6 +27,13 @@
 #define EVSTWIN_ALWAYS_INLINE inline
 #endif
 
+// The same for a lambda (written after its parameter list; no `inline` keyword there).
+#if defined(__GNUC__) || defined(__clang__)
+#define EVSTWIN_LAMBDA_ALWAYS_INLINE __attribute__((always_inline))
+#else
+#define EVSTWIN_LAMBDA_ALWAYS_INLINE
+#endif
+
 // A rare path kept out of line, so the common one around it stays short.
 #if defined(__GNUC__) || defined(__clang__)
 #define EVSTWIN_NOINLINE __attribute__((noinline))

@@ -26,6 +26,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 
 #include "config.hpp"
@@ -275,6 +277,19 @@ inline double bridge_crossing_probability(double u0, double u1, double mid_var) 
 }
 
 namespace detail {
+/// `take ? a : b` by a mask on the bits, without a branch (which the compiler emits for a
+/// plain conditional where one side has a division it can sink into it).
+inline double select(bool take, double a, double b) {
+    std::uint64_t ia, ib;
+    std::memcpy(&ia, &a, sizeof ia);
+    std::memcpy(&ib, &b, sizeof ib);
+    const std::uint64_t mask = std::uint64_t{0} - static_cast<std::uint64_t>(take);
+    const std::uint64_t r = (ia & mask) | (ib & ~mask);
+    double out;
+    std::memcpy(&out, &r, sizeof out);
+    return out;
+}
+
 /// ln Phi(x) of the standard normal CDF, accurate in the far lower tail.
 inline double log_normal_cdf(double x) {
     if (x > -8.0) return std::log(0.5 * std::erfc(-x / std::sqrt(2.0)));
@@ -328,8 +343,10 @@ inline double bridge_first_passage_sample(double u0, double u1, double sigma2, d
     // MSH's smaller root mu (1 + w - sqrt(w (2 + w))), w = mu g^2 / (2 lambda), written as
     // 1 / (1/mu + c + sqrt(c (2/mu + c))): no cancellation, and finite as mu -> infinity.
     const double x = 1.0 / (m + c + std::sqrt(c * (2.0 * m + c)));
-    // The root x with probability mu / (mu + x), else the other one, mu^2 / x.
-    const double r = u * (1.0 + x * m) <= 1.0 ? x : 1.0 / (m * m * x);
+    // The root x with probability mu / (mu + x), else the other one, mu^2 / x: both computed
+    // and one picked, as a coin toss makes a branch on it mispredict often.
+    const double other = 1.0 / (m * m * x);
+    const double r = detail::select(u * (1.0 + x * m) <= 1.0, x, other);
     return T / (1.0 + T / r);  // r T / (T + r), and T when r is infinite
 }
 

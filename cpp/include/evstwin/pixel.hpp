@@ -169,7 +169,10 @@ inline void require_range(const char* name, double v, double lo, double hi, cons
 /// the model.
 inline double exp_neg_bracket(double e) {
     const double t = -e * 1.4426950408889634;  // log2(e)
-    const double k = std::floor(t + 0.5);
+    // The nearest integer by the 1.5 * 2^52 shift (|t| <= 58 here; ties to even): with the
+    // default SSE2 target std::floor is a dozen instructions and a long chain.
+    constexpr double SHIFT = 6755399441055744.0;
+    const double k = (t + SHIFT) - SHIFT;
     const double r = (t - k) * 0.6931471805599453;
     double p = 1.0 / 5040.0;
     p = p * r + 1.0 / 720.0;
@@ -183,6 +186,12 @@ inline double exp_neg_bracket(double e) {
     double two_k;
     std::memcpy(&two_k, &bits, sizeof two_k);
     return p * two_k;
+}
+
+/// std::floor(x), by truncation where x is in (0, 2^52) (elsewhere the library's): there the
+/// truncation is the floor, and the default SSE2 target has no rounding instruction.
+inline double floor_positive(double x) {
+    return (x > 0.0) & (x < 4503599627370496.0) ? static_cast<double>(static_cast<std::int64_t>(x)) : std::floor(x);
 }
 
 /// Whether a uniform u in (0, 1) fires a Brownian bridge that crosses the ON level with
@@ -360,8 +369,18 @@ private:
 /// the first block of the bridge's random words and whether (and at which level) it fires.
 struct BridgePre {
     Philox4x32Counter words{};
-    bool known = false;  ///< false: compare_bridged draws as usual
+    /// compare_bridged()'s test of whether the bridge applies (a bridge variance, time left after
+    /// the refractory period, the line inside both levels there and at the end), made ahead:
+    /// false, no draw; true, `fires` and `on` are the draw's decision.
+    bool known = false;
     bool fires = false, on = false;
+    /// Where it fires and its normal took the ziggurat's common path (one word): the crossing
+    /// time tc that compare_bridged() would draw from the same words, and 1 / (tc - c.t0),
+    /// 1 / (c.t1 - tc), its two pieces' inverse lengths (the same expressions). Drawn in a
+    /// batch, so these divisions and the square root overlap across pixels instead of standing
+    /// in each event's chain.
+    bool timed = false;
+    double tc = 0.0, inv_first_dt = 0.0, inv_second_dt = 0.0;
 };
 
 /// Per-sample constants shared by every pixel: computed once per sample, not per pixel.
@@ -1154,7 +1173,8 @@ struct PixelModel {
         std::vector<std::uint32_t> ctr0, ctr1, ctr2, need_at, r0, r1, r2, r3;
         std::vector<std::uint8_t> slow1, slow2;
         std::vector<BridgePre> bridge_pre;  ///< step_block_continuous' bridge decisions of the busy pixels
-        std::vector<double> bridge_args;    ///< bridge_decisions' five numbers a pixel
+        std::vector<double> bridge_args;    ///< bridge_decisions' numbers, ARGS a pixel
+        std::vector<std::uint32_t> fired;   ///< bridge_decisions' pixels whose draw fires
         double cached_rate = -1.0, cached_x = 0.0;
         // The photoreceptor pole's decay and ramp depend on the current only through the
         // electron count of the interval: kept per count for the current dt.
@@ -1174,6 +1194,7 @@ struct PixelModel {
                 ctr0.resize(n); ctr1.resize(n); ctr2.resize(n); need_at.resize(n);
                 r0.resize(n); r1.resize(n); r2.resize(n); r3.resize(n); slow1.resize(n); slow2.resize(n);
                 bridge_pre.resize(n);
+                fired.resize(n);
             }
         }
     };
@@ -1436,6 +1457,7 @@ struct PixelModel {
         NoiseCache& cache = scratch.noise;
         if (cache.dt != c.dt) cache.photon_rate = std::numeric_limits<double>::quiet_NaN();  // refill below
         std::size_t n_busy = 0;
+        BridgeBatch bridge = bridge_batch(scratch, SfOnly ? n : 0);
         for (std::size_t j = 0; j < n; ++j) {
             PixelState& s = st[at(j)];
             const double r = static_cast<double>(rate[at(j)]);
@@ -1465,6 +1487,9 @@ struct PixelModel {
                 y[n_busy] = yj;
                 nz[n_busy] = nzj;
                 ny[n_busy] = nyj;
+                if (SfOnly)
+                    bridge_prepare(s, v.ids[at(j)], static_cast<std::uint32_t>(n_busy), yj, cache.leak_hz,
+                                   cache.k.bridge_var, c, bridge);
                 ++n_busy;
             }
         }
@@ -1473,7 +1498,7 @@ struct PixelModel {
         BridgePre* pre = nullptr;
         if (SfOnly && n_busy > 0) {
             pre = scratch.bridge_pre.data();
-            bridge_decisions(st, v.ids, busy_at, n_busy, y, leak, bvar, c, key, scratch, pre);
+            bridge_decisions(bridge, n_busy, c, key, scratch, pre);
         }
         for (std::size_t b = 0; b < n_busy; ++b) {
             PixelState& s = st[busy_at[b]];
@@ -1486,60 +1511,102 @@ struct PixelModel {
         }
     }
 
-    /// compare_bridged()'s decision, made ahead for n busy pixels of a block (local indices
-    /// busy_at, global ids[], new levels y1, leak rates leak_hz, bridge variances bvar; the
-    /// state still at c.t0): where the line stays inside both levels, the bridge's first
-    /// Philox block (one vectorised batch), its uniform and whether it fires, and at which
-    /// level (detail::bridge_fires). compare_bridged then reads them instead of drawing: the
-    /// long chain of a scalar Philox call, two divisions and two exps no longer stands
-    /// between a pixel's state and its comparator's first unpredictable branch. The same
-    /// expressions on the same state (continuous_finish's background_fire changes only the
-    /// clocks), so the same decisions.
-    void bridge_decisions(const PixelState* st, const std::uint32_t* ids, const std::uint32_t* busy_at, std::size_t n,
-                          const double* y1, const double* leak_hz, const double* bvar, const SampleConstants& c,
-                          Philox4x32Key key, BlockScratch& scratch, BridgePre* pre) const {
-        std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
-        std::uint32_t* at = scratch.need_at.data();
-        std::vector<double>& q = scratch.bridge_args;
-        if (q.size() < 5 * n) q.resize(5 * n);
+    /// bridge_decisions' inputs, filled by bridge_prepare() for each busy pixel in the pass that
+    /// finds it busy (its state is at hand there): the draws' counters and arguments (ARGS
+    /// numbers a pixel) of the m pixels whose line stays inside both levels, and their places
+    /// among the busy ones.
+    struct BridgeBatch {
+        double* args;
+        std::uint32_t *c0, *c1, *c2, *at;
         std::size_t m = 0;
-        for (std::size_t b = 0; b < n; ++b) {
-            const PixelState& s = st[busy_at[b]];
-            pre[b].known = false;
-            const double t_start = std::max(c.t0, s.refr_until);
-            const double g = (y1[b] - s.y) * c.inv_dt + leak_slope(s, leak_hz[b]);
-            const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
-            const double d_end = (s.y - s.ref) + g * c.dt;
-            const double th_on = s.theta_on, th_off = s.theta_off;
-            const bool inside = (bvar[b] > 0.0) & (t_start < c.t1) & (d_start < th_on) & (d_start > -th_off) &
-                                (d_end < th_on) & (d_end > -th_off);
-            const double sigma2 = 4.0 * bvar[b] * c.inv_dt;
-            const double span = c.t1 - t_start;
-            double* a = q.data() + 5 * m;
-            a[0] = th_on - d_start;
-            a[1] = th_on - d_end;
-            a[2] = th_off + d_start;
-            a[3] = th_off + d_end;
-            a[4] = 0.25 * sigma2 * span;
-            c0[m] = static_cast<std::uint32_t>(s.n);
-            c1[m] = static_cast<std::uint32_t>(s.n >> 32);
-            c2[m] = ids[busy_at[b]];
-            at[m] = static_cast<std::uint32_t>(b);
-            m += inside;
-        }
+    };
+    static BridgeBatch bridge_batch(BlockScratch& scratch, std::size_t n) {
+        if (scratch.bridge_args.size() < ARGS * n) scratch.bridge_args.resize(ARGS * n);
+        return {scratch.bridge_args.data(), scratch.ctr0.data(), scratch.ctr1.data(), scratch.ctr2.data(),
+                scratch.need_at.data(), 0};
+    }
+    /// bridge_decisions' test and arguments for the b-th busy pixel (global index id, new level
+    /// y1, leak rate leak_hz, bridge variance bvar; the state still at c.t0): compare_bridged()'s
+    /// expressions on the same values.
+    EVSTWIN_ALWAYS_INLINE void bridge_prepare(const PixelState& s, std::uint32_t id, std::uint32_t b, double y1,
+                                              double leak_hz, double bvar, const SampleConstants& c,
+                                              BridgeBatch& bb) const {
+        const double t_start = std::max(c.t0, s.refr_until);
+        const double g = (y1 - s.y) * c.inv_dt + leak_slope(s, leak_hz);
+        const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
+        const double d_end = (s.y - s.ref) + g * c.dt;
+        const double th_on = s.theta_on, th_off = s.theta_off;
+        const bool inside = (bvar > 0.0) & (t_start < c.t1) & (d_start < th_on) & (d_start > -th_off) &
+                            (d_end < th_on) & (d_end > -th_off);
+        const double sigma2 = 4.0 * bvar * c.inv_dt;
+        const double span = c.t1 - t_start;
+        const std::size_t m = bb.m;
+        double* a = bb.args + ARGS * m;
+        a[0] = th_on - d_start;
+        a[1] = th_on - d_end;
+        a[2] = th_off + d_start;
+        a[3] = th_off + d_end;
+        a[4] = 0.25 * sigma2 * span;
+        a[5] = sigma2;
+        a[6] = span;
+        a[7] = t_start;
+        bb.c0[m] = static_cast<std::uint32_t>(s.n);
+        bb.c1[m] = static_cast<std::uint32_t>(s.n >> 32);
+        bb.c2[m] = id;
+        bb.at[m] = b;
+        bb.m = m + inside;
+    }
+
+    /// compare_bridged()'s decision, made ahead for the n busy pixels of a block whose tests
+    /// and arguments bridge_prepare() put in bb (the state still at c.t0): where the line stays
+    /// inside both levels, the bridge's first Philox block (one vectorised batch), its uniform
+    /// and whether it fires, and at which level (detail::bridge_fires). compare_bridged then
+    /// reads them instead of drawing: the long chain of a scalar Philox call, two divisions and
+    /// two exps no longer stands between a pixel's state and its comparator's first
+    /// unpredictable branch. The same expressions on the same state (continuous_finish's
+    /// background_fire changes only the clocks), so the same decisions.
+    void bridge_decisions(const BridgeBatch& bb, std::size_t n, const SampleConstants& c, Philox4x32Key key,
+                          BlockScratch& scratch, BridgePre* pre) const {
+        for (std::size_t b = 0; b < n; ++b) pre[b].known = false;
+        const std::size_t m = bb.m;
+        const std::uint32_t *c0 = bb.c0, *c1 = bb.c1, *c2 = bb.c2, *at = bb.at;
+        const double* q = bb.args;
         if (m == 0) return;
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, m, r0, r1, r2, r3);
+        std::uint32_t* fired = scratch.fired.data();
+        std::size_t n_fired = 0;
         for (std::size_t k = 0; k < m; ++k) {
             BridgePre& r = pre[at[k]];
-            const double* a = q.data() + 5 * k;
+            const double* a = q + ARGS * k;
             bool on = false;
             r.fires = detail::bridge_fires(uniform_open(r0[k]), a[0], a[1], a[2], a[3], a[4], on);
             r.on = on;
             r.words = {r0[k], r1[k], r2[k], r3[k]};
             r.known = true;
+            r.timed = false;
+            fired[n_fired] = static_cast<std::uint32_t>(k);
+            n_fired += r.fires;
+        }
+        // The crossing times of those that fire, as compare_bridged() draws them: the normal
+        // from the second word (where the ziggurat's common path takes it; else compare_bridged
+        // draws as usual), the uniform from the third, the same arithmetic on the same values.
+        for (std::size_t f = 0; f < n_fired; ++f) {
+            const std::size_t k = fired[f];
+            BridgePre& r = pre[at[k]];
+            double g_time;
+            if (!normal_ziggurat_common(r1[k], g_time)) continue;
+            const double* a = q + ARGS * k;
+            const double u0 = r.on ? a[0] : a[2];
+            const double u1 = r.on ? a[1] : a[3];
+            r.tc = a[7] + bridge_first_passage_sample(u0, u1, a[5], a[6], g_time, uniform_open(r2[k]));
+            r.inv_first_dt = 1.0 / (r.tc - c.t0);
+            r.inv_second_dt = 1.0 / (c.t1 - r.tc);
+            r.timed = true;
         }
     }
+    /// bridge_decisions' numbers a pixel (BlockScratch::bridge_args).
+    static constexpr std::size_t ARGS = 8;
 
     /// Whether step_block_soa() handles this configuration: the continuous model with the exact
     /// source follower, behind the photoreceptor pole or not.
@@ -2113,14 +2180,18 @@ struct PixelModel {
                                                double leak_g, double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
                                                std::uint32_t pixel, std::uint32_t purpose, Emit& emit,
                                                const BridgePre* pre = nullptr) const {
-        if (bridge_var > 0.0) {
+        // `pre` (bridge_decisions): its `known` is the two tests below, made on the same state
+        // and values, and `fires` the draw's decision; the branches test its bytes, which are
+        // at hand long before the levels' arithmetic is done (a mispredicted branch costs less).
+        const bool decided = pre != nullptr;
+        if (decided ? (pre->known & pre->fires) : bridge_var > 0.0) {
             const double t_start = std::max(c.t0, s.refr_until);
-            if (t_start < c.t1) {
+            if (decided || t_start < c.t1) {
                 const double g = (y - s.y) * c.inv_dt + leak_g;
                 const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
                 const double d_end = (s.y - s.ref) + g * c.dt;
                 const double th_on = s.theta_on, th_off = s.theta_off;
-                if (d_start < th_on && d_start > -th_off && d_end < th_on && d_end > -th_off) {
+                if (decided || ((d_start < th_on) & (d_start > -th_off) & (d_end < th_on) & (d_end > -th_off))) {
                     // The variance rate of the bridge that has this middle variance over dt.
                     const double sigma2 = 4.0 * bridge_var * c.inv_dt;
                     const double span = c.t1 - t_start;
@@ -2131,19 +2202,25 @@ struct PixelModel {
                     // drawn whatever p is: a counter-based draw changes nothing else, and where
                     // p_on + p_off <= 2^-33 no uniform (uniform_open) lies below it.
                     // `pre`: the same words and decision, made ahead in a batch (bridge_decisions).
-                    const bool ahead = pre && pre->known;
-                    PrefilledStream more(key, pixel, s.n, purpose, ahead ? &pre->words : nullptr);
-                    const double u = more.uniform();
-                    bool on = ahead && pre->on;
-                    const bool fires = ahead ? pre->fires
-                                             : detail::bridge_fires(u, th_on - d_start, th_on - d_end, th_off + d_start,
-                                                                    th_off + d_end, mid, on);
+                    bool on = decided && pre->on;
+                    bool fires = decided;
+                    double tc = 0.0;
+                    if (decided && pre->timed) {
+                        tc = pre->tc;  // bridge_decisions drew it, from the same words
+                    } else {
+                        PrefilledStream more(key, pixel, s.n, purpose, decided ? &pre->words : nullptr);
+                        const double u = more.uniform();
+                        if (!decided)
+                            fires = detail::bridge_fires(u, th_on - d_start, th_on - d_end, th_off + d_start, th_off + d_end,
+                                                         mid, on);
+                        if (fires) {
+                            const double u0 = on ? th_on - d_start : th_off + d_start;
+                            const double u1 = on ? th_on - d_end : th_off + d_end;
+                            const double g_time = normal_ziggurat(more.word(), [&more] { return more.word(); });
+                            tc = t_start + bridge_first_passage_sample(u0, u1, sigma2, span, g_time, more.uniform());
+                        }
+                    }
                     if (fires) {
-                        const double u0 = on ? th_on - d_start : th_off + d_start;
-                        const double u1 = on ? th_on - d_end : th_off + d_end;
-                        const double g_time = normal_ziggurat(more.word(), [&more] { return more.word(); });
-                        const double tc = t_start + bridge_first_passage_sample(u0, u1, sigma2, span, g_time,
-                                                                                more.uniform());
                         if (tc > c.t0 && tc < c.t1) {
                             // Split the interval at the crossing: a virtual sample there, just
                             // past the level, so the comparator fires at tc; then on to y.
@@ -2156,9 +2233,10 @@ struct PixelModel {
                             SampleConstants first = c, second = c;
                             first.t1 = second.t0 = tc;
                             first.dt = tc - c.t0;
-                            first.inv_dt = 1.0 / first.dt;
                             second.dt = c.t1 - tc;
-                            second.inv_dt = 1.0 / second.dt;
+                            const bool timed = decided && pre->timed;
+                            first.inv_dt = timed ? pre->inv_first_dt : 1.0 / first.dt;
+                            second.inv_dt = timed ? pre->inv_second_dt : 1.0 / second.dt;
                             const bool noise_first = noise_pol >= 0 && t_noise <= tc;
                             compare(s, y_c, ny_c, first, leak_g, noise_first ? noise_pol : -1, t_noise, emit);
                             s.y = y_c;
@@ -2275,12 +2353,14 @@ struct PixelModel {
         const double dn = ny_t - s.noise_at_event;
         const double dl = s.level_at_event - (y_t - d);  // how far the reference has leaked
         const double ds = d - dn - dl;
-        if (pol == ON) {
-            if (dl >= ds && dl >= dn) return LABEL_LEAK;
-            return dn > ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
-        }
-        if (-dl >= -ds && -dl >= -dn) return LABEL_LEAK;
-        return -dn > -ds ? LABEL_SHOT_NOISE : LABEL_SIGNAL;
+        // The changes' signs turned to the crossing's direction (a negation is exact), and the
+        // label picked by arithmetic on the comparisons: these are the event path's least
+        // predictable branches.
+        const double sign = pol == ON ? 1.0 : -1.0;
+        const double sl = sign * dl, ss = sign * ds, sn = sign * dn;
+        const unsigned leak = static_cast<unsigned>(sl >= ss) & static_cast<unsigned>(sl >= sn);
+        const unsigned shot = static_cast<unsigned>(sn > ss);
+        return static_cast<std::uint8_t>(leak * LABEL_LEAK + (1u - leak) * (shot * LABEL_SHOT_NOISE + (1u - shot) * LABEL_SIGNAL));
     }
 
     /// The comparator over (t0, t1]: the level difference d(t) = y(t) - ref(t) is linear in
@@ -2311,7 +2391,10 @@ struct PixelModel {
         const double y0 = s.y, ny0 = s.ny;
         // An event at t with the difference d there, leaving the difference d_after: emit it
         // and remember where it left the pixel.
-        auto fire = [&](double t, int pol, double d, double d_after, int label) {
+        // Inlined at each of its four calls (GCC's attribute; elsewhere a plain lambda): left to
+        // the compiler, whether it was depended on the code around it, and an out-of-line copy
+        // cost an event more.
+        auto fire = [&](double t, int pol, double d, double d_after, int label) EVSTWIN_LAMBDA_ALWAYS_INLINE {
             const double f = (t - c.t0) * c.inv_dt;
             const double y_t = y0 + f * (y1 - y0), ny_t = ny0 + f * (ny1 - ny0);
             if (label < 0) label = crossing_label(s, pol, d, y_t, ny_t);
@@ -2327,7 +2410,7 @@ struct PixelModel {
                 tb = s.refr_until;
             }
             if (db >= th_on) {
-                const double n = std::floor(db / th_on);
+                const double n = detail::floor_positive(db / th_on);
                 const double d = db;
                 db -= n * th_on;
                 fire(tb, ON, d, db, -1);
@@ -2335,7 +2418,7 @@ struct PixelModel {
                 continue;
             }
             if (db <= -th_off) {
-                const double n = std::floor(-db / th_off);
+                const double n = detail::floor_positive(-db / th_off);
                 const double d = db;
                 db += n * th_off;
                 fire(tb, OFF, d, db, -1);

@@ -164,6 +164,16 @@ EVSTWIN_NOINLINE double normal_ziggurat_slow(std::uint32_t w, More& more) {
     }
 }
 
+/// normal_ziggurat's common path: whether word w is accepted at once, and then its normal in g
+/// (else normal_ziggurat_slow() finishes it, with further words).
+EVSTWIN_ALWAYS_INLINE bool normal_ziggurat_common(std::uint32_t w, double& g) {
+    const std::uint32_t i = w & 127u, j = w >> 8;
+    const double x = static_cast<double>(j) * ZIGGURAT.w[i];
+    // The sign from bit 7 by arithmetic: a branch on it would be mispredicted half the time.
+    g = x * (1.0 - 2.0 * static_cast<double>((w >> 7) & 1u));
+    return j < ZIGGURAT.k[i];
+}
+
 /// One standard normal from a 32-bit word by the ziggurat: bits 0-6 pick the layer, bit 7 the
 /// sign, bits 8-31 the magnitude; ~99 % of words are accepted with a table look-up and a
 /// multiply (no log, no square root). The rest (a wedge, or the tail beyond r) draw further
@@ -171,10 +181,8 @@ EVSTWIN_NOINLINE double normal_ziggurat_slow(std::uint32_t w, More& more) {
 /// included (threshold crossings of the noise live in its tails).
 template <class More>
 EVSTWIN_ALWAYS_INLINE double normal_ziggurat(std::uint32_t w, More&& more) {
-    const std::uint32_t i = w & 127u, j = w >> 8;
-    const double x = static_cast<double>(j) * ZIGGURAT.w[i];
-    // The sign from bit 7 by arithmetic: a branch on it would be mispredicted half the time.
-    if (j < ZIGGURAT.k[i]) return x * (1.0 - 2.0 * static_cast<double>((w >> 7) & 1u));
+    double g;
+    if (normal_ziggurat_common(w, g)) return g;
     return normal_ziggurat_slow(w, more);
 }
 

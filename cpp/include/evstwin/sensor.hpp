@@ -85,6 +85,15 @@ public:
     /// over the whole block, so below that the array-of-structures kernel over the pixels
     /// that advance costs less. Speed only: either gives the same events.
     static constexpr std::size_t SOA_MIN_ACTIVE_QUARTERS = 2;
+    /// run() leaves the vector kernel for the rest of a call in a block where more than this
+    /// many quarters of its pixels took the per-pixel path at a sample (an event-heavy scene):
+    /// then copying them out of the arrays and back costs more than the vector pass saves.
+    /// Measured with bench/engine_driver.cpp (continuous 130 CUTOFF_HZ, one thread, user+sys):
+    /// a quarter, against the half it was, is as fast at 20-40 Hz (0.40 / 0.81-0.83 /
+    /// 0.91-0.94 s against 0.40 / 0.81-0.82 / 0.94-0.95 s) and faster at 45-60 Hz (1.00-1.01
+    /// against 1.06 s at 45 Hz, 1.04-1.06 against 1.15-1.16 s at 50 Hz); an eighth loses at
+    /// 20-30 Hz (0.45 / 0.84-0.85 s). Speed only: either kernel gives the same events.
+    static constexpr std::size_t SOA_MAX_BUSY_QUARTERS = 1;
     /// Shortest sample interval accepted [s]: below it 1/dt and the crossing times lose meaning.
     static constexpr double MIN_DT_S = 1e-12;
     /// Largest photon rate accepted [photons/s on a pixel]; with no dark current, positive
@@ -293,6 +302,8 @@ public:
         start_call(nblocks, n_samples);
 
         CollectPlan plan;
+        plan.t_s = t_s;
+        plan.t_before = last_t_;
         guarded_for_each_block(
             nblocks, npix * n_samples, rate_check,
             [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
@@ -536,6 +547,12 @@ private:
         std::uint32_t pixel;
         std::uint8_t p;
         std::uint8_t label;  ///< EventLabel: why it fired
+        RawEvent() = default;
+        /// For emplace_back: the fields stored straight into the list. push_back of a braced
+        /// record built it on the stack with four small stores and copied it with one 16-byte
+        /// load, which the processor cannot forward from them (a stall on every event).
+        RawEvent(std::int64_t t_us_, std::uint32_t pixel_, std::uint8_t p_, std::uint8_t label_)
+            : t_us(t_us_), pixel(pixel_), p(p_), label(label_) {}
     };
 
     /// A block's event list, taken out of block_events_ while the block runs and put back
@@ -679,7 +696,7 @@ private:
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
-            out.push_back({round_us(t), pixel, static_cast<std::uint8_t>(pol), label});
+            out.emplace_back(round_us(t), pixel, static_cast<std::uint8_t>(pol), label);
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
@@ -697,9 +714,10 @@ private:
         std::uint8_t held[BLOCK];
         std::uint32_t held_at[BLOCK];
         std::size_t n_held = 0;
-        // Where most of a block's pixels need the per-pixel path (an event-heavy scene), copying
-        // them out of the arrays and back costs more than the vector pass saves: the block goes
-        // on with the array-of-structures kernel for the rest of the call. The same events.
+        // Where many of a block's pixels need the per-pixel path (an event-heavy scene;
+        // SOA_MAX_BUSY_QUARTERS), copying them out of the arrays and back costs more than the
+        // vector pass saves: the block goes on with the array-of-structures kernel for the rest
+        // of the call. The same events.
         bool soa_pays = soa_kernel;
         const auto leave_soa = [&] {
             if (in_soa) scratch.soa.store(state_.data() + lo, hi - lo, soa_t, n_held ? held : nullptr);
@@ -766,7 +784,7 @@ private:
                                                                  c, key_, scratch, emit, pixel, held_at, n_held);
                 soa_t = c.t1;
                 synced = n_held == 0;
-                if (2 * n_busy > hi - lo) {
+                if (4 * n_busy > SOA_MAX_BUSY_QUARTERS * (hi - lo)) {
                     soa_pays = false;
                     leave_soa();
                 }
@@ -806,7 +824,7 @@ private:
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
-            out.push_back({round_us(t), pixel, static_cast<std::uint8_t>(pol), label});
+            out.emplace_back(round_us(t), pixel, static_cast<std::uint8_t>(pol), label);
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
@@ -889,6 +907,12 @@ private:
         std::vector<std::size_t> base;    ///< sample k's events go to [base[k], base[k + 1])
         bool pixel_ordered = true;
         detail::PixelDivider row{1};      ///< pixel -> (x, y) without a division
+        /// run()'s sample times and the time before the first (nullptr: not known, run_pixels):
+        /// sample k's events lie in [t_s[k - 1], t_s[k]], so its microseconds lie between those
+        /// times' (round_us is monotone), which collect_sample() takes as the counting sort's
+        /// range without a pass to find it.
+        const double* t_s = nullptr;
+        double t_before = 0.0;
     };
 
     /// The call's events in output order: by time in microseconds; within one microsecond,
@@ -953,6 +977,7 @@ private:
             labels[j] = e.label;
         };
         const auto first = [this, k](std::uint32_t b) { return k == 0 ? 0u : block_sample_ends_[b][k - 1]; };
+        if (plan.pixel_ordered && plan.t_s && counting_sort_in_interval(plan, k, sort, put, first)) return;
         std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
         for (const std::uint32_t b : plan.busy) {
             const RawEvent* out = block_events_[b].data();
@@ -990,6 +1015,41 @@ private:
             });
             for (std::size_t e = 0; e < n_k; ++e) put(e, sample_events[e]);
         }
+    }
+
+    /// collect_sample()'s counting sort over the microseconds of sample k's interval (plan.t_s),
+    /// without the pass that finds the events' own range: one pass counts, one puts. Returns
+    /// false, having written nothing, where that range is unknown (no previous time), too wide
+    /// for the events (as collect_sample() decides on the events' own range), or an event lies
+    /// outside it (none does: the guard keeps the slots in bounds); collect_sample() then sorts
+    /// as before. Either way the same order: by t_us, then block and place in the block.
+    template <class Put, class First>
+    bool counting_sort_in_interval(const CollectPlan& plan, std::size_t k, SortScratch& sort, Put& put,
+                                   First& first) const {
+        const double t0 = k == 0 ? plan.t_before : plan.t_s[k - 1];
+        if (!std::isfinite(t0)) return false;
+        const std::size_t n_k = plan.base[k + 1] - plan.base[k];
+        const std::int64_t lo = round_us(t0), hi = round_us(plan.t_s[k]);
+        const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
+        if (!(hi >= lo && span <= 4 * n_k + 4096)) return false;
+        std::vector<std::uint32_t>& slots = sort.slots;
+        slots.assign(span + 2, 0);
+        for (const std::uint32_t b : plan.busy) {
+            const RawEvent* out = block_events_[b].data();
+            const std::uint32_t end = block_sample_ends_[b][k];
+            for (std::uint32_t e = first(b); e < end; ++e) {
+                const std::uint64_t d = static_cast<std::uint64_t>(out[e].t_us) - static_cast<std::uint64_t>(lo);
+                if (d > span) return false;
+                ++slots[d + 1];
+            }
+        }
+        for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
+        for (const std::uint32_t b : plan.busy) {
+            const RawEvent* out = block_events_[b].data();
+            const std::uint32_t end = block_sample_ends_[b][k];
+            for (std::uint32_t e = first(b); e < end; ++e) put(slots[static_cast<std::size_t>(out[e].t_us - lo)]++, out[e]);
+        }
+        return true;
     }
 
     /// Keep the blocks' memory for the next call, unless a flood made it large.
