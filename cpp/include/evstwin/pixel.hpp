@@ -1438,15 +1438,18 @@ struct PixelModel {
         double* leak = scratch.leak.data();
         PixelState* st = v.state;
         const auto at = [&v](std::size_t j) -> std::size_t { return AllActive ? j : v.active[j]; };
-        block_sample_words<AllActive>(v, key, scratch, w0, w1);
         // The normals in a pass of their own (their rare slow path is a call, which would make
         // the main pass save and restore its registers around it). Not needed without shot
         // noise (the per-pixel path draws them only where the noise intensity is > 0, and so
-        // must this: a pixel's rate enters only through the cache, below).
+        // must this: a pixel's rate enters only through the cache, below), and then neither
+        // are the sample's words, which only they use: a noiseless pixel (an ideal one) spent
+        // a fifth of its time on a Philox call per two samples. The words are counter-based
+        // and the kept ones are tagged with their sample, so not drawing them changes nothing.
         double* g1s = scratch.u_noise.data();
         double* g2s = scratch.count.data();
         const bool noisy = draws_normals();
         if (noisy) {
+            block_sample_words<AllActive>(v, key, scratch, w0, w1);
             // The second normal only drives the two-pole system (continuous_levels).
             const bool two_poles = !SfOnly && p.pr_pole && has_filter;
             block_sample_normals<AllActive>(v, key, scratch, w0, w1, g1s, g2s, two_poles);
