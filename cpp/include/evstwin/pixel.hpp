@@ -433,7 +433,11 @@ struct BlockSoA {
     int cur = 0;
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
     std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
-    std::vector<std::uint64_t> spare_words, spare_sample;  ///< changed in place by the word batch
+    /// PixelState::spare_words as its two 32-bit halves (the Philox batch writes its third and
+    /// fourth words straight into them, and the next odd sample reads them in place), and
+    /// spare_sample: changed in place by the word batch.
+    std::vector<std::uint32_t> spare_lo, spare_hi;
+    std::vector<std::uint64_t> spare_sample;
     /// The quiet pass's verdict per pixel (0 quiet, 1 bridge, 2 per-pixel path), 64-bit like
     /// the levels: a byte array would make the vectoriser take 64 pixels an iteration (one
     /// byte vector), eight zmm registers per level, and spill them to the stack.
@@ -451,7 +455,8 @@ struct BlockSoA {
             l.n.resize(m);
         }
         for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz}) v->resize(m);
-        spare_words.resize(m);
+        spare_lo.resize(m);
+        spare_hi.resize(m);
         spare_sample.resize(m);
         busy.resize(m);
     }
@@ -460,7 +465,9 @@ struct BlockSoA {
         into.x[j] = s.x; into.z[j] = s.z; into.y[j] = s.y; into.nz[j] = s.nz; into.ny[j] = s.ny;
         into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off; into.n[j] = s.n;
         refr_until[j] = s.refr_until; next_hot_t[j] = s.next_hot_t;
-        spare_words[j] = s.spare_words; spare_sample[j] = s.spare_sample;
+        spare_lo[j] = static_cast<std::uint32_t>(s.spare_words);
+        spare_hi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
+        spare_sample[j] = s.spare_sample;
     }
     /// Pixel j's fields back into its state, its changing levels from `from` (the constant
     /// ones are not written).
@@ -468,7 +475,8 @@ struct BlockSoA {
         s.x = from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
         s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = from.n[j];
         s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
-        s.spare_words = spare_words[j]; s.spare_sample = spare_sample[j];
+        s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
+        s.spare_sample = spare_sample[j];
     }
     void load(const PixelState* st, std::size_t m) {
         resize(m);
@@ -1233,53 +1241,60 @@ struct PixelModel {
 
     /// batch_sample_words() for a block held as arrays, with the two cases of a block whose
     /// pixels all share the sample's parity as loops without branches: an odd sample whose
-    /// words every pixel kept (no Philox call), and an even one where every pixel needs one.
-    /// Anything else (pixels sub-sampled apart) goes through batch_sample_words(). The same words.
+    /// words every pixel kept (no Philox call: w0, w1 point at the kept words in h), and an
+    /// even one where every pixel needs one (the batch writes the kept words straight into h).
+    /// Anything else (pixels sub-sampled apart) goes through batch_sample_words() into the
+    /// scratch arrays. The same words. Each case is tested by one pass over the block without
+    /// an early exit (an OR of the parities or mismatches), which vectorises, fused with the
+    /// counters the even case needs; a block of pixels sub-sampled apart wastes one such pass.
     EVSTWIN_ALWAYS_INLINE static void soa_sample_words(BlockSoA& h, const std::uint32_t* ids, std::size_t n,
-                                                       Philox4x32Key key, BlockScratch& scratch, std::uint32_t* w0,
-                                                       std::uint32_t* w1) {
+                                                       Philox4x32Key key, BlockScratch& scratch,
+                                                       const std::uint32_t*& w0, const std::uint32_t*& w1) {
         const std::uint64_t* __restrict sample = h.now().n.data();
-        std::uint64_t* __restrict words = h.spare_words.data();
+        std::uint32_t* __restrict lo = h.spare_lo.data();
+        std::uint32_t* __restrict hi = h.spare_hi.data();
         std::uint64_t* __restrict kept_for = h.spare_sample.data();
-        // Which case, with early exits: a block of pixels sub-sampled apart fails both tests
-        // at its first pixels of the other parity.
-        const auto all_kept = [&] {
-            for (std::size_t j = 0; j < n; ++j)
-                if ((kept_for[j] != sample[j]) | !(sample[j] & 1u)) return false;
-            return true;
-        };
-        const auto all_even = [&] {
-            for (std::size_t j = 0; j < n; ++j)
-                if (sample[j] & 1u) return false;
-            return true;
-        };
+        std::uint32_t* __restrict s0 = scratch.count_word.data();
+        std::uint32_t* __restrict s1 = scratch.word1.data();
         const bool first_odd = n > 0 && (sample[0] & 1u);
-        if (first_odd && all_kept()) {
-            for (std::size_t j = 0; j < n; ++j) {
-                w0[j] = static_cast<std::uint32_t>(words[j]);
-                w1[j] = static_cast<std::uint32_t>(words[j] >> 32);
+        if (first_odd) {
+            std::uint64_t off = 0;  // nonzero: some pixel's words are not kept for this sample
+            for (std::size_t j = 0; j < n; ++j) off |= (kept_for[j] ^ sample[j]) | (~sample[j] & 1u);
+            if (off == 0) {
+                w0 = lo;
+                w1 = hi;
+                return;
             }
-            return;
-        }
-        if (!first_odd && all_even()) {
-            std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
+        } else {
+            std::uint32_t *__restrict c0 = scratch.ctr0.data(), *__restrict c1 = scratch.ctr1.data(),
+                          *__restrict c2 = scratch.ctr2.data();
+            std::uint64_t odd = 0;
             for (std::size_t j = 0; j < n; ++j) {
                 const std::uint64_t pair = sample[j] >> 1;
                 c0[j] = static_cast<std::uint32_t>(pair);
                 c1[j] = static_cast<std::uint32_t>(pair >> 32);
                 c2[j] = ids[j];
+                odd |= sample[j];
             }
-            std::uint32_t *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
-            philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, w0, w1, r2, r3);
-            for (std::size_t j = 0; j < n; ++j) {
-                words[j] = static_cast<std::uint64_t>(r2[j]) | (static_cast<std::uint64_t>(r3[j]) << 32);
-                kept_for[j] = sample[j] | 1u;
+            if (!(odd & 1u)) {
+                philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, s0, s1, lo, hi);
+                for (std::size_t j = 0; j < n; ++j) kept_for[j] = sample[j] | 1u;
+                w0 = s0;
+                w1 = s1;
+                return;
             }
-            return;
         }
         batch_sample_words(
             n, [sample](std::size_t j) { return sample[j]; }, [ids](std::size_t j) { return ids[j]; },
-            [&](std::size_t j, auto&& use) { use(words[j], kept_for[j]); }, key, scratch, w0, w1);
+            [&](std::size_t j, auto&& use) {
+                std::uint64_t words = static_cast<std::uint64_t>(lo[j]) | (static_cast<std::uint64_t>(hi[j]) << 32);
+                use(words, kept_for[j]);
+                lo[j] = static_cast<std::uint32_t>(words);
+                hi[j] = static_cast<std::uint32_t>(words >> 32);
+            },
+            key, scratch, s0, s1);
+        w0 = s0;
+        w1 = s1;
     }
 
     /// batch_sample_words() for the active pixels of a block view (array-of-structures state).
@@ -1580,8 +1595,8 @@ struct PixelModel {
         scratch.resize(n);
         BlockSoA::Levels& now = h.now();
         BlockSoA::Levels& next = h.next();
-        std::uint32_t* w0 = scratch.count_word.data();
-        std::uint32_t* w1 = scratch.word1.data();
+        const std::uint32_t* w0 = nullptr;
+        const std::uint32_t* w1 = nullptr;
         const auto count = [&now](std::size_t j) { return now.n[j]; };
         const auto id = [ids](std::size_t j) { return ids[j]; };
         soa_sample_words(h, ids, n, key, scratch, w0, w1);
