@@ -162,29 +162,6 @@ inline void require_range(const char* name, double v, double lo, double hi, cons
     }
 }
 
-/// exp(-e) for 0 <= e <= 40 within a relative 1e-8 (tests/cpp checks it against std::exp):
-/// 2^k e^r with k the nearest integer to -e log2(e) and |r| <= ln(2) / 2, e^r by its Taylor
-/// series to r^7 (remainder below 0.35^8 / 8! = 5e-9), 2^k put in the exponent bits. No
-/// library call, no table. Only a bracket for decisions (bridge_fires), never a value of
-/// the model.
-inline double exp_neg_bracket(double e) {
-    const double t = -e * 1.4426950408889634;  // log2(e)
-    const double k = std::floor(t + 0.5);
-    const double r = (t - k) * 0.6931471805599453;
-    double p = 1.0 / 5040.0;
-    p = p * r + 1.0 / 720.0;
-    p = p * r + 1.0 / 120.0;
-    p = p * r + 1.0 / 24.0;
-    p = p * r + 1.0 / 6.0;
-    p = p * r + 0.5;
-    p = p * r + 1.0;
-    p = p * r + 1.0;
-    const std::uint64_t bits = static_cast<std::uint64_t>(static_cast<std::int64_t>(k) + 1023) << 52;
-    double two_k;
-    std::memcpy(&two_k, &bits, sizeof two_k);
-    return p * two_k;
-}
-
 /// Whether a uniform u in (0, 1) fires a Brownian bridge that crosses the ON level with
 /// probability bridge_crossing_probability(on0, on1, mid) = p_on and the OFF one with p_off
 /// (u < p_on + p_off), and at which (on: u < p_on): the decisions compare_bridged() takes,
@@ -572,12 +549,32 @@ EVSTWIN_ALWAYS_INLINE std::size_t list_flagged_body(const Flag* __restrict flag,
     return m;
 }
 
+/// The bridge stage's bracket of each candidate's crossing probability: q[i] =
+/// exp_neg_bracket(e_on[i]) + exp_neg_bracket(e_off[i]), a term 0 where its exponent is above
+/// 40 (as bridge_crossing_probability cuts), and -1 where an exponent is negative or NaN (the
+/// caller then takes the exact probability). Without branches, so it vectorises.
+EVSTWIN_ALWAYS_INLINE void bridge_bracket_body(const double* __restrict e_on, const double* __restrict e_off,
+                                               std::size_t m, double* __restrict q) {
+    for (std::size_t i = 0; i < m; ++i) {
+        const double eo = e_on[i], ef = e_off[i];
+        const bool in_range = (eo >= 0.0) & (ef >= 0.0);
+        // Clamped so the bracket's arithmetic stays finite; the lanes clamped are cut below.
+        const double bo = exp_neg_bracket(eo < 40.0 ? eo : 40.0);
+        const double bf = exp_neg_bracket(ef < 40.0 ? ef : 40.0);
+        const double sum = (eo > 40.0 ? 0.0 : bo) + (ef > 40.0 ? 0.0 : bf);
+        q[i] = in_range ? sum : -1.0;
+    }
+}
+
 #define EVSTWIN_LIST_FLAGGED_LEVEL(SUFFIX, TARGET)                                                              \
     TARGET inline std::size_t list_flagged_##SUFFIX(const std::uint64_t* flag, std::size_t n, std::uint32_t* list) { \
         return list_flagged_body(flag, n, list);                                                                \
     }                                                                                                           \
     TARGET inline std::size_t list_flagged_##SUFFIX(const std::uint8_t* flag, std::size_t n, std::uint32_t* list) {  \
         return list_flagged_body(flag, n, list);                                                                \
+    }                                                                                                           \
+    TARGET inline void bridge_bracket_##SUFFIX(const double* e_on, const double* e_off, std::size_t m, double* q) {   \
+        bridge_bracket_body(e_on, e_off, m, q);                                                                 \
     }
 EVSTWIN_LIST_FLAGGED_LEVEL(baseline, )
 #if EVSTWIN_MULTIVERSION
@@ -586,6 +583,17 @@ EVSTWIN_LIST_FLAGGED_LEVEL(avx512, EVSTWIN_TARGET_AVX512)
 #endif
 #undef EVSTWIN_LIST_FLAGGED_LEVEL
 
+/// bridge_bracket_body() at the current SIMD level (simd.hpp).
+inline void bridge_bracket(const double* e_on, const double* e_off, std::size_t m, double* q) {
+#if EVSTWIN_MULTIVERSION
+    switch (simd_level()) {
+        case SimdLevel::AVX512: return bridge_bracket_avx512(e_on, e_off, m, q);
+        case SimdLevel::AVX2: return bridge_bracket_avx2(e_on, e_off, m, q);
+        default: break;
+    }
+#endif
+    bridge_bracket_baseline(e_on, e_off, m, q);
+}
 }  // namespace detail
 
 /// The indices i in [0, n) with flag[i] != 0 into list, in order; returns how many: a pass
@@ -1202,6 +1210,8 @@ struct PixelModel {
     }
 
     /// Scratch space of the block kernel (one per thread).
+    /// The Philox batches' widest vector body (16 counters with AVX-512): short batches are padded to it.
+    static constexpr std::size_t PHILOX_BATCH_PAD = 16;
     struct BlockScratch {
         std::vector<double> u_noise, x, current, y;
         std::vector<std::uint8_t> busy;
@@ -1233,12 +1243,26 @@ struct PixelModel {
                 word1.resize(n); busy_at.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
                 noise_d.resize(n);
                 leak.resize(n);
-                ctr0.resize(n); ctr1.resize(n); ctr2.resize(n); need_at.resize(n);
-                r0.resize(n); r1.resize(n); r2.resize(n); r3.resize(n); slow1.resize(n); slow2.resize(n);
+                // Room for a short batch's padding (pad_batch).
+                ctr0.resize(n + PHILOX_BATCH_PAD); ctr1.resize(n + PHILOX_BATCH_PAD); ctr2.resize(n + PHILOX_BATCH_PAD);
+                need_at.resize(n);
+                r0.resize(n + PHILOX_BATCH_PAD); r1.resize(n + PHILOX_BATCH_PAD); r2.resize(n + PHILOX_BATCH_PAD);
+                r3.resize(n + PHILOX_BATCH_PAD);
+                slow1.resize(n); slow2.resize(n);
                 bridge_pre.resize(n);
             }
         }
     };
+
+    /// A Philox batch of m counters (ctr0..ctr2 from index 0) padded with zero counters up to a
+    /// multiple of PHILOX_BATCH_PAD: the batch loop's vector body takes 8 (AVX2) or 16 (AVX-512)
+    /// counters at a time and finishes the rest one by one, so a batch of a few (a block's slow
+    /// normals or bridge draws, ~10) would be all scalar. The padding's words are not used.
+    static std::size_t pad_batch(BlockScratch& scratch, std::size_t m) {
+        const std::size_t padded = (m + PHILOX_BATCH_PAD - 1) / PHILOX_BATCH_PAD * PHILOX_BATCH_PAD;
+        for (std::size_t i = m; i < padded; ++i) scratch.ctr0[i] = scratch.ctr1[i] = scratch.ctr2[i] = 0;
+        return padded;
+    }
 
     /// Which pixels of a block the kernel advances now: `active` lists their positions
     /// (local indices into the block's state, rates and ids).
@@ -1744,10 +1768,15 @@ struct PixelModel {
 
     /// The pixels the quiet pass left to the bridge alone (h.busy 1): their levels in h.next()
     /// are final unless the bridge's draw fires. As compare_bridged() (the interval starts at
-    /// c.t0: not refractory), each one's crossing probability, and for those where it is above
-    /// the smallest uniform, its uniform, all in one Philox batch; a pixel whose draw fires is
-    /// handed to the per-pixel path (h.busy 2), which draws the same uniform again and places
-    /// the event; the others are settled (h.busy 0).
+    /// c.t0: not refractory), whether its uniform u falls below the crossing probability
+    /// p = bridge_crossing_probability(on) + bridge_crossing_probability(off); a pixel whose
+    /// draw fires is handed to the per-pixel path (h.busy 2), which draws the same uniform again
+    /// and places the event; the others are settled (h.busy 0). The uniforms of all the pixels
+    /// that might fire come from one Philox batch; p's two exps are bracketed by
+    /// exp_neg_bracket (within 1e-8), which decides wherever u lies farther than a relative 1e-6
+    /// from the bracketed sum, and the library's exps are taken only for the rare pixel whose
+    /// u lies that close (or whose exponents are out of the bracket's range): the same
+    /// decision as u < p for every u (as detail::bridge_fires decides).
     void bridge_stage(BlockSoA& h, const std::uint32_t* ids, const std::uint32_t* flagged, std::size_t n_flagged,
                       const NoiseCache& common,
                       const SampleConstants& c, Philox4x32Key key, BlockScratch& scratch) const {
@@ -1760,34 +1789,60 @@ struct PixelModel {
         const double mid = 0.25 * sigma2 * span;
         std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
         std::uint32_t* at = scratch.need_at.data();
-        double* p_fire = scratch.noise_d.data();
+        double* q_fire = scratch.noise_d.data();       // the bracketed p (-1: take the exact p)
+        double* e_on = scratch.x.data();               // bridge_crossing_probability's exponents
+        double* e_off = scratch.y.data();
+        // bridge_crossing_probability is 0 for both levels without a middle variance.
+        const bool has_mid = mid > 0.0;
+        // The candidates and their exponents, as bridge_crossing_probability forms them.
         std::size_t m = 0;
         for (std::size_t f = 0; f < n_flagged; ++f) {
             const std::size_t j = flagged[f];
             if (busy[j] != 1) continue;
+            busy[j] = 0;
+            if (!has_mid) continue;
             const double s_y = now.y[j], ref = now.ref[j], th_on = h.theta_on[j], th_off = h.theta_off[j];
             const double g = (next.y[j] - s_y) * c.inv_dt + leak_slope(h.leak_spread[j], th_on, th_off, common.leak_hz);
             const double d_start = (s_y - ref) + g * (t_start - c.t0);
             const double d_end = (s_y - ref) + g * c.dt;
-            const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
-            const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
-            if (p_on + p_off > 0x1p-33) {
-                const std::uint64_t sample = now.n[j];
-                c0[m] = static_cast<std::uint32_t>(sample);
-                c1[m] = static_cast<std::uint32_t>(sample >> 32);
-                c2[m] = ids[j];
-                at[m] = static_cast<std::uint32_t>(j);
-                p_fire[m] = p_on + p_off;
-                ++m;
-            }
-            busy[j] = 0;
+            e_on[m] = (th_on - d_start) * (th_on - d_end) / (2.0 * mid);
+            e_off[m] = (th_off + d_start) * (th_off + d_end) / (2.0 * mid);
+            at[m] = static_cast<std::uint32_t>(j);
+            ++m;
         }
         if (m == 0) return;
+        // Their brackets in one vectorised pass: the exps' latency chains overlap.
+        detail::bridge_bracket(e_on, e_off, m, q_fire);
+        // Those whose p may exceed 2^-33 (a uniform can fall below it; wherever q (1 + 1e-6)
+        // does), kept in place without branches, with their counters.
+        std::size_t d = 0;
+        for (std::size_t k = 0; k < m; ++k) {
+            const std::size_t j = at[k];
+            const double q = q_fire[k];
+            const std::uint64_t sample = now.n[j];
+            c0[d] = static_cast<std::uint32_t>(sample);
+            c1[d] = static_cast<std::uint32_t>(sample >> 32);
+            c2[d] = ids[j];
+            at[d] = static_cast<std::uint32_t>(j);
+            q_fire[d] = q;
+            e_on[d] = e_on[k];
+            e_off[d] = e_off[k];
+            d += static_cast<std::size_t>((q < 0.0) | (q * (1.0 + 1e-6) > 0x1p-33));
+        }
+        if (d == 0) return;
         // CounterStream(key, pixel, sample, PURPOSE_BRIDGE)'s first word.
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
-        philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, m, r0, r1, r2, r3);
-        for (std::size_t q = 0; q < m; ++q)
-            if (uniform_open(r0[q]) < p_fire[q]) busy[at[q]] = 2;
+        philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, pad_batch(scratch, d), r0, r1, r2, r3);
+        for (std::size_t k = 0; k < d; ++k) {
+            const double u = uniform_open(r0[k]), q = q_fire[k];
+            bool fires = u < q;
+            if ((q < 0.0) | ((u >= q * (1.0 - 1e-6)) & (u <= q * (1.0 + 1e-6)))) {
+                const double p_on = e_on[k] > 40.0 ? 0.0 : std::exp(-e_on[k]);
+                const double p_off = e_off[k] > 40.0 ? 0.0 : std::exp(-e_off[k]);
+                fires = u < p_on + p_off;
+            }
+            busy[at[k]] = 2u * static_cast<std::uint64_t>(fires);
+        }
     }
 
     template <bool AllActive, class Real, class Emit>
