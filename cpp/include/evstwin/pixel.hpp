@@ -1210,7 +1210,7 @@ struct PixelModel {
     }
 
     /// Scratch space of the block kernel (one per thread).
-    /// The Philox batches' widest vector body (16 counters with AVX-512): short batches are padded to it.
+    /// The Philox batches' widest vector body (16 counters with AVX-512): room for pad_batch's padding.
     static constexpr std::size_t PHILOX_BATCH_PAD = 16;
     struct BlockScratch {
         std::vector<double> u_noise, x, current, y;
@@ -1255,11 +1255,14 @@ struct PixelModel {
     };
 
     /// A Philox batch of m counters (ctr0..ctr2 from index 0) padded with zero counters up to a
-    /// multiple of PHILOX_BATCH_PAD: the batch loop's vector body takes 8 (AVX2) or 16 (AVX-512)
-    /// counters at a time and finishes the rest one by one, so a batch of a few (a block's slow
-    /// normals or bridge draws, ~10) would be all scalar. The padding's words are not used.
+    /// multiple of the batch loop's vector body at the current SIMD level (4 counters on SSE2,
+    /// 8 with AVX2, 16 with AVX-512), which does the rest one by one: a batch of a few (a
+    /// block's slow normals or bridge draws, ~10) would be all scalar. The padding's words are
+    /// not used.
     static std::size_t pad_batch(BlockScratch& scratch, std::size_t m) {
-        const std::size_t padded = (m + PHILOX_BATCH_PAD - 1) / PHILOX_BATCH_PAD * PHILOX_BATCH_PAD;
+        const SimdLevel level = simd_level();
+        const std::size_t width = level == SimdLevel::AVX512 ? 16 : level == SimdLevel::AVX2 ? 8 : 4;
+        const std::size_t padded = (m + width - 1) / width * width;
         for (std::size_t i = m; i < padded; ++i) scratch.ctr0[i] = scratch.ctr1[i] = scratch.ctr2[i] = 0;
         return padded;
     }
@@ -1404,12 +1407,36 @@ struct PixelModel {
         // The flags of both words in one array, so one scan finds the few to finish.
         if (second)
             for (std::size_t j = 0; j < n; ++j) slow1[j] |= static_cast<std::uint8_t>(slow2[j] << 1);
-        for (std::size_t j = next_flagged(slow1, 0, n); j < n; j = next_flagged(slow1, j + 1, n)) {
+        // The few to finish, listed; their further words' first blocks in one Philox batch (a
+        // scalar call each was most of the slow path's instructions), and the bracket of each
+        // one's first wedge test in one pass without branches (its polynomial's latency then
+        // overlaps across normals); then each finished from a stream that starts with that block.
+        std::uint32_t* at = scratch.need_at.data();
+        const std::size_t m = list_flagged(slow1, n, at);
+        if (m == 0) return;
+        std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
+        double* q_first = scratch.noise_d.data();
+        const ZigguratTables& z = ZIGGURAT;
+        for (std::size_t q = 0; q < m; ++q) {
+            const std::size_t j = at[q];
+            const std::uint64_t sample = count(j);
+            c0[q] = static_cast<std::uint32_t>(sample);
+            c1[q] = static_cast<std::uint32_t>(sample >> 32);
+            c2[q] = id(j);
+            const std::uint32_t w = (slow1[j] & 1u) ? w0[j] : w1[j];
+            const double x = static_cast<double>(w >> 8) * z.w[w & 127u];
+            q_first[q] = detail::exp_neg_bracket(0.5 * x * x);
+        }
+        std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
+        philox4x32_batch(c0, c1, c2, PURPOSE_NORMAL, key, pad_batch(scratch, m), r0, r1, r2, r3);
+        for (std::size_t q = 0; q < m; ++q) {
+            const std::size_t j = at[q];
             const bool first_slow = slow1[j] & 1u, second_slow = slow1[j] >> 1;
-            CounterStream extra(key, id(j), count(j), PURPOSE_NORMAL);
+            const Philox4x32Counter first{r0[q], r1[q], r2[q], r3[q]};
+            PrefilledStream extra(key, id(j), count(j), PURPOSE_NORMAL, &first);
             auto more = [&extra] { return extra.word(); };
-            if (first_slow) g1[j] = normal_ziggurat_slow(w0[j], more);
-            if (second_slow) g2[j] = normal_ziggurat_slow(w1[j], more);
+            if (first_slow) g1[j] = normal_ziggurat_slow(w0[j], more, q_first[q]);
+            if (second_slow) g2[j] = normal_ziggurat_slow(w1[j], more, first_slow ? -1.0 : q_first[q]);
         }
     }
 
