@@ -1210,7 +1210,7 @@ struct PixelModel {
     }
 
     /// Scratch space of the block kernel (one per thread).
-    /// The Philox batches' widest vector body (16 counters with AVX-512): room for pad_batch's padding.
+    /// Room for pad_batch's padding (at least the Philox batches' widest vector body, 8 counters).
     static constexpr std::size_t PHILOX_BATCH_PAD = 16;
     struct BlockScratch {
         std::vector<double> u_noise, x, current, y;
@@ -1255,13 +1255,12 @@ struct PixelModel {
     };
 
     /// A Philox batch of m counters (ctr0..ctr2 from index 0) padded with zero counters up to a
-    /// multiple of the batch loop's vector body at the current SIMD level (4 counters on SSE2,
-    /// 8 with AVX2, 16 with AVX-512), which does the rest one by one: a batch of a few (a
-    /// block's slow normals or bridge draws, ~10) would be all scalar. The padding's words are
-    /// not used.
+    /// multiple of the batch loop's vector body at the current SIMD level (4 counters on SSE2
+    /// and AVX2, 8 with AVX-512: simd.hpp), which does the rest one by one: a batch of a few (a
+    /// block's slow normals or bridge draws, ~10) would be mostly scalar. The padding's words
+    /// are not used.
     static std::size_t pad_batch(BlockScratch& scratch, std::size_t m) {
-        const SimdLevel level = simd_level();
-        const std::size_t width = level == SimdLevel::AVX512 ? 16 : level == SimdLevel::AVX2 ? 8 : 4;
+        const std::size_t width = simd_level() == SimdLevel::AVX512 ? 8 : 4;
         const std::size_t padded = (m + width - 1) / width * width;
         for (std::size_t i = m; i < padded; ++i) scratch.ctr0[i] = scratch.ctr1[i] = scratch.ctr2[i] = 0;
         return padded;
