@@ -642,6 +642,79 @@ inline void bridge_bracket(const double* e_on, const double* e_off, std::size_t 
 }
 }  // namespace detail
 
+namespace detail {
+/// soa_sample_words' passes over a block's counters, compiled per SIMD level (the block
+/// kernel itself is compiled for the baseline, where these loops take two counters a step):
+/// sample_words_off: nonzero unless every pixel's words are kept for its (odd) sample;
+/// even_counters: the counters of an even sample's Philox batch, and the OR of the samples
+/// (odd bit set: some pixel's sample is odd); keep_for_next: every pixel's words now belong
+/// to its sample | 1.
+EVSTWIN_ALWAYS_INLINE std::uint64_t sample_words_off_body(const std::uint64_t* __restrict kept_for,
+                                                         const std::uint64_t* __restrict sample, std::size_t n) {
+    std::uint64_t off = 0;
+    for (std::size_t j = 0; j < n; ++j) off |= (kept_for[j] ^ sample[j]) | (~sample[j] & 1u);
+    return off;
+}
+EVSTWIN_ALWAYS_INLINE std::uint64_t even_counters_body(const std::uint64_t* __restrict sample,
+                                                      const std::uint32_t* __restrict ids, std::size_t n,
+                                                      std::uint32_t* __restrict c0, std::uint32_t* __restrict c1,
+                                                      std::uint32_t* __restrict c2) {
+    std::uint64_t any = 0;
+    for (std::size_t j = 0; j < n; ++j) {
+        const std::uint64_t pair = sample[j] >> 1;
+        c0[j] = static_cast<std::uint32_t>(pair);
+        c1[j] = static_cast<std::uint32_t>(pair >> 32);
+        c2[j] = ids[j];
+        any |= sample[j];
+    }
+    return any;
+}
+EVSTWIN_ALWAYS_INLINE void keep_for_next_body(const std::uint64_t* __restrict sample, std::size_t n,
+                                              std::uint64_t* __restrict kept_for) {
+    for (std::size_t j = 0; j < n; ++j) kept_for[j] = sample[j] | 1u;
+}
+#define EVSTWIN_WORD_BOOKS_LEVEL(SUFFIX, TARGET)                                                               \
+    TARGET inline std::uint64_t sample_words_off_##SUFFIX(const std::uint64_t* k, const std::uint64_t* s,      \
+                                                          std::size_t n) {                                     \
+        return sample_words_off_body(k, s, n);                                                                 \
+    }                                                                                                          \
+    TARGET inline std::uint64_t even_counters_##SUFFIX(const std::uint64_t* s, const std::uint32_t* ids,       \
+                                                       std::size_t n, std::uint32_t* c0, std::uint32_t* c1,    \
+                                                       std::uint32_t* c2) {                                    \
+        return even_counters_body(s, ids, n, c0, c1, c2);                                                      \
+    }                                                                                                          \
+    TARGET inline void keep_for_next_##SUFFIX(const std::uint64_t* s, std::size_t n, std::uint64_t* k) {       \
+        keep_for_next_body(s, n, k);                                                                           \
+    }
+EVSTWIN_WORD_BOOKS_LEVEL(baseline, )
+#if EVSTWIN_MULTIVERSION
+EVSTWIN_WORD_BOOKS_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
+EVSTWIN_WORD_BOOKS_LEVEL(avx512, EVSTWIN_TARGET_AVX512)
+#endif
+#undef EVSTWIN_WORD_BOOKS_LEVEL
+#if EVSTWIN_MULTIVERSION
+#define EVSTWIN_AT_LEVEL(NAME, ...)                                                 \
+    switch (simd_level()) {                                                        \
+        case SimdLevel::AVX512: return NAME##_avx512(__VA_ARGS__);                  \
+        case SimdLevel::AVX2: return NAME##_avx2(__VA_ARGS__);                      \
+        default: return NAME##_baseline(__VA_ARGS__);                               \
+    }
+#else
+#define EVSTWIN_AT_LEVEL(NAME, ...) return NAME##_baseline(__VA_ARGS__);
+#endif
+inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::size_t n) {
+    EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, n)
+}
+inline std::uint64_t even_counters(const std::uint64_t* sample, const std::uint32_t* ids, std::size_t n,
+                                   std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) {
+    EVSTWIN_AT_LEVEL(even_counters, sample, ids, n, c0, c1, c2)
+}
+inline void keep_for_next(const std::uint64_t* sample, std::size_t n, std::uint64_t* kept_for) {
+    EVSTWIN_AT_LEVEL(keep_for_next, sample, n, kept_for)
+}
+#undef EVSTWIN_AT_LEVEL
+}  // namespace detail
+
 /// The indices i in [0, n) with flag[i] != 0 into list, in order; returns how many: a pass
 /// over the flags without branches, then one step per flagged pixel (list_flagged_body), at
 /// the current SIMD level (simd.hpp). Flag: std::uint64_t (the quiet pass's verdicts) or
@@ -1384,9 +1457,7 @@ struct PixelModel {
         std::uint32_t* __restrict s1 = scratch.word1.data();
         const bool first_odd = n > 0 && (sample[0] & 1u);
         if (first_odd) {
-            std::uint64_t off = 0;  // nonzero: some pixel's words are not kept for this sample
-            for (std::size_t j = 0; j < n; ++j) off |= (kept_for[j] ^ sample[j]) | (~sample[j] & 1u);
-            if (off == 0) {
+            if (detail::sample_words_off(kept_for, sample, n) == 0) {
                 w0 = lo;
                 w1 = hi;
                 return;
@@ -1394,17 +1465,9 @@ struct PixelModel {
         } else {
             std::uint32_t *__restrict c0 = scratch.ctr0.data(), *__restrict c1 = scratch.ctr1.data(),
                           *__restrict c2 = scratch.ctr2.data();
-            std::uint64_t odd = 0;
-            for (std::size_t j = 0; j < n; ++j) {
-                const std::uint64_t pair = sample[j] >> 1;
-                c0[j] = static_cast<std::uint32_t>(pair);
-                c1[j] = static_cast<std::uint32_t>(pair >> 32);
-                c2[j] = ids[j];
-                odd |= sample[j];
-            }
-            if (!(odd & 1u)) {
+            if (!(detail::even_counters(sample, ids, n, c0, c1, c2) & 1u)) {
                 philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, s0, s1, lo, hi);
-                for (std::size_t j = 0; j < n; ++j) kept_for[j] = sample[j] | 1u;
+                detail::keep_for_next(sample, n, kept_for);
                 w0 = s0;
                 w1 = s1;
                 return;
