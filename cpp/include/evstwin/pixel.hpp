@@ -497,25 +497,6 @@ struct QuietPass {
     bool bridge_stage;
 };
 
-/// The first index i in [from, n) with flag[i] != 0 (n if none), eight flags at a time: the
-/// block kernels' lists of the few pixels that need more (a slow normal, a bridge draw, the
-/// per-pixel path) are byte flags, mostly zero.
-inline std::size_t next_flagged(const std::uint8_t* flag, std::size_t from, std::size_t n) {
-    std::size_t i = from;
-    while (i < n && (i & 7u)) {
-        if (flag[i]) return i;
-        ++i;
-    }
-    for (; i + 8 <= n; i += 8) {
-        std::uint64_t eight;
-        std::memcpy(&eight, flag + i, 8);
-        if (eight) break;
-    }
-    for (; i < n; ++i)
-        if (flag[i]) return i;
-    return n;
-}
-
 namespace detail {
 /// The index of the lowest set bit of b != 0.
 EVSTWIN_ALWAYS_INLINE unsigned lowest_set_bit(std::uint64_t b) {
