@@ -325,6 +325,118 @@ TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
     set_simd_level(before);
 }
 
+TEST(list_flagged_lists_the_flagged_indices_in_order_at_every_simd_level) {
+    // Against the plain list, for 64-bit and byte flags, lengths around the 64-flag words, flag
+    // densities from none to all (values other than 1 count as flagged too).
+    const SimdLevel before = simd_level();
+    std::uint64_t state = 12345u;
+    const auto next = [&state] {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return static_cast<std::uint32_t>(state >> 33);
+    };
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        set_simd_level(l);
+        for (std::size_t n : {0u, 1u, 63u, 64u, 65u, 200u, 256u, 300u}) {
+            for (std::uint32_t per_mille : {0u, 50u, 500u, 1000u}) {
+                std::vector<std::uint64_t> f64(n);
+                std::vector<std::uint8_t> f8(n);
+                std::vector<std::uint32_t> expected;
+                for (std::size_t i = 0; i < n; ++i) {
+                    const bool on = next() % 1000u < per_mille;
+                    f64[i] = on ? 1u + next() % 3u : 0u;
+                    f8[i] = static_cast<std::uint8_t>(on ? 1u + next() % 3u : 0u);
+                    if (on) expected.push_back(static_cast<std::uint32_t>(i));
+                }
+                std::vector<std::uint32_t> got64(n + 1, 9999u), got8(n + 1, 9999u);
+                const std::size_t m64 = list_flagged(f64.data(), n, got64.data());
+                const std::size_t m8 = list_flagged(f8.data(), n, got8.data());
+                CHECK(m64 == expected.size() && m8 == expected.size());
+                for (std::size_t k = 0; k < expected.size() && k < m64 && k < m8; ++k)
+                    CHECK(got64[k] == expected[k] && got8[k] == expected[k]);
+            }
+        }
+    }
+    set_simd_level(before);
+}
+
+TEST(bridge_bracket_is_within_1e_8_of_the_crossing_probabilities_at_every_simd_level) {
+    // q = exp(-e_on) + exp(-e_off) with terms above 40 cut to 0 (bridge_crossing_probability's
+    // cut), -1 where an exponent is negative or NaN; the same bits at every level.
+    std::vector<double> e_on, e_off;
+    for (int i = 0; i <= 200; ++i)
+        for (double other : {0.0, 0.3, 7.0, 39.9, 40.0, 40.5, 1e300}) {
+            e_on.push_back(45.0 * i / 200.0);
+            e_off.push_back(other);
+        }
+    for (double bad : {-1e-300, -3.0, std::numeric_limits<double>::quiet_NaN()}) {
+        e_on.push_back(bad);
+        e_off.push_back(1.0);
+        e_on.push_back(1.0);
+        e_off.push_back(bad);
+    }
+    const std::size_t m = e_on.size();
+    const SimdLevel before = simd_level();
+    std::vector<double> first;
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        set_simd_level(l);
+        std::vector<double> q(m);
+        detail::bridge_bracket(e_on.data(), e_off.data(), m, q.data());
+        for (std::size_t i = 0; i < m; ++i) {
+            if (!(e_on[i] >= 0.0) || !(e_off[i] >= 0.0)) {
+                CHECK(q[i] == -1.0);
+                continue;
+            }
+            const double p = (e_on[i] > 40.0 ? 0.0 : std::exp(-e_on[i])) + (e_off[i] > 40.0 ? 0.0 : std::exp(-e_off[i]));
+            CHECK(p == 0.0 ? q[i] == 0.0 : std::fabs(q[i] / p - 1.0) < 1e-8);
+        }
+        if (first.empty()) first = q;
+        for (std::size_t i = 0; i < m; ++i) CHECK(std::memcmp(&q[i], &first[i], sizeof(double)) == 0);
+    }
+    set_simd_level(before);
+}
+
+TEST(ziggurat_slow_path_decides_its_wedges_as_the_library_exp_does) {
+    // normal_ziggurat_slow (its wedge test decided on exp_neg_bracket, the library exp only
+    // near the boundary; with or without the caller's bracket of the first wedge) against the
+    // same algorithm written with std::exp, for 20,000 words that leave the common path.
+    const auto reference = [](std::uint32_t w, CounterStream& more) {
+        const ZigguratTables& z = ZIGGURAT;
+        for (;;) {
+            const std::uint32_t i = w & 127u, j = w >> 8;
+            const double sign = (w & 128u) ? -1.0 : 1.0;
+            const double x = static_cast<double>(j) * z.w[i];
+            if (j < z.k[i]) return sign * x;
+            if (i == 0) {
+                double xt, yt;
+                do {
+                    xt = -std::log(uniform_open(more.word())) / ZigguratTables::R;
+                    yt = -std::log(uniform_open(more.word()));
+                } while (yt + yt < xt * xt);
+                return sign * (ZigguratTables::R + xt);
+            }
+            if (z.f[i] + uniform_open(more.word()) * (z.f[i - 1] - z.f[i]) < std::exp(-0.5 * x * x)) return sign * x;
+            w = more.word();
+        }
+    };
+    int slow = 0, differ = 0;
+    for (std::uint32_t s = 0; slow < 20000; ++s) {
+        const std::uint32_t w = philox4x32({s, 0u, 77u, PURPOSE_SAMPLE}, {3u, 4u})[0];
+        if ((w >> 8) < ZIGGURAT.k[w & 127u]) continue;
+        ++slow;
+        CounterStream a({3u, 4u}, 77u, s, PURPOSE_NORMAL), b = a, c = a;
+        auto more_b = [&b] { return b.word(); };
+        auto more_c = [&c] { return c.word(); };
+        const double x = static_cast<double>(w >> 8) * ZIGGURAT.w[w & 127u];
+        const double want = reference(w, a);
+        const double plain = normal_ziggurat_slow(w, more_b);
+        const double given = normal_ziggurat_slow(w, more_c, detail::exp_neg_bracket(0.5 * x * x));
+        differ += !(plain == want && given == want);
+    }
+    CHECK(differ == 0);
+}
+
 TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     // The block kernel's vectorised pass on random levels (around both thresholds, so every
     // class occurs), every chain and switch, against the baseline build's scalar loop: the

@@ -162,32 +162,6 @@ inline void require_range(const char* name, double v, double lo, double hi, cons
     }
 }
 
-/// exp(-e) for 0 <= e <= 40 within a relative 1e-8 (tests/cpp checks it against std::exp):
-/// 2^k e^r with k the nearest integer to -e log2(e) and |r| <= ln(2) / 2, e^r by its Taylor
-/// series to r^7 (remainder below 0.35^8 / 8! = 5e-9), 2^k put in the exponent bits. No
-/// library call, no table. Only a bracket for decisions (bridge_fires), never a value of
-/// the model.
-inline double exp_neg_bracket(double e) {
-    const double t = -e * 1.4426950408889634;  // log2(e)
-    // The nearest integer by the 1.5 * 2^52 shift (|t| <= 58 here; ties to even): with the
-    // default SSE2 target std::floor is a dozen instructions and a long chain.
-    constexpr double SHIFT = 6755399441055744.0;
-    const double k = (t + SHIFT) - SHIFT;
-    const double r = (t - k) * 0.6931471805599453;
-    double p = 1.0 / 5040.0;
-    p = p * r + 1.0 / 720.0;
-    p = p * r + 1.0 / 120.0;
-    p = p * r + 1.0 / 24.0;
-    p = p * r + 1.0 / 6.0;
-    p = p * r + 0.5;
-    p = p * r + 1.0;
-    p = p * r + 1.0;
-    const std::uint64_t bits = static_cast<std::uint64_t>(static_cast<std::int64_t>(k) + 1023) << 52;
-    double two_k;
-    std::memcpy(&two_k, &bits, sizeof two_k);
-    return p * two_k;
-}
-
 /// std::floor(x), by truncation where x is in (0, 2^52) (elsewhere the library's): there the
 /// truncation is the floor, and the default SSE2 target has no rounding instruction.
 inline double floor_positive(double x) {
@@ -452,7 +426,11 @@ struct BlockSoA {
     int cur = 0;
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
     std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
-    std::vector<std::uint64_t> spare_words, spare_sample;  ///< changed in place by the word batch
+    /// PixelState::spare_words as its two 32-bit halves (the Philox batch writes its third and
+    /// fourth words straight into them, and the next odd sample reads them in place), and
+    /// spare_sample: changed in place by the word batch.
+    std::vector<std::uint32_t> spare_lo, spare_hi;
+    std::vector<std::uint64_t> spare_sample;
     /// The quiet pass's verdict per pixel (0 quiet, 1 bridge, 2 per-pixel path), 64-bit like
     /// the levels: a byte array would make the vectoriser take 64 pixels an iteration (one
     /// byte vector), eight zmm registers per level, and spill them to the stack.
@@ -470,7 +448,8 @@ struct BlockSoA {
             l.n.resize(m);
         }
         for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz}) v->resize(m);
-        spare_words.resize(m);
+        spare_lo.resize(m);
+        spare_hi.resize(m);
         spare_sample.resize(m);
         busy.resize(m);
     }
@@ -479,7 +458,9 @@ struct BlockSoA {
         into.x[j] = s.x; into.z[j] = s.z; into.y[j] = s.y; into.nz[j] = s.nz; into.ny[j] = s.ny;
         into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off; into.n[j] = s.n;
         refr_until[j] = s.refr_until; next_hot_t[j] = s.next_hot_t;
-        spare_words[j] = s.spare_words; spare_sample[j] = s.spare_sample;
+        spare_lo[j] = static_cast<std::uint32_t>(s.spare_words);
+        spare_hi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
+        spare_sample[j] = s.spare_sample;
     }
     /// Pixel j's fields back into its state, its changing levels from `from` (the constant
     /// ones are not written).
@@ -487,7 +468,8 @@ struct BlockSoA {
         s.x = from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
         s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = from.n[j];
         s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
-        s.spare_words = spare_words[j]; s.spare_sample = spare_sample[j];
+        s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
+        s.spare_sample = spare_sample[j];
     }
     void load(const PixelState* st, std::size_t m) {
         resize(m);
@@ -531,34 +513,219 @@ struct QuietPass {
     bool bridge_stage;
 };
 
-/// The first index i in [from, n) with flag[i] != 0 (n if none), eight flags at a time: the
-/// block kernels' lists of the few pixels that need more (a slow normal, a bridge draw, the
-/// per-pixel path) are byte flags, mostly zero.
-inline std::size_t next_flagged(const std::uint8_t* flag, std::size_t from, std::size_t n) {
-    std::size_t i = from;
-    while (i < n && (i & 7u)) {
-        if (flag[i]) return i;
-        ++i;
-    }
-    for (; i + 8 <= n; i += 8) {
-        std::uint64_t eight;
-        std::memcpy(&eight, flag + i, 8);
-        if (eight) break;
-    }
-    for (; i < n; ++i)
-        if (flag[i]) return i;
-    return n;
+namespace detail {
+/// The index of the lowest set bit of b != 0.
+EVSTWIN_ALWAYS_INLINE unsigned lowest_set_bit(std::uint64_t b) {
+#if defined(__GNUC__) || defined(__clang__)
+    return static_cast<unsigned>(__builtin_ctzll(b));
+#else
+    unsigned i = 0;
+    for (; !(b & 1u); b >>= 1) ++i;
+    return i;
+#endif
 }
 
-/// The indices i in [0, n) with flag[i] != 0 into list, in order; returns how many. Without
-/// branches: as cheap for a block whose pixels are all flagged as for one where none is.
-inline std::size_t list_flagged(const std::uint64_t* __restrict flag, std::size_t n, std::uint32_t* __restrict list) {
+/// list_flagged()'s loop: the flags of 64 pixels at a time gathered into the bits of one word
+/// (a loop without branches that vectorises: a compare, a shift and an OR per lane), then the
+/// word's set bits listed lowest first (one step per flagged pixel, and one branch a word
+/// that is mispredicted at most once).
+template <class Flag>
+EVSTWIN_ALWAYS_INLINE std::size_t list_flagged_body(const Flag* __restrict flag, std::size_t n,
+                                                    std::uint32_t* __restrict list) {
     std::size_t m = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-        list[m] = static_cast<std::uint32_t>(i);
-        m += flag[i] != 0;
+    for (std::size_t base = 0; base < n; base += 64) {
+        const std::size_t len = n - base < 64 ? n - base : 64;
+        const Flag* __restrict f = flag + base;
+        std::uint64_t bits = 0;
+        for (std::size_t i = 0; i < len; ++i) bits |= static_cast<std::uint64_t>(f[i] != 0) << i;
+        while (bits) {
+            list[m++] = static_cast<std::uint32_t>(base + lowest_set_bit(bits));
+            bits &= bits - 1;
+        }
     }
     return m;
+}
+
+/// The bridge stage's bracket of each candidate's crossing probability: q[i] =
+/// exp_neg_bracket(e_on[i]) + exp_neg_bracket(e_off[i]), a term 0 where its exponent is above
+/// 40 (as bridge_crossing_probability cuts), and -1 where an exponent is negative or NaN (the
+/// caller then takes the exact probability). Without branches, so it vectorises.
+EVSTWIN_ALWAYS_INLINE void bridge_bracket_body(const double* __restrict e_on, const double* __restrict e_off,
+                                               std::size_t m, double* __restrict q) {
+    for (std::size_t i = 0; i < m; ++i) {
+        const double eo = e_on[i], ef = e_off[i];
+        const bool in_range = (eo >= 0.0) & (ef >= 0.0);
+        // Clamped so the bracket's arithmetic stays finite; the lanes clamped are cut below.
+        const double bo = exp_neg_bracket(eo < 40.0 ? eo : 40.0);
+        const double bf = exp_neg_bracket(ef < 40.0 ? ef : 40.0);
+        const double sum = (eo > 40.0 ? 0.0 : bo) + (ef > 40.0 ? 0.0 : bf);
+        q[i] = in_range ? sum : -1.0;
+    }
+}
+
+#define EVSTWIN_LIST_FLAGGED_LEVEL(SUFFIX, TARGET)                                                              \
+    TARGET inline std::size_t list_flagged_##SUFFIX(const std::uint64_t* flag, std::size_t n, std::uint32_t* list) { \
+        return list_flagged_body(flag, n, list);                                                                \
+    }                                                                                                           \
+    TARGET inline std::size_t list_flagged_##SUFFIX(const std::uint8_t* flag, std::size_t n, std::uint32_t* list) {  \
+        return list_flagged_body(flag, n, list);                                                                \
+    }                                                                                                           \
+    TARGET inline void bridge_bracket_##SUFFIX(const double* e_on, const double* e_off, std::size_t m, double* q) {   \
+        bridge_bracket_body(e_on, e_off, m, q);                                                                 \
+    }
+EVSTWIN_LIST_FLAGGED_LEVEL(baseline, )
+#if EVSTWIN_MULTIVERSION
+EVSTWIN_LIST_FLAGGED_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
+#endif
+#undef EVSTWIN_LIST_FLAGGED_LEVEL
+
+#if EVSTWIN_MULTIVERSION
+// AVX-512: 16 flags at a time become a 16-bit mask (vptestm), their indices are compressed to
+// the front of a vector (vpcompressd) and stored under a mask of the count's length, so no
+// branch depends on the flags (list_flagged_body's loop over a word's bits ends at a branch
+// mispredicted about once a word: perf had the two listings at ~9 % of continuous 260).
+// The last n % 16 (n % 64 for bytes) flags as in the plain list. Same list.
+EVSTWIN_TARGET_AVX512 inline std::size_t list_flagged_avx512(const std::uint64_t* flag, std::size_t n, std::uint32_t* list) {
+    const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    std::size_t m = 0, i = 0;
+    for (; i + 16 <= n; i += 16) {
+        const __m512i a = _mm512_loadu_si512(flag + i), b = _mm512_loadu_si512(flag + i + 8);
+        const unsigned k = static_cast<unsigned>(_mm512_test_epi64_mask(a, a)) |
+                           (static_cast<unsigned>(_mm512_test_epi64_mask(b, b)) << 8);
+        const __m512i idx = _mm512_add_epi32(lane, _mm512_set1_epi32(static_cast<int>(i)));
+        const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
+        _mm512_mask_storeu_epi32(list + m, static_cast<__mmask16>((1u << count) - 1u),
+                                 _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
+        m += count;
+    }
+    for (; i < n; ++i)
+        if (flag[i]) list[m++] = static_cast<std::uint32_t>(i);
+    return m;
+}
+EVSTWIN_TARGET_AVX512 inline std::size_t list_flagged_avx512(const std::uint8_t* flag, std::size_t n, std::uint32_t* list) {
+    const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    std::size_t m = 0, i = 0;
+    for (; i + 64 <= n; i += 64) {
+        const __m512i a = _mm512_loadu_si512(flag + i);
+        const std::uint64_t k64 = _mm512_test_epi8_mask(a, a);
+        for (unsigned part = 0; part < 4; ++part) {
+            const unsigned k = static_cast<unsigned>(k64 >> (16u * part)) & 0xFFFFu;
+            const __m512i idx = _mm512_add_epi32(lane, _mm512_set1_epi32(static_cast<int>(i + 16u * part)));
+            const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
+            _mm512_mask_storeu_epi32(list + m, static_cast<__mmask16>((1u << count) - 1u),
+                                     _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
+            m += count;
+        }
+    }
+    for (; i < n; ++i)
+        if (flag[i]) list[m++] = static_cast<std::uint32_t>(i);
+    return m;
+}
+EVSTWIN_TARGET_AVX512 inline void bridge_bracket_avx512(const double* e_on, const double* e_off, std::size_t m, double* q) {
+    bridge_bracket_body(e_on, e_off, m, q);
+}
+#endif
+
+/// bridge_bracket_body() at the current SIMD level (simd.hpp).
+inline void bridge_bracket(const double* e_on, const double* e_off, std::size_t m, double* q) {
+#if EVSTWIN_MULTIVERSION
+    switch (simd_level()) {
+        case SimdLevel::AVX512: return bridge_bracket_avx512(e_on, e_off, m, q);
+        case SimdLevel::AVX2: return bridge_bracket_avx2(e_on, e_off, m, q);
+        default: break;
+    }
+#endif
+    bridge_bracket_baseline(e_on, e_off, m, q);
+}
+}  // namespace detail
+
+namespace detail {
+/// soa_sample_words' passes over a block's counters, compiled per SIMD level (the block
+/// kernel itself is compiled for the baseline, where these loops take two counters a step):
+/// sample_words_off: nonzero unless every pixel's words are kept for its (odd) sample;
+/// even_counters: the counters of an even sample's Philox batch, and the OR of the samples
+/// (odd bit set: some pixel's sample is odd); keep_for_next: every pixel's words now belong
+/// to its sample | 1.
+EVSTWIN_ALWAYS_INLINE std::uint64_t sample_words_off_body(const std::uint64_t* __restrict kept_for,
+                                                         const std::uint64_t* __restrict sample, std::size_t n) {
+    std::uint64_t off = 0;
+    for (std::size_t j = 0; j < n; ++j) off |= (kept_for[j] ^ sample[j]) | (~sample[j] & 1u);
+    return off;
+}
+EVSTWIN_ALWAYS_INLINE std::uint64_t even_counters_body(const std::uint64_t* __restrict sample,
+                                                      const std::uint32_t* __restrict ids, std::size_t n,
+                                                      std::uint32_t* __restrict c0, std::uint32_t* __restrict c1,
+                                                      std::uint32_t* __restrict c2) {
+    std::uint64_t any = 0;
+    for (std::size_t j = 0; j < n; ++j) {
+        const std::uint64_t pair = sample[j] >> 1;
+        c0[j] = static_cast<std::uint32_t>(pair);
+        c1[j] = static_cast<std::uint32_t>(pair >> 32);
+        c2[j] = ids[j];
+        any |= sample[j];
+    }
+    return any;
+}
+EVSTWIN_ALWAYS_INLINE void keep_for_next_body(const std::uint64_t* __restrict sample, std::size_t n,
+                                              std::uint64_t* __restrict kept_for) {
+    for (std::size_t j = 0; j < n; ++j) kept_for[j] = sample[j] | 1u;
+}
+#define EVSTWIN_WORD_BOOKS_LEVEL(SUFFIX, TARGET)                                                               \
+    TARGET inline std::uint64_t sample_words_off_##SUFFIX(const std::uint64_t* k, const std::uint64_t* s,      \
+                                                          std::size_t n) {                                     \
+        return sample_words_off_body(k, s, n);                                                                 \
+    }                                                                                                          \
+    TARGET inline std::uint64_t even_counters_##SUFFIX(const std::uint64_t* s, const std::uint32_t* ids,       \
+                                                       std::size_t n, std::uint32_t* c0, std::uint32_t* c1,    \
+                                                       std::uint32_t* c2) {                                    \
+        return even_counters_body(s, ids, n, c0, c1, c2);                                                      \
+    }                                                                                                          \
+    TARGET inline void keep_for_next_##SUFFIX(const std::uint64_t* s, std::size_t n, std::uint64_t* k) {       \
+        keep_for_next_body(s, n, k);                                                                           \
+    }
+EVSTWIN_WORD_BOOKS_LEVEL(baseline, )
+#if EVSTWIN_MULTIVERSION
+EVSTWIN_WORD_BOOKS_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
+EVSTWIN_WORD_BOOKS_LEVEL(avx512, EVSTWIN_TARGET_AVX512)
+#endif
+#undef EVSTWIN_WORD_BOOKS_LEVEL
+#if EVSTWIN_MULTIVERSION
+#define EVSTWIN_AT_LEVEL(NAME, ...)                                                 \
+    switch (simd_level()) {                                                        \
+        case SimdLevel::AVX512: return NAME##_avx512(__VA_ARGS__);                  \
+        case SimdLevel::AVX2: return NAME##_avx2(__VA_ARGS__);                      \
+        default: return NAME##_baseline(__VA_ARGS__);                               \
+    }
+#else
+#define EVSTWIN_AT_LEVEL(NAME, ...) return NAME##_baseline(__VA_ARGS__);
+#endif
+inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::size_t n) {
+    EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, n)
+}
+inline std::uint64_t even_counters(const std::uint64_t* sample, const std::uint32_t* ids, std::size_t n,
+                                   std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) {
+    EVSTWIN_AT_LEVEL(even_counters, sample, ids, n, c0, c1, c2)
+}
+inline void keep_for_next(const std::uint64_t* sample, std::size_t n, std::uint64_t* kept_for) {
+    EVSTWIN_AT_LEVEL(keep_for_next, sample, n, kept_for)
+}
+#undef EVSTWIN_AT_LEVEL
+}  // namespace detail
+
+/// The indices i in [0, n) with flag[i] != 0 into list, in order; returns how many: a pass
+/// over the flags without branches, then one step per flagged pixel (list_flagged_body), at
+/// the current SIMD level (simd.hpp). Flag: std::uint64_t (the quiet pass's verdicts) or
+/// std::uint8_t (the ziggurat batch's slow flags).
+template <class Flag>
+inline std::size_t list_flagged(const Flag* flag, std::size_t n, std::uint32_t* list) {
+#if EVSTWIN_MULTIVERSION
+    switch (simd_level()) {
+        case SimdLevel::AVX512: return detail::list_flagged_avx512(flag, n, list);
+        case SimdLevel::AVX2: return detail::list_flagged_avx2(flag, n, list);
+        default: break;
+    }
+#endif
+    return detail::list_flagged_baseline(flag, n, list);
 }
 
 /// The configurations the quiet pass is compiled for: the exact source follower alone (the
@@ -1159,6 +1326,8 @@ struct PixelModel {
     }
 
     /// Scratch space of the block kernel (one per thread).
+    /// Room for pad_batch's padding (at least the Philox batches' widest vector body, 8 counters).
+    static constexpr std::size_t PHILOX_BATCH_PAD = 16;
     struct BlockScratch {
         std::vector<double> u_noise, x, current, y;
         std::vector<std::uint8_t> busy;
@@ -1191,13 +1360,29 @@ struct PixelModel {
                 word1.resize(n); busy_at.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
                 noise_d.resize(n);
                 leak.resize(n);
-                ctr0.resize(n); ctr1.resize(n); ctr2.resize(n); need_at.resize(n);
-                r0.resize(n); r1.resize(n); r2.resize(n); r3.resize(n); slow1.resize(n); slow2.resize(n);
+                // Room for a short batch's padding (pad_batch).
+                ctr0.resize(n + PHILOX_BATCH_PAD); ctr1.resize(n + PHILOX_BATCH_PAD); ctr2.resize(n + PHILOX_BATCH_PAD);
+                need_at.resize(n);
+                r0.resize(n + PHILOX_BATCH_PAD); r1.resize(n + PHILOX_BATCH_PAD); r2.resize(n + PHILOX_BATCH_PAD);
+                r3.resize(n + PHILOX_BATCH_PAD);
+                slow1.resize(n); slow2.resize(n);
                 bridge_pre.resize(n);
                 fired.resize(n);
             }
         }
     };
+
+    /// A Philox batch of m counters (ctr0..ctr2 from index 0) padded with zero counters up to a
+    /// multiple of the batch loop's vector body at the current SIMD level (4 counters on SSE2
+    /// and AVX2, 8 with AVX-512: simd.hpp), which does the rest one by one: a batch of a few (a
+    /// block's slow normals or bridge draws, ~10) would be mostly scalar. The padding's words
+    /// are not used.
+    static std::size_t pad_batch(BlockScratch& scratch, std::size_t m) {
+        const std::size_t width = simd_level() == SimdLevel::AVX512 ? 8 : 4;
+        const std::size_t padded = (m + width - 1) / width * width;
+        for (std::size_t i = m; i < padded; ++i) scratch.ctr0[i] = scratch.ctr1[i] = scratch.ctr2[i] = 0;
+        return padded;
+    }
 
     /// Which pixels of a block the kernel advances now: `active` lists their positions
     /// (local indices into the block's state, rates and ids).
@@ -1254,53 +1439,50 @@ struct PixelModel {
 
     /// batch_sample_words() for a block held as arrays, with the two cases of a block whose
     /// pixels all share the sample's parity as loops without branches: an odd sample whose
-    /// words every pixel kept (no Philox call), and an even one where every pixel needs one.
-    /// Anything else (pixels sub-sampled apart) goes through batch_sample_words(). The same words.
+    /// words every pixel kept (no Philox call: w0, w1 point at the kept words in h), and an
+    /// even one where every pixel needs one (the batch writes the kept words straight into h).
+    /// Anything else (pixels sub-sampled apart) goes through batch_sample_words() into the
+    /// scratch arrays. The same words. Each case is tested by one pass over the block without
+    /// an early exit (an OR of the parities or mismatches), which vectorises, fused with the
+    /// counters the even case needs; a block of pixels sub-sampled apart wastes one such pass.
     EVSTWIN_ALWAYS_INLINE static void soa_sample_words(BlockSoA& h, const std::uint32_t* ids, std::size_t n,
-                                                       Philox4x32Key key, BlockScratch& scratch, std::uint32_t* w0,
-                                                       std::uint32_t* w1) {
+                                                       Philox4x32Key key, BlockScratch& scratch,
+                                                       const std::uint32_t*& w0, const std::uint32_t*& w1) {
         const std::uint64_t* __restrict sample = h.now().n.data();
-        std::uint64_t* __restrict words = h.spare_words.data();
+        std::uint32_t* __restrict lo = h.spare_lo.data();
+        std::uint32_t* __restrict hi = h.spare_hi.data();
         std::uint64_t* __restrict kept_for = h.spare_sample.data();
-        // Which case, with early exits: a block of pixels sub-sampled apart fails both tests
-        // at its first pixels of the other parity.
-        const auto all_kept = [&] {
-            for (std::size_t j = 0; j < n; ++j)
-                if ((kept_for[j] != sample[j]) | !(sample[j] & 1u)) return false;
-            return true;
-        };
-        const auto all_even = [&] {
-            for (std::size_t j = 0; j < n; ++j)
-                if (sample[j] & 1u) return false;
-            return true;
-        };
+        std::uint32_t* __restrict s0 = scratch.count_word.data();
+        std::uint32_t* __restrict s1 = scratch.word1.data();
         const bool first_odd = n > 0 && (sample[0] & 1u);
-        if (first_odd && all_kept()) {
-            for (std::size_t j = 0; j < n; ++j) {
-                w0[j] = static_cast<std::uint32_t>(words[j]);
-                w1[j] = static_cast<std::uint32_t>(words[j] >> 32);
+        if (first_odd) {
+            if (detail::sample_words_off(kept_for, sample, n) == 0) {
+                w0 = lo;
+                w1 = hi;
+                return;
             }
-            return;
-        }
-        if (!first_odd && all_even()) {
-            std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
-            for (std::size_t j = 0; j < n; ++j) {
-                const std::uint64_t pair = sample[j] >> 1;
-                c0[j] = static_cast<std::uint32_t>(pair);
-                c1[j] = static_cast<std::uint32_t>(pair >> 32);
-                c2[j] = ids[j];
+        } else {
+            std::uint32_t *__restrict c0 = scratch.ctr0.data(), *__restrict c1 = scratch.ctr1.data(),
+                          *__restrict c2 = scratch.ctr2.data();
+            if (!(detail::even_counters(sample, ids, n, c0, c1, c2) & 1u)) {
+                philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, s0, s1, lo, hi);
+                detail::keep_for_next(sample, n, kept_for);
+                w0 = s0;
+                w1 = s1;
+                return;
             }
-            std::uint32_t *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
-            philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, w0, w1, r2, r3);
-            for (std::size_t j = 0; j < n; ++j) {
-                words[j] = static_cast<std::uint64_t>(r2[j]) | (static_cast<std::uint64_t>(r3[j]) << 32);
-                kept_for[j] = sample[j] | 1u;
-            }
-            return;
         }
         batch_sample_words(
             n, [sample](std::size_t j) { return sample[j]; }, [ids](std::size_t j) { return ids[j]; },
-            [&](std::size_t j, auto&& use) { use(words[j], kept_for[j]); }, key, scratch, w0, w1);
+            [&](std::size_t j, auto&& use) {
+                std::uint64_t words = static_cast<std::uint64_t>(lo[j]) | (static_cast<std::uint64_t>(hi[j]) << 32);
+                use(words, kept_for[j]);
+                lo[j] = static_cast<std::uint32_t>(words);
+                hi[j] = static_cast<std::uint32_t>(words >> 32);
+            },
+            key, scratch, s0, s1);
+        w0 = s0;
+        w1 = s1;
     }
 
     /// batch_sample_words() for the active pixels of a block view (array-of-structures state).
@@ -1332,12 +1514,36 @@ struct PixelModel {
         // The flags of both words in one array, so one scan finds the few to finish.
         if (second)
             for (std::size_t j = 0; j < n; ++j) slow1[j] |= static_cast<std::uint8_t>(slow2[j] << 1);
-        for (std::size_t j = next_flagged(slow1, 0, n); j < n; j = next_flagged(slow1, j + 1, n)) {
+        // The few to finish, listed; their further words' first blocks in one Philox batch (a
+        // scalar call each was most of the slow path's instructions), and the bracket of each
+        // one's first wedge test in one pass without branches (its polynomial's latency then
+        // overlaps across normals); then each finished from a stream that starts with that block.
+        std::uint32_t* at = scratch.need_at.data();
+        const std::size_t m = list_flagged(slow1, n, at);
+        if (m == 0) return;
+        std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
+        double* q_first = scratch.noise_d.data();
+        const ZigguratTables& z = ZIGGURAT;
+        for (std::size_t q = 0; q < m; ++q) {
+            const std::size_t j = at[q];
+            const std::uint64_t sample = count(j);
+            c0[q] = static_cast<std::uint32_t>(sample);
+            c1[q] = static_cast<std::uint32_t>(sample >> 32);
+            c2[q] = id(j);
+            const std::uint32_t w = (slow1[j] & 1u) ? w0[j] : w1[j];
+            const double x = static_cast<double>(w >> 8) * z.w[w & 127u];
+            q_first[q] = detail::exp_neg_bracket(0.5 * x * x);
+        }
+        std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
+        philox4x32_batch(c0, c1, c2, PURPOSE_NORMAL, key, pad_batch(scratch, m), r0, r1, r2, r3);
+        for (std::size_t q = 0; q < m; ++q) {
+            const std::size_t j = at[q];
             const bool first_slow = slow1[j] & 1u, second_slow = slow1[j] >> 1;
-            CounterStream extra(key, id(j), count(j), PURPOSE_NORMAL);
+            const Philox4x32Counter first{r0[q], r1[q], r2[q], r3[q]};
+            PrefilledStream extra(key, id(j), count(j), PURPOSE_NORMAL, &first);
             auto more = [&extra] { return extra.word(); };
-            if (first_slow) g1[j] = normal_ziggurat_slow(w0[j], more);
-            if (second_slow) g2[j] = normal_ziggurat_slow(w1[j], more);
+            if (first_slow) g1[j] = normal_ziggurat_slow(w0[j], more, q_first[q]);
+            if (second_slow) g2[j] = normal_ziggurat_slow(w1[j], more, first_slow ? -1.0 : q_first[q]);
         }
     }
 
@@ -1650,8 +1856,8 @@ struct PixelModel {
         scratch.resize(n);
         BlockSoA::Levels& now = h.now();
         BlockSoA::Levels& next = h.next();
-        std::uint32_t* w0 = scratch.count_word.data();
-        std::uint32_t* w1 = scratch.word1.data();
+        const std::uint32_t* w0 = nullptr;
+        const std::uint32_t* w1 = nullptr;
         const auto count = [&now](std::size_t j) { return now.n[j]; };
         const auto id = [ids](std::size_t j) { return ids[j]; };
         soa_sample_words(h, ids, n, key, scratch, w0, w1);
@@ -1745,10 +1951,15 @@ struct PixelModel {
 
     /// The pixels the quiet pass left to the bridge alone (h.busy 1): their levels in h.next()
     /// are final unless the bridge's draw fires. As compare_bridged() (the interval starts at
-    /// c.t0: not refractory), each one's crossing probability, and for those where it is above
-    /// the smallest uniform, its uniform, all in one Philox batch; a pixel whose draw fires is
-    /// handed to the per-pixel path (h.busy 2), which draws the same uniform again and places
-    /// the event; the others are settled (h.busy 0).
+    /// c.t0: not refractory), whether its uniform u falls below the crossing probability
+    /// p = bridge_crossing_probability(on) + bridge_crossing_probability(off); a pixel whose
+    /// draw fires is handed to the per-pixel path (h.busy 2), which draws the same uniform again
+    /// and places the event; the others are settled (h.busy 0). The uniforms of all the pixels
+    /// that might fire come from one Philox batch; p's two exps are bracketed by
+    /// exp_neg_bracket (within 1e-8), which decides wherever u lies farther than a relative 1e-6
+    /// from the bracketed sum, and the library's exps are taken only for the rare pixel whose
+    /// u lies that close (or whose exponents are out of the bracket's range): the same
+    /// decision as u < p for every u (as detail::bridge_fires decides).
     void bridge_stage(BlockSoA& h, const std::uint32_t* ids, const std::uint32_t* flagged, std::size_t n_flagged,
                       const NoiseCache& common,
                       const SampleConstants& c, Philox4x32Key key, BlockScratch& scratch) const {
@@ -1761,34 +1972,60 @@ struct PixelModel {
         const double mid = 0.25 * sigma2 * span;
         std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
         std::uint32_t* at = scratch.need_at.data();
-        double* p_fire = scratch.noise_d.data();
+        double* q_fire = scratch.noise_d.data();       // the bracketed p (-1: take the exact p)
+        double* e_on = scratch.x.data();               // bridge_crossing_probability's exponents
+        double* e_off = scratch.y.data();
+        // bridge_crossing_probability is 0 for both levels without a middle variance.
+        const bool has_mid = mid > 0.0;
+        // The candidates and their exponents, as bridge_crossing_probability forms them.
         std::size_t m = 0;
         for (std::size_t f = 0; f < n_flagged; ++f) {
             const std::size_t j = flagged[f];
             if (busy[j] != 1) continue;
+            busy[j] = 0;
+            if (!has_mid) continue;
             const double s_y = now.y[j], ref = now.ref[j], th_on = h.theta_on[j], th_off = h.theta_off[j];
             const double g = (next.y[j] - s_y) * c.inv_dt + leak_slope(h.leak_spread[j], th_on, th_off, common.leak_hz);
             const double d_start = (s_y - ref) + g * (t_start - c.t0);
             const double d_end = (s_y - ref) + g * c.dt;
-            const double p_on = bridge_crossing_probability(th_on - d_start, th_on - d_end, mid);
-            const double p_off = bridge_crossing_probability(th_off + d_start, th_off + d_end, mid);
-            if (p_on + p_off > 0x1p-33) {
-                const std::uint64_t sample = now.n[j];
-                c0[m] = static_cast<std::uint32_t>(sample);
-                c1[m] = static_cast<std::uint32_t>(sample >> 32);
-                c2[m] = ids[j];
-                at[m] = static_cast<std::uint32_t>(j);
-                p_fire[m] = p_on + p_off;
-                ++m;
-            }
-            busy[j] = 0;
+            e_on[m] = (th_on - d_start) * (th_on - d_end) / (2.0 * mid);
+            e_off[m] = (th_off + d_start) * (th_off + d_end) / (2.0 * mid);
+            at[m] = static_cast<std::uint32_t>(j);
+            ++m;
         }
         if (m == 0) return;
+        // Their brackets in one vectorised pass: the exps' latency chains overlap.
+        detail::bridge_bracket(e_on, e_off, m, q_fire);
+        // Those whose p may exceed 2^-33 (a uniform can fall below it; wherever q (1 + 1e-6)
+        // does), kept in place without branches, with their counters.
+        std::size_t d = 0;
+        for (std::size_t k = 0; k < m; ++k) {
+            const std::size_t j = at[k];
+            const double q = q_fire[k];
+            const std::uint64_t sample = now.n[j];
+            c0[d] = static_cast<std::uint32_t>(sample);
+            c1[d] = static_cast<std::uint32_t>(sample >> 32);
+            c2[d] = ids[j];
+            at[d] = static_cast<std::uint32_t>(j);
+            q_fire[d] = q;
+            e_on[d] = e_on[k];
+            e_off[d] = e_off[k];
+            d += static_cast<std::size_t>((q < 0.0) | (q * (1.0 + 1e-6) > 0x1p-33));
+        }
+        if (d == 0) return;
         // CounterStream(key, pixel, sample, PURPOSE_BRIDGE)'s first word.
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
-        philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, m, r0, r1, r2, r3);
-        for (std::size_t q = 0; q < m; ++q)
-            if (uniform_open(r0[q]) < p_fire[q]) busy[at[q]] = 2;
+        philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, pad_batch(scratch, d), r0, r1, r2, r3);
+        for (std::size_t k = 0; k < d; ++k) {
+            const double u = uniform_open(r0[k]), q = q_fire[k];
+            bool fires = u < q;
+            if ((q < 0.0) | ((u >= q * (1.0 - 1e-6)) & (u <= q * (1.0 + 1e-6)))) {
+                const double p_on = e_on[k] > 40.0 ? 0.0 : std::exp(-e_on[k]);
+                const double p_off = e_off[k] > 40.0 ? 0.0 : std::exp(-e_off[k]);
+                fires = u < p_on + p_off;
+            }
+            busy[at[k]] = 2u * static_cast<std::uint64_t>(fires);
+        }
     }
 
     template <bool AllActive, class Real, class Emit>
