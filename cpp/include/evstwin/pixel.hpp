@@ -1860,11 +1860,13 @@ struct PixelModel {
         const std::uint32_t* w1 = nullptr;
         const auto count = [&now](std::size_t j) { return now.n[j]; };
         const auto id = [ids](std::size_t j) { return ids[j]; };
-        soa_sample_words(h, ids, n, key, scratch, w0, w1);
         double* g1s = scratch.u_noise.data();
         double* g2s = scratch.count.data();
         const bool noisy = draws_normals();
         if (noisy) {
+            // The words only for the normals (as step_block_continuous): a noiseless pixel has
+            // no use for them, and the kept ones are tagged with their sample.
+            soa_sample_words(h, ids, n, key, scratch, w0, w1);
             // The second normal only drives the two-pole system (continuous_levels).
             batch_sample_normals(n, count, id, key, scratch, w0, w1, g1s, g2s, !sf_only);
         } else {
