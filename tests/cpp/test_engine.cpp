@@ -360,6 +360,57 @@ TEST(list_flagged_lists_the_flagged_indices_in_order_at_every_simd_level) {
     set_simd_level(before);
 }
 
+TEST(bracket_fires_decides_as_the_library_exps_next_to_the_boundary_at_every_simd_level) {
+    // The bridge stage's decision (bracket_fires on bridge_bracket's q) against u < p_on +
+    // p_off with the library's exps, for uniforms aimed at that sum: within a relative 1e-12
+    // to 1e-5 of it on either side, and its own bits and their neighbours a few ulps away.
+    // Those in the 1e-6 band must take the library's exps (the engine's runs almost never
+    // land there), the rest are decided on q; every answer must be the exps'.
+    std::uint64_t state = 0x2545F4914F6CDD1Dull;
+    const auto next = [&state] {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        return (static_cast<double>(state >> 11) + 0.5) * 0x1p-53;
+    };
+    const std::size_t m = 4000;
+    std::vector<double> e_on(m), e_off(m);
+    for (std::size_t i = 0; i < m; ++i) {
+        e_on[i] = 42.0 * next();
+        e_off[i] = i % 3 == 0 ? 1e300 : 42.0 * next();
+    }
+    const SimdLevel before = simd_level();
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        set_simd_level(l);
+        std::vector<double> q(m);
+        detail::bridge_bracket(e_on.data(), e_off.data(), m, q.data());
+        int wrong = 0, in_band = 0, out_of_band = 0;
+        for (std::size_t i = 0; i < m; ++i) {
+            const double p = (e_on[i] > 40.0 ? 0.0 : std::exp(-e_on[i])) + (e_off[i] > 40.0 ? 0.0 : std::exp(-e_off[i]));
+            if (!(p > 0.0)) continue;
+            std::vector<double> us = {p, std::nextafter(p, 0.0), std::nextafter(p, 1.0),
+                                      std::nextafter(std::nextafter(p, 0.0), 0.0), q[i]};
+            for (int k = 0; k < 8; ++k) {
+                const double delta = std::pow(10.0, -12.0 + 7.0 * next());
+                us.push_back(p * (1.0 + delta));
+                us.push_back(p * (1.0 - delta));
+            }
+            for (double u : us) {
+                if (!(u > 0.0 && u < 1.0)) continue;
+                const bool band = u >= q[i] * (1.0 - 1e-6) && u <= q[i] * (1.0 + 1e-6);
+                in_band += band;
+                out_of_band += !band;
+                wrong += detail::bracket_fires(u, q[i], e_on[i], e_off[i]) != (u < p);
+            }
+        }
+        CHECK(wrong == 0);
+        CHECK(in_band > 10000);     // the library's exps decided these
+        CHECK(out_of_band > 5000);  // and the bracket these, next to the boundary
+    }
+    set_simd_level(before);
+}
+
 TEST(bridge_bracket_is_within_1e_8_of_the_crossing_probabilities_at_every_simd_level) {
     // q = exp(-e_on) + exp(-e_off) with terms above 40 cut to 0 (bridge_crossing_probability's
     // cut), -1 where an exponent is negative or NaN; the same bits at every level.

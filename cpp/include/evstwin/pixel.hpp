@@ -563,6 +563,20 @@ EVSTWIN_ALWAYS_INLINE void bridge_bracket_body(const double* __restrict e_on, co
     }
 }
 
+/// The bridge stage's decision for a uniform u: whether u < p_on + p_off, p = exp(-e) of the
+/// exponents (0 above 40, as bridge_crossing_probability), given q, their sum's bracket from
+/// bridge_bracket_body (-1: exponents the bracket does not cover). Decided on q where u lies
+/// farther than a relative 1e-6 from it (q is within 1e-8 of the sum), else on the library's
+/// exps: the same answer as the exps for every u.
+inline bool bracket_fires(double u, double q, double e_on, double e_off) {
+    if ((q < 0.0) | ((u >= q * (1.0 - 1e-6)) & (u <= q * (1.0 + 1e-6)))) {
+        const double p_on = e_on > 40.0 ? 0.0 : std::exp(-e_on);
+        const double p_off = e_off > 40.0 ? 0.0 : std::exp(-e_off);
+        return u < p_on + p_off;
+    }
+    return u < q;
+}
+
 #define EVSTWIN_LIST_FLAGGED_LEVEL(SUFFIX, TARGET)                                                              \
     TARGET inline std::size_t list_flagged_##SUFFIX(const std::uint64_t* flag, std::size_t n, std::uint32_t* list) { \
         return list_flagged_body(flag, n, list);                                                                \
@@ -1325,9 +1339,9 @@ struct PixelModel {
         return pooled || deterministic;
     }
 
-    /// Scratch space of the block kernel (one per thread).
     /// Room for pad_batch's padding (at least the Philox batches' widest vector body, 8 counters).
     static constexpr std::size_t PHILOX_BATCH_PAD = 16;
+    /// Scratch space of the block kernel (one per thread).
     struct BlockScratch {
         std::vector<double> u_noise, x, current, y;
         std::vector<std::uint8_t> busy;
@@ -2019,13 +2033,7 @@ struct PixelModel {
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_BRIDGE, key, pad_batch(scratch, d), r0, r1, r2, r3);
         for (std::size_t k = 0; k < d; ++k) {
-            const double u = uniform_open(r0[k]), q = q_fire[k];
-            bool fires = u < q;
-            if ((q < 0.0) | ((u >= q * (1.0 - 1e-6)) & (u <= q * (1.0 + 1e-6)))) {
-                const double p_on = e_on[k] > 40.0 ? 0.0 : std::exp(-e_on[k]);
-                const double p_off = e_off[k] > 40.0 ? 0.0 : std::exp(-e_off[k]);
-                fires = u < p_on + p_off;
-            }
+            const bool fires = detail::bracket_fires(uniform_open(r0[k]), q_fire[k], e_on[k], e_off[k]);
             busy[at[k]] = 2u * static_cast<std::uint64_t>(fires);
         }
     }
@@ -2422,7 +2430,8 @@ struct PixelModel {
                                                double leak_g, double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
                                                std::uint32_t pixel, std::uint32_t purpose, Emit& emit,
                                                const BridgePre* pre = nullptr) const {
-        // `pre` (bridge_decisions): its `known` is the two tests below, made on the same state
+        // `pre` (bridge_decisions): its `known` is the tests below (a variance, an interval left
+        // after the refractory period, the line inside both levels), made on the same state
         // and values, and `fires` the draw's decision; the branches test its bytes, which are
         // at hand long before the levels' arithmetic is done (a mispredicted branch costs less).
         const bool decided = pre != nullptr;
