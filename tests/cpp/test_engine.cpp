@@ -11,6 +11,18 @@
 
 using namespace evstwin;
 
+/// Uniforms in (0, 1) from xorshift64 (Marsaglia 2003), 53 bits each: test inputs that do
+/// not share the engine's Philox streams.
+struct XorshiftUniform {
+    std::uint64_t state;
+    double operator()() {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        return (static_cast<double>(state >> 11) + 0.5) * 0x1p-53;
+    }
+};
+
 static PixelParams ideal() {
     PixelParams p;
     p.photon_shot_noise = false;
@@ -366,13 +378,7 @@ TEST(bracket_fires_decides_as_the_library_exps_next_to_the_boundary_at_every_sim
     // to 1e-5 of it on either side, and its own bits and their neighbours a few ulps away.
     // Those in the 1e-6 band must take the library's exps (the engine's runs almost never
     // land there), the rest are decided on q; every answer must be the exps'.
-    std::uint64_t state = 0x2545F4914F6CDD1Dull;
-    const auto next = [&state] {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        return (static_cast<double>(state >> 11) + 0.5) * 0x1p-53;
-    };
+    XorshiftUniform next{0x2545F4914F6CDD1Dull};
     const std::size_t m = 4000;
     std::vector<double> e_on(m), e_off(m);
     for (std::size_t i = 0; i < m; ++i) {
@@ -828,13 +834,7 @@ TEST(bridge_fires_decides_as_the_exact_probabilities) {
     // bridge_crossing_probability, for random bridges and uniforms, and for uniforms placed
     // within a relative 1e-12 to 1e-6 of the sums (where the bracket cannot decide and the
     // exps must), distances beyond exp(-40) and a zero variance.
-    std::uint64_t state = 0x9E3779B97F4A7C15ull;
-    const auto next = [&state] {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        return (static_cast<double>(state >> 11) + 0.5) * 0x1p-53;
-    };
+    XorshiftUniform next{0x9E3779B97F4A7C15ull};
     int wrong = 0, near_ties = 0;
     for (int i = 0; i < 200000; ++i) {
         const double mid = i % 1000 == 0 ? 0.0 : 1e-4 * next();

@@ -599,36 +599,36 @@ EVSTWIN_LIST_FLAGGED_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
 // branch depends on the flags (list_flagged_body's loop over a word's bits ends at a branch
 // mispredicted about once a word: perf had the two listings at ~9 % of continuous 260).
 // The last n % 16 (n % 64 for bytes) flags as in the plain list. Same list.
+/// The indices base + b of the set bits b of the 16-bit mask k, compressed into out in order
+/// (their count returned): vpcompressd and a store under a mask of the count's length.
+EVSTWIN_TARGET_AVX512 inline unsigned list_sixteen(unsigned k, std::size_t base, std::uint32_t* out) {
+    const __m512i idx = _mm512_add_epi32(_mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+                                         _mm512_set1_epi32(static_cast<int>(base)));
+    const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
+    _mm512_mask_storeu_epi32(out, static_cast<__mmask16>((1u << count) - 1u),
+                             _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
+    return count;
+}
 EVSTWIN_TARGET_AVX512 inline std::size_t list_flagged_avx512(const std::uint64_t* flag, std::size_t n, std::uint32_t* list) {
-    const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     std::size_t m = 0, i = 0;
     for (; i + 16 <= n; i += 16) {
         const __m512i a = _mm512_loadu_si512(flag + i), b = _mm512_loadu_si512(flag + i + 8);
         const unsigned k = static_cast<unsigned>(_mm512_test_epi64_mask(a, a)) |
                            (static_cast<unsigned>(_mm512_test_epi64_mask(b, b)) << 8);
-        const __m512i idx = _mm512_add_epi32(lane, _mm512_set1_epi32(static_cast<int>(i)));
-        const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
-        _mm512_mask_storeu_epi32(list + m, static_cast<__mmask16>((1u << count) - 1u),
-                                 _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
-        m += count;
+        m += list_sixteen(k, i, list + m);
     }
     for (; i < n; ++i)
         if (flag[i]) list[m++] = static_cast<std::uint32_t>(i);
     return m;
 }
 EVSTWIN_TARGET_AVX512 inline std::size_t list_flagged_avx512(const std::uint8_t* flag, std::size_t n, std::uint32_t* list) {
-    const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     std::size_t m = 0, i = 0;
     for (; i + 64 <= n; i += 64) {
         const __m512i a = _mm512_loadu_si512(flag + i);
         const std::uint64_t k64 = _mm512_test_epi8_mask(a, a);
         for (unsigned part = 0; part < 4; ++part) {
             const unsigned k = static_cast<unsigned>(k64 >> (16u * part)) & 0xFFFFu;
-            const __m512i idx = _mm512_add_epi32(lane, _mm512_set1_epi32(static_cast<int>(i + 16u * part)));
-            const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
-            _mm512_mask_storeu_epi32(list + m, static_cast<__mmask16>((1u << count) - 1u),
-                                     _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
-            m += count;
+            m += list_sixteen(k, i + 16u * part, list + m);
         }
     }
     for (; i < n; ++i)
@@ -642,14 +642,7 @@ EVSTWIN_TARGET_AVX512 inline void bridge_bracket_avx512(const double* e_on, cons
 
 /// bridge_bracket_body() at the current SIMD level (simd.hpp).
 inline void bridge_bracket(const double* e_on, const double* e_off, std::size_t m, double* q) {
-#if EVSTWIN_MULTIVERSION
-    switch (simd_level()) {
-        case SimdLevel::AVX512: return bridge_bracket_avx512(e_on, e_off, m, q);
-        case SimdLevel::AVX2: return bridge_bracket_avx2(e_on, e_off, m, q);
-        default: break;
-    }
-#endif
-    bridge_bracket_baseline(e_on, e_off, m, q);
+    EVSTWIN_AT_LEVEL(bridge_bracket, e_on, e_off, m, q)
 }
 }  // namespace detail
 
@@ -703,16 +696,6 @@ EVSTWIN_WORD_BOOKS_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
 EVSTWIN_WORD_BOOKS_LEVEL(avx512, EVSTWIN_TARGET_AVX512)
 #endif
 #undef EVSTWIN_WORD_BOOKS_LEVEL
-#if EVSTWIN_MULTIVERSION
-#define EVSTWIN_AT_LEVEL(NAME, ...)                                                 \
-    switch (simd_level()) {                                                        \
-        case SimdLevel::AVX512: return NAME##_avx512(__VA_ARGS__);                  \
-        case SimdLevel::AVX2: return NAME##_avx2(__VA_ARGS__);                      \
-        default: return NAME##_baseline(__VA_ARGS__);                               \
-    }
-#else
-#define EVSTWIN_AT_LEVEL(NAME, ...) return NAME##_baseline(__VA_ARGS__);
-#endif
 inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::size_t n) {
     EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, n)
 }
@@ -723,7 +706,6 @@ inline std::uint64_t even_counters(const std::uint64_t* sample, const std::uint3
 inline void keep_for_next(const std::uint64_t* sample, std::size_t n, std::uint64_t* kept_for) {
     EVSTWIN_AT_LEVEL(keep_for_next, sample, n, kept_for)
 }
-#undef EVSTWIN_AT_LEVEL
 }  // namespace detail
 
 /// The indices i in [0, n) with flag[i] != 0 into list, in order; returns how many: a pass
@@ -732,14 +714,7 @@ inline void keep_for_next(const std::uint64_t* sample, std::size_t n, std::uint6
 /// std::uint8_t (the ziggurat batch's slow flags).
 template <class Flag>
 inline std::size_t list_flagged(const Flag* flag, std::size_t n, std::uint32_t* list) {
-#if EVSTWIN_MULTIVERSION
-    switch (simd_level()) {
-        case SimdLevel::AVX512: return detail::list_flagged_avx512(flag, n, list);
-        case SimdLevel::AVX2: return detail::list_flagged_avx2(flag, n, list);
-        default: break;
-    }
-#endif
-    return detail::list_flagged_baseline(flag, n, list);
+    EVSTWIN_AT_LEVEL(detail::list_flagged, flag, n, list)
 }
 
 /// The configurations the quiet pass is compiled for: the exact source follower alone (the

@@ -82,6 +82,20 @@ inline std::atomic<int>& simd_level_slot() {
 /// The level the batched loops use now (process-wide; the best supported one by default).
 inline SimdLevel simd_level() { return static_cast<SimdLevel>(detail::simd_level_slot().load(std::memory_order_relaxed)); }
 
+/// The body of a function that calls NAME_avx512, NAME_avx2 or NAME_baseline (NAME may be
+/// qualified, e.g. detail::philox_batch) with the arguments, at the current level: the one
+/// dispatch of every batched loop, here and in pixel.hpp.
+#if EVSTWIN_MULTIVERSION
+#define EVSTWIN_AT_LEVEL(NAME, ...)                                \
+    switch (::evstwin::simd_level()) {                             \
+        case ::evstwin::SimdLevel::AVX512: return NAME##_avx512(__VA_ARGS__); \
+        case ::evstwin::SimdLevel::AVX2: return NAME##_avx2(__VA_ARGS__);     \
+        default: return NAME##_baseline(__VA_ARGS__);              \
+    }
+#else
+#define EVSTWIN_AT_LEVEL(NAME, ...) return NAME##_baseline(__VA_ARGS__);
+#endif
+
 /// Force a level (for tests and benchmarks: the results are the same at every level). Throws
 /// std::invalid_argument for a level this processor or build cannot run.
 inline void set_simd_level(SimdLevel l) {
@@ -151,6 +165,15 @@ inline void ziggurat_batch_baseline(const std::uint32_t* w, std::size_t n, doubl
     ziggurat_batch_body(w, n, g, slow);
 }
 #if EVSTWIN_MULTIVERSION
+/// The intrinsic batches' last counters, from `from` to n (fewer than a vector), one by one.
+inline void philox_batch_tail(std::size_t from, const std::uint32_t* c0, const std::uint32_t* c1,
+                              const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key, std::size_t n,
+                              std::uint32_t* r0, std::uint32_t* r1, std::uint32_t* r2, std::uint32_t* r3) {
+    for (std::size_t i = from; i < n; ++i) {
+        const Philox4x32Counter r = philox4x32({c0[i], c1[i], c2[i], c3}, key);
+        r0[i] = r[0]; r1[i] = r[1]; r2[i] = r[2]; r3[i] = r[3];
+    }
+}
 // The AVX2 and AVX-512 batches are written with intrinsics: each 32-bit word rides in a 64-bit
 // lane (its upper half ignored: the multiplication reads the low 32 bits, the stores
 // truncate), so each product is one 32 x 32 -> 64-bit multiplication (vpmuludq) and the three
@@ -196,10 +219,7 @@ EVSTWIN_TARGET_AVX2 inline void philox_batch_avx2(const std::uint32_t* c0, const
     }
 #undef EVSTWIN_LOAD4
 #undef EVSTWIN_STORE4
-    for (; i < n; ++i) {
-        const Philox4x32Counter r = philox4x32({c0[i], c1[i], c2[i], c3}, key);
-        r0[i] = r[0]; r1[i] = r[1]; r2[i] = r[2]; r3[i] = r[3];
-    }
+    philox_batch_tail(i, c0, c1, c2, c3, key, n, r0, r1, r2, r3);
 }
 // GCC 12's AVX-512 intrinsics leave an undefined vector that -Wmaybe-uninitialized reports
 // (GCC bug 105593, fixed in 13): silenced for this function only.
@@ -241,10 +261,7 @@ EVSTWIN_TARGET_AVX512 inline void philox_batch_avx512(const std::uint32_t* c0, c
     }
 #undef EVSTWIN_LOAD8
 #undef EVSTWIN_STORE8
-    for (; i < n; ++i) {
-        const Philox4x32Counter r = philox4x32({c0[i], c1[i], c2[i], c3}, key);
-        r0[i] = r[0]; r1[i] = r[1]; r2[i] = r[2]; r3[i] = r[3];
-    }
+    philox_batch_tail(i, c0, c1, c2, c3, key, n, r0, r1, r2, r3);
 }
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
@@ -264,26 +281,12 @@ EVSTWIN_TARGET_AVX512 inline void ziggurat_batch_avx512(const std::uint32_t* w, 
 inline void philox4x32_batch(const std::uint32_t* c0, const std::uint32_t* c1, const std::uint32_t* c2,
                              std::uint32_t c3, Philox4x32Key key, std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
                              std::uint32_t* r2, std::uint32_t* r3) {
-#if EVSTWIN_MULTIVERSION
-    switch (simd_level()) {
-        case SimdLevel::AVX512: return detail::philox_batch_avx512(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
-        case SimdLevel::AVX2: return detail::philox_batch_avx2(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
-        default: break;
-    }
-#endif
-    detail::philox_batch_baseline(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+    EVSTWIN_AT_LEVEL(detail::philox_batch, c0, c1, c2, c3, key, n, r0, r1, r2, r3)
 }
 
 /// normal_ziggurat's common path for n words, at the current level (see ziggurat_batch_body).
 inline void ziggurat_batch(const std::uint32_t* w, std::size_t n, double* g, std::uint8_t* slow) {
-#if EVSTWIN_MULTIVERSION
-    switch (simd_level()) {
-        case SimdLevel::AVX512: return detail::ziggurat_batch_avx512(w, n, g, slow);
-        case SimdLevel::AVX2: return detail::ziggurat_batch_avx2(w, n, g, slow);
-        default: break;
-    }
-#endif
-    detail::ziggurat_batch_baseline(w, n, g, slow);
+    EVSTWIN_AT_LEVEL(detail::ziggurat_batch, w, n, g, slow)
 }
 
 }  // namespace evstwin
