@@ -526,19 +526,27 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     }
     QuietPass q{};
     q.now = &h.now(); q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
-    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_spread = h.leak_spread.data();
-    q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data(); q.g1 = g1.data(); q.g2 = g2.data();
+    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.g1 = g1.data(); q.g2 = g2.data();
     q.count = n; q.rate = 2e6; q.cx = -29.7; q.pole_decay = 0.93; q.pole_ramp = 0.97;
     q.phi_zz = 0.91; q.phi_yz = 0.05; q.phi_yy = 0.94; q.l_zz = 0.013; q.l_yz = 0.004; q.l_yy = 0.011;
-    q.bg_factor = 0.77; q.bridge_bound = 2e-3; q.sf_decay = 0.939; q.sf_ramp = 0.969; q.dt = 1e-3; q.inv_dt = 1e3;
+    q.bridge_bound = 2e-3; q.sf_decay = 0.939; q.sf_ramp = 0.969; q.dt = 1e-3; q.inv_dt = 1e3;
     q.t0 = 0.010; q.t1 = 0.011; q.bridge_stage = true;
-    q.leak_hz = 0.07;  // a fast leak (70 thresholds a second x spread) moves d by up to 0.1 per sample
+    const double leak_hz = 0.07;  // a fast leak (70 thresholds a second x spread) moves d by up to 0.1 per sample
+    const double bg_factor = 0.77;
+    std::vector<double> bg_on_rate(n), bg_off_rate(n);
+    for (std::size_t j = 0; j < n; ++j) {
+        bg_on_rate[j] = h.bg_on_hz[j] * bg_factor;
+        bg_off_rate[j] = h.bg_off_hz[j] * bg_factor;
+    }
+    q.bg_on_rate = bg_on_rate.data(); q.bg_off_rate = bg_off_rate.data();
     const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background, bool leak_off) {
         BlockSoA::Levels out = h.buf[1];
         std::vector<std::uint64_t> busy(n, 7);
         QuietPass qq = q;
-        qq.leak_on_w = leak_off ? 0.0 : 1.0;
-        qq.leak_off_w = leak_off ? 1.0 : 0.0;
+        std::vector<double> leak_g(n);  // PixelModel::leak_slope's term
+        for (std::size_t j = 0; j < n; ++j)
+            leak_g[j] = (leak_hz * h.leak_spread[j]) * (leak_off ? -h.theta_off[j] : h.theta_on[j]);
+        qq.leak_g = leak_g.data();
         qq.next = &out;
         qq.busy = busy.data();
         set_simd_level(l);

@@ -426,6 +426,15 @@ struct BlockSoA {
     int cur = 0;
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
     std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
+    /// The quiet pass's per-pixel terms that hold while the block's common rate does (computed
+    /// by prepare_terms, with the same operations as the pass made them before): the leak's
+    /// part of the slope, PixelModel::leak_slope(leak_spread, theta_on, theta_off, leak_hz), and
+    /// the background clocks' rates bg_on_hz * bg_factor, bg_off_hz * bg_factor. One stream
+    /// each in place of two or three, and their multiplies out of every sample's pass.
+    std::vector<double> leak_g, bg_on_rate, bg_off_rate;
+    /// The leak_hz and bg_factor those terms are for (NaN: none; load() forgets them).
+    double terms_leak_hz = std::numeric_limits<double>::quiet_NaN();
+    double terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
     /// PixelState::spare_words as its two 32-bit halves (the Philox batch writes its third and
     /// fourth words straight into them, and the next odd sample reads them in place), and
     /// spare_sample: changed in place by the word batch.
@@ -447,7 +456,9 @@ struct BlockSoA {
             for (auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off}) v->resize(m);
             l.n.resize(m);
         }
-        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz}) v->resize(m);
+        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz, &leak_g,
+                        &bg_on_rate, &bg_off_rate})
+            v->resize(m);
         spare_lo.resize(m);
         spare_hi.resize(m);
         spare_sample.resize(m);
@@ -473,6 +484,7 @@ struct BlockSoA {
     }
     void load(const PixelState* st, std::size_t m) {
         resize(m);
+        terms_leak_hz = terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
         for (std::size_t j = 0; j < m; ++j) {
             take(st[j], j, now());
             theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_spread[j] = st[j].leak_spread;
@@ -495,18 +507,17 @@ struct BlockSoA {
 struct QuietPass {
     const BlockSoA::Levels* now;
     BlockSoA::Levels* next;
-    const double *refr_until, *next_hot_t, *theta_on, *theta_off, *leak_spread, *bg_on_hz, *bg_off_hz;
+    const double *refr_until, *next_hot_t, *theta_on, *theta_off;
+    /// BlockSoA's terms for this rate (prepare_terms): the leak's part of the slope, and the
+    /// background clocks' rates (bg_on_hz * bg_factor, bg_off_hz * bg_factor).
+    const double *leak_g, *bg_on_rate, *bg_off_rate;
     const double *g1, *g2;
     std::uint64_t* busy;
     std::size_t count;
     double rate;  ///< the common photon rate: the pixels at any other are left busy
     double cx, pole_decay, pole_ramp;                 ///< NoiseCache's x and pole numbers at that rate
     double phi_zz, phi_yz, phi_yy, l_zz, l_yz, l_yy;  ///< its noise transition and innovation
-    double bg_factor, bridge_bound;
-    /// The leak at that rate: its rate before the pixel's spread (NoiseCache::leak_hz) and its
-    /// direction as weights of the thresholds, leak_on_w theta_on - leak_off_w theta_off (1, 0
-    /// for ON, 0, 1 for OFF), which is exactly PixelModel::leak_theta(), without a select.
-    double leak_hz, leak_on_w, leak_off_w;
+    double bridge_bound;
     double sf_decay, sf_ramp, dt, inv_dt, t0, t1;
     /// Whether a pixel that only the bridge keeps from quiet may be settled by the bridge stage
     /// (step_block_soa_impl): the bridge has a variance and continuous_finish() would not refine.
@@ -757,9 +768,9 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double* __restrict hot = q.next_hot_t;
     const double* __restrict th_on_a = q.theta_on;
     const double* __restrict th_off_a = q.theta_off;
-    const double* __restrict leak_spread = q.leak_spread;
-    const double* __restrict bon = q.bg_on_hz;
-    const double* __restrict boff = q.bg_off_hz;
+    const double* __restrict leak_g = q.leak_g;
+    const double* __restrict bon = q.bg_on_rate;
+    const double* __restrict boff = q.bg_off_rate;
     const double* __restrict g1 = q.g1;
     const double* __restrict g2 = q.g2;
     std::uint64_t* __restrict busy = q.busy;
@@ -767,8 +778,7 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double x = q.cx, common = q.rate;
     const double pole_decay = q.pole_decay, pole_ramp = q.pole_ramp, sf_decay = q.sf_decay, sf_ramp = q.sf_ramp;
     const double phi_zz = q.phi_zz, phi_yz = q.phi_yz, phi_yy = q.phi_yy, l_zz = q.l_zz, l_yz = q.l_yz, l_yy = q.l_yy;
-    const double bg_factor = q.bg_factor, bridge_bound = q.bridge_bound, dt = q.dt, inv_dt = q.inv_dt;
-    const double leak_hz = q.leak_hz, leak_on_w = q.leak_on_w, leak_off_w = q.leak_off_w;
+    const double bridge_bound = q.bridge_bound, dt = q.dt, inv_dt = q.inv_dt;
     const double t0 = q.t0, t1 = q.t1;
     const bool bridge_stage = q.bridge_stage;
     const std::size_t count = q.count;
@@ -796,13 +806,14 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         double on = son[j], off = soff[j];
         bool ran_out = false;
         if constexpr (Background) {
-            on = son[j] - bon[j] * bg_factor * dt;
-            off = soff[j] - boff[j] * bg_factor * dt;
+            // background_spend()'s (bg_on_hz bg_factor) dt, the product in brackets made once.
+            on = son[j] - bon[j] * dt;
+            off = soff[j] - boff[j] * dt;
             ran_out = !((on > 0.0) & (off > 0.0));
         }
         // The quiet test (step_block_continuous()).
         const double th_on = th_on_a[j], th_off = th_off_a[j];
-        const double g = (y - s_y) * inv_dt + (leak_hz * leak_spread[j]) * (leak_on_w * th_on - leak_off_w * th_off);
+        const double g = (y - s_y) * inv_dt + leak_g[j];
         const double db = s_y - sref[j];
         const double d1 = db + g * dt;
         const double on0 = th_on - db, off0 = th_off + db;
@@ -1877,8 +1888,9 @@ struct PixelModel {
         q.now = &now;
         q.next = &next;
         q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
-        q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_spread = h.leak_spread.data();
-        q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data();
+        q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data();
+        prepare_quiet_terms(h, n, common, background);
+        q.leak_g = h.leak_g.data(); q.bg_on_rate = h.bg_on_rate.data(); q.bg_off_rate = h.bg_off_rate.data();
         q.g1 = g1s; q.g2 = g2s; q.busy = h.busy.data(); q.count = n;
         // The pass takes the two-pole noise wherever there is noise behind the pole, which holds
         // when the pole's rate is > 0; were it not (a current that underflows), no pixel is
@@ -1887,8 +1899,7 @@ struct PixelModel {
         q.cx = common.x; q.pole_decay = common.pole_decay; q.pole_ramp = common.pole_ramp;
         q.phi_zz = common.k.phi_zz; q.phi_yz = common.k.phi_yz; q.phi_yy = common.k.phi_yy;
         q.l_zz = common.k.l_zz; q.l_yz = common.k.l_yz; q.l_yy = common.k.l_yy;
-        q.bg_factor = common.bg_factor; q.bridge_bound = common.bridge_bound;
-        q.leak_hz = common.leak_hz; q.leak_on_w = leak_off ? 0.0 : 1.0; q.leak_off_w = leak_off ? 1.0 : 0.0;
+        q.bridge_bound = common.bridge_bound;
         q.sf_decay = c.sf_decay; q.sf_ramp = c.sf_ramp; q.dt = c.dt; q.inv_dt = c.inv_dt; q.t0 = c.t0; q.t1 = c.t1;
         // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling.
         q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
@@ -1938,6 +1949,24 @@ struct PixelModel {
         }
         h.flip();
         return n_busy;
+    }
+
+    /// The quiet pass's per-pixel terms at the common rate's numbers (BlockSoA::leak_g,
+    /// bg_on_rate, bg_off_rate), unless the arrays hold them already: they change only with
+    /// the common rate (its leak_hz and bg_factor), so most calls make them once per block.
+    void prepare_quiet_terms(BlockSoA& h, std::size_t n, const NoiseCache& common, bool background) const {
+        if (!(h.terms_leak_hz == common.leak_hz)) {
+            for (std::size_t j = 0; j < n; ++j)
+                h.leak_g[j] = leak_slope(h.leak_spread[j], h.theta_on[j], h.theta_off[j], common.leak_hz);
+            h.terms_leak_hz = common.leak_hz;
+        }
+        if (background && !(h.terms_bg_factor == common.bg_factor)) {
+            for (std::size_t j = 0; j < n; ++j) {
+                h.bg_on_rate[j] = h.bg_on_hz[j] * common.bg_factor;
+                h.bg_off_rate[j] = h.bg_off_hz[j] * common.bg_factor;
+            }
+            h.terms_bg_factor = common.bg_factor;
+        }
     }
 
     /// The pixels the quiet pass left to the bridge alone (h.busy 1): their levels in h.next()
