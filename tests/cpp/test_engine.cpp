@@ -1,6 +1,7 @@
 // C++ tests of the pixel engine: analytic cases, determinism, bad input.
 #include <evstwin/evstwin.hpp>
 
+#include <cmath>
 #include <cstring>
 #include <initializer_list>
 #include <limits>
@@ -585,6 +586,90 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
                 }
     set_simd_level(before);
     std::printf("  quiet pass: %d level comparisons\n", compared);
+}
+
+TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
+    // step_block_soa on a block held as arrays against advance() pixel by pixel over the same
+    // samples (every noise source on, 10 Hz source follower, alone and behind the pole; a
+    // quarter of the pixels at photon rates of their own that change every sample): the same
+    // events in the same order and, once the arrays are stored back, every field of every
+    // pixel's state the same bits. x among them, which the arrays leave unwritten with the
+    // source follower alone (BlockSoA::x_is_z); and the terms the pass takes ready-made
+    // (BlockSoA::leak_g, bg_on_rate, bg_off_rate) reach the clocks and references.
+    struct Ev {
+        double t;
+        std::uint32_t pixel;
+        int pol;
+        bool operator==(const Ev& o) const { return t == o.t && pixel == o.pixel && pol == o.pol; }
+    };
+    const auto same = [](const PixelState& a, const PixelState& b) {
+        const auto bits = [](const auto& u, const auto& v) { return std::memcmp(&u, &v, sizeof u) == 0; };
+        return bits(a.x, b.x) && bits(a.z, b.z) && bits(a.y, b.y) && bits(a.ref, b.ref) &&
+               bits(a.refr_until, b.refr_until) && bits(a.theta_on, b.theta_on) && bits(a.theta_off, b.theta_off) &&
+               bits(a.t, b.t) && a.n == b.n && a.spare_words == b.spare_words && a.spare_sample == b.spare_sample &&
+               bits(a.nz, b.nz) && bits(a.ny, b.ny) && bits(a.level_at_event, b.level_at_event) &&
+               bits(a.noise_at_event, b.noise_at_event) && bits(a.leak_spread, b.leak_spread) &&
+               bits(a.bg_on_hz, b.bg_on_hz) && bits(a.bg_off_hz, b.bg_off_hz) && bits(a.hot_hz, b.hot_hz) &&
+               bits(a.next_hot_t, b.next_hot_t) && bits(a.hot_event_t, b.hot_event_t) &&
+               bits(a.hot_switch_t, b.hot_switch_t) && bits(a.hot_last_t, b.hot_last_t) && a.hot_count == b.hot_count &&
+               a.hot_switches == b.hot_switches && a.hot_pol == b.hot_pol && a.hot_active == b.hot_active &&
+               a.hot_chain == b.hot_chain && bits(a.bg_clock_on, b.bg_clock_on) && bits(a.bg_clock_off, b.bg_clock_off);
+    };
+    for (bool pole : {false, true}) {
+        PixelParams p;
+        p.threshold_sigma = 0.03;
+        p.cutoff_hz = 10.0;
+        p.pr_pole = pole;
+        const PixelModel model(p);
+        CHECK(model.has_soa_kernel());
+        const Philox4x32Key key{11u, 12u};
+        const std::size_t n = 203;  // not a multiple of a vector
+        const int samples = 400;
+        std::vector<PixelState> per_pixel(n), block;
+        std::vector<std::uint32_t> ids(n);
+        std::vector<float> rate(n);
+        const auto rates_at = [&](int k) {
+            for (std::size_t j = 0; j < n; ++j)
+                rate[j] = j % 4 == 3 ? static_cast<float>(2e6 * (1.0 + 0.5 * std::sin(0.05 * k + static_cast<double>(j))))
+                                     : 2e6f;
+        };
+        std::vector<Ev> want, got;
+        std::uint32_t pixel = 0;
+        auto emit_want = [&](double t, Polarity pol, std::uint8_t) { want.push_back({t, pixel, static_cast<int>(pol)}); };
+        auto emit_got = [&](double t, Polarity pol, std::uint8_t) { got.push_back({t, pixel, static_cast<int>(pol)}); };
+        PoissonSampler poisson;
+        NoiseCache cache;
+        PixelModel::BlockScratch scratch;
+        BlockSoA h;
+        // The first sample starts every pixel (as Sensor::run's does); then both paths.
+        rates_at(0);
+        for (std::size_t j = 0; j < n; ++j) {
+            ids[j] = static_cast<std::uint32_t>(j);
+            model.init_pixel(per_pixel[j], key, ids[j]);
+            pixel = ids[j];
+            model.advance(per_pixel[j], rate[j], model.constants(-1e-3, 0.0), key, ids[j], poisson, cache, emit_want);
+        }
+        block = per_pixel;
+        h.load(block.data(), n);
+        std::size_t n_busy = 0;
+        for (int k = 1; k < samples; ++k) {
+            rates_at(k);
+            const SampleConstants c = model.constants((k - 1) / 1000.0, k / 1000.0);
+            for (std::size_t j = 0; j < n; ++j) {
+                pixel = ids[j];
+                model.advance(per_pixel[j], rate[j], c, key, ids[j], poisson, cache, emit_want);
+            }
+            n_busy += model.step_block_soa(h, block.data(), ids.data(), n, rate.data(), c, key, scratch, emit_got, pixel);
+        }
+        h.store(block.data(), n, (samples - 1) / 1000.0);
+        CHECK(n_busy > 0 && !want.empty());  // the per-pixel path and the comparator were reached
+        CHECK(got == want);
+        std::size_t differ = 0;
+        for (std::size_t j = 0; j < n; ++j) differ += !same(block[j], per_pixel[j]);
+        CHECK(differ == 0);
+        std::printf("  %s: %zu events, %zu per-pixel steps, %zu states differ\n", pole ? "pole" : "source follower",
+                    want.size(), n_busy, differ);
+    }
 }
 
 TEST(a_leak_grows_with_the_photocurrent_and_fires_its_own_polarity) {

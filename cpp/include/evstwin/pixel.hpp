@@ -435,6 +435,10 @@ struct BlockSoA {
     /// The leak_hz and bg_factor those terms are for (NaN: none; load() forgets them).
     double terms_leak_hz = std::numeric_limits<double>::quiet_NaN();
     double terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
+    /// Whether the levels' x is left unwritten by the quiet pass (QuietChain::SfOnly): with the
+    /// source follower alone z is x (the pole's output is its input), in every state at all
+    /// times, so give() takes x from z and the pass saves a stream of stores.
+    bool x_is_z = false;
     /// PixelState::spare_words as its two 32-bit halves (the Philox batch writes its third and
     /// fourth words straight into them, and the next odd sample reads them in place), and
     /// spare_sample: changed in place by the word batch.
@@ -476,7 +480,7 @@ struct BlockSoA {
     /// Pixel j's fields back into its state, its changing levels from `from` (the constant
     /// ones are not written).
     EVSTWIN_ALWAYS_INLINE void give(PixelState& s, std::size_t j, const Levels& from) const {
-        s.x = from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
+        s.x = x_is_z ? from.z[j] : from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
         s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = from.n[j];
         s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
         s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
@@ -737,7 +741,8 @@ namespace detail {
 
 /// The continuous block kernel's common path for every pixel of a block: continuous_levels(),
 /// background_spend() and the quiet test of step_block_continuous(), one loop over the arrays
-/// without branches or conditional stores, so it vectorises. Every pixel's new levels go to
+/// without branches or conditional stores, so it vectorises. Every pixel's new levels (but x
+/// with the source follower alone, which is z: BlockSoA::x_is_z) go to
 /// q.next (a quiet pixel's are final: what continuous_finish() would leave); q.busy says 0 for
 /// quiet, 1 where only the bridge's draw could fire (the bridge stage), 2 for the per-pixel
 /// path, which starts over from q.now. The same operations in
@@ -824,7 +829,7 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         // bridge's draw can make it fire.
         const bool bridge = bridge_stage & plain & (db < th_on) & (db > -th_off) & (d1 < th_on) & (d1 > -th_off);
         oref[j] = y - d1;
-        ox[j] = x;
+        if constexpr (pole) ox[j] = x;  // else z is x (BlockSoA::x_is_z)
         oz[j] = z;
         oy[j] = y;
         onz[j] = nz;
@@ -1903,6 +1908,7 @@ struct PixelModel {
         q.sf_decay = c.sf_decay; q.sf_ramp = c.sf_ramp; q.dt = c.dt; q.inv_dt = c.inv_dt; q.t0 = c.t0; q.t1 = c.t1;
         // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling.
         q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
+        h.x_is_z = sf_only;
         detail::quiet_pass<Chain>(q, rate, noise, background);
         std::uint64_t* busy = h.busy.data();
         for (std::size_t i = 0; i < n_held; ++i) busy[held[i]] = 0;  // dropped, whatever the pass found
