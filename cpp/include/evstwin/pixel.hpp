@@ -420,10 +420,14 @@ struct TraceSample {
 struct BlockSoA {
     struct Levels {
         std::vector<double> x, z, y, nz, ny, ref, clock_on, clock_off;
-        std::vector<std::uint64_t> n;
     };
     Levels buf[2];
     int cur = 0;
+    /// The sample counters (PixelState::n): pixel j's is n_base[j] + n_step (count()). Every
+    /// pixel in the arrays advances one sample a step (flip() counts them), so no pass loads or
+    /// stores a counter that only grows by one; take() and give() translate.
+    std::vector<std::uint64_t> n_base;
+    std::uint64_t n_step = 0;
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
     std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
     /// The quiet pass's per-pixel terms that hold while the block's common rate does (computed
@@ -452,13 +456,17 @@ struct BlockSoA {
     Levels& now() { return buf[cur]; }
     const Levels& now() const { return buf[cur]; }
     Levels& next() { return buf[cur ^ 1]; }
-    void flip() { cur ^= 1; }
+    void flip() {
+        cur ^= 1;
+        ++n_step;
+    }
+    /// Pixel j's sample counter (PixelState::n) before the coming step.
+    std::uint64_t count(std::size_t j) const { return n_base[j] + n_step; }
 
     void resize(std::size_t m) {
         if (busy.size() >= m) return;
         for (Levels& l : buf) {
             for (auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off}) v->resize(m);
-            l.n.resize(m);
         }
         for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz, &leak_g,
                         &bg_on_rate, &bg_off_rate})
@@ -466,12 +474,16 @@ struct BlockSoA {
         spare_lo.resize(m);
         spare_hi.resize(m);
         spare_sample.resize(m);
+        n_base.resize(m);
         busy.resize(m);
     }
-    /// Pixel j's fields from its state, its changing levels into `into`.
+    /// Pixel j's fields from its state, its changing levels into `into`: now() for a state at
+    /// the coming step's start, next() for one at its end (the per-pixel path's; its counter
+    /// one ahead of count()).
     EVSTWIN_ALWAYS_INLINE void take(const PixelState& s, std::size_t j, Levels& into) {
         into.x[j] = s.x; into.z[j] = s.z; into.y[j] = s.y; into.nz[j] = s.nz; into.ny[j] = s.ny;
-        into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off; into.n[j] = s.n;
+        into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off;
+        n_base[j] = s.n - n_step - static_cast<std::uint64_t>(&into != &now());
         refr_until[j] = s.refr_until; next_hot_t[j] = s.next_hot_t;
         spare_lo[j] = static_cast<std::uint32_t>(s.spare_words);
         spare_hi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
@@ -481,7 +493,7 @@ struct BlockSoA {
     /// ones are not written).
     EVSTWIN_ALWAYS_INLINE void give(PixelState& s, std::size_t j, const Levels& from) const {
         s.x = x_is_z ? from.z[j] : from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
-        s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = from.n[j];
+        s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = count(j);
         s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
         s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
         s.spare_sample = spare_sample[j];
@@ -489,6 +501,7 @@ struct BlockSoA {
     void load(const PixelState* st, std::size_t m) {
         resize(m);
         terms_leak_hz = terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
+        n_step = 0;
         for (std::size_t j = 0; j < m; ++j) {
             take(st[j], j, now());
             theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_spread[j] = st[j].leak_spread;
@@ -663,47 +676,53 @@ inline void bridge_bracket(const double* e_on, const double* e_off, std::size_t 
 
 namespace detail {
 /// soa_sample_words' passes over a block's counters, compiled per SIMD level (the block
-/// kernel itself is compiled for the baseline, where these loops take two counters a step):
+/// kernel itself is compiled for the baseline, where these loops take two counters a step).
+/// A pixel's counter is sample[j] + step (BlockSoA::count):
 /// sample_words_off: nonzero unless every pixel's words are kept for its (odd) sample;
 /// even_counters: the counters of an even sample's Philox batch, and the OR of the samples
 /// (odd bit set: some pixel's sample is odd); keep_for_next: every pixel's words now belong
 /// to its sample | 1.
 EVSTWIN_ALWAYS_INLINE std::uint64_t sample_words_off_body(const std::uint64_t* __restrict kept_for,
-                                                         const std::uint64_t* __restrict sample, std::size_t n) {
+                                                         const std::uint64_t* __restrict sample, std::uint64_t step,
+                                                         std::size_t n) {
     std::uint64_t off = 0;
-    for (std::size_t j = 0; j < n; ++j) off |= (kept_for[j] ^ sample[j]) | (~sample[j] & 1u);
+    for (std::size_t j = 0; j < n; ++j) {
+        const std::uint64_t now = sample[j] + step;
+        off |= (kept_for[j] ^ now) | (~now & 1u);
+    }
     return off;
 }
-EVSTWIN_ALWAYS_INLINE std::uint64_t even_counters_body(const std::uint64_t* __restrict sample,
+EVSTWIN_ALWAYS_INLINE std::uint64_t even_counters_body(const std::uint64_t* __restrict sample, std::uint64_t step,
                                                       const std::uint32_t* __restrict ids, std::size_t n,
                                                       std::uint32_t* __restrict c0, std::uint32_t* __restrict c1,
                                                       std::uint32_t* __restrict c2) {
     std::uint64_t any = 0;
     for (std::size_t j = 0; j < n; ++j) {
-        const std::uint64_t pair = sample[j] >> 1;
+        const std::uint64_t now = sample[j] + step, pair = now >> 1;
         c0[j] = static_cast<std::uint32_t>(pair);
         c1[j] = static_cast<std::uint32_t>(pair >> 32);
         c2[j] = ids[j];
-        any |= sample[j];
+        any |= now;
     }
     return any;
 }
-EVSTWIN_ALWAYS_INLINE void keep_for_next_body(const std::uint64_t* __restrict sample, std::size_t n,
+EVSTWIN_ALWAYS_INLINE void keep_for_next_body(const std::uint64_t* __restrict sample, std::uint64_t step, std::size_t n,
                                               std::uint64_t* __restrict kept_for) {
-    for (std::size_t j = 0; j < n; ++j) kept_for[j] = sample[j] | 1u;
+    for (std::size_t j = 0; j < n; ++j) kept_for[j] = (sample[j] + step) | 1u;
 }
 #define EVSTWIN_WORD_BOOKS_LEVEL(SUFFIX, TARGET)                                                               \
     TARGET inline std::uint64_t sample_words_off_##SUFFIX(const std::uint64_t* k, const std::uint64_t* s,      \
-                                                          std::size_t n) {                                     \
-        return sample_words_off_body(k, s, n);                                                                 \
+                                                          std::uint64_t step, std::size_t n) {                 \
+        return sample_words_off_body(k, s, step, n);                                                           \
     }                                                                                                          \
-    TARGET inline std::uint64_t even_counters_##SUFFIX(const std::uint64_t* s, const std::uint32_t* ids,       \
-                                                       std::size_t n, std::uint32_t* c0, std::uint32_t* c1,    \
-                                                       std::uint32_t* c2) {                                    \
-        return even_counters_body(s, ids, n, c0, c1, c2);                                                      \
+    TARGET inline std::uint64_t even_counters_##SUFFIX(const std::uint64_t* s, std::uint64_t step,             \
+                                                       const std::uint32_t* ids, std::size_t n,                \
+                                                       std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) { \
+        return even_counters_body(s, step, ids, n, c0, c1, c2);                                                \
     }                                                                                                          \
-    TARGET inline void keep_for_next_##SUFFIX(const std::uint64_t* s, std::size_t n, std::uint64_t* k) {       \
-        keep_for_next_body(s, n, k);                                                                           \
+    TARGET inline void keep_for_next_##SUFFIX(const std::uint64_t* s, std::uint64_t step, std::size_t n,       \
+                                              std::uint64_t* k) {                                              \
+        keep_for_next_body(s, step, n, k);                                                                     \
     }
 EVSTWIN_WORD_BOOKS_LEVEL(baseline, )
 #if EVSTWIN_MULTIVERSION
@@ -711,15 +730,16 @@ EVSTWIN_WORD_BOOKS_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
 EVSTWIN_WORD_BOOKS_LEVEL(avx512, EVSTWIN_TARGET_AVX512)
 #endif
 #undef EVSTWIN_WORD_BOOKS_LEVEL
-inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::size_t n) {
-    EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, n)
+inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::uint64_t step,
+                                      std::size_t n) {
+    EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, step, n)
 }
-inline std::uint64_t even_counters(const std::uint64_t* sample, const std::uint32_t* ids, std::size_t n,
-                                   std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) {
-    EVSTWIN_AT_LEVEL(even_counters, sample, ids, n, c0, c1, c2)
+inline std::uint64_t even_counters(const std::uint64_t* sample, std::uint64_t step, const std::uint32_t* ids,
+                                   std::size_t n, std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) {
+    EVSTWIN_AT_LEVEL(even_counters, sample, step, ids, n, c0, c1, c2)
 }
-inline void keep_for_next(const std::uint64_t* sample, std::size_t n, std::uint64_t* kept_for) {
-    EVSTWIN_AT_LEVEL(keep_for_next, sample, n, kept_for)
+inline void keep_for_next(const std::uint64_t* sample, std::uint64_t step, std::size_t n, std::uint64_t* kept_for) {
+    EVSTWIN_AT_LEVEL(keep_for_next, sample, step, n, kept_for)
 }
 }  // namespace detail
 
@@ -759,7 +779,6 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double* __restrict sref = q.now->ref.data();
     const double* __restrict son = q.now->clock_on.data();
     const double* __restrict soff = q.now->clock_off.data();
-    const std::uint64_t* __restrict sn = q.now->n.data();
     double* __restrict ox = q.next->x.data();
     double* __restrict oz = q.next->z.data();
     double* __restrict oy = q.next->y.data();
@@ -768,7 +787,6 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     double* __restrict oref = q.next->ref.data();
     double* __restrict oon = q.next->clock_on.data();
     double* __restrict ooff = q.next->clock_off.data();
-    std::uint64_t* __restrict on_ = q.next->n.data();
     const double* __restrict refr = q.refr_until;
     const double* __restrict hot = q.next_hot_t;
     const double* __restrict th_on_a = q.theta_on;
@@ -836,7 +854,6 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         ony[j] = ny;
         oon[j] = on;
         ooff[j] = off;
-        on_[j] = sn[j] + 1u;
         // 0, 1 or 2 as arithmetic: a nested select here becomes a branch and stops the vectoriser.
         const std::uint64_t not_quiet = !quiet;
         busy[j] = 2u * not_quiet - (not_quiet & static_cast<std::uint64_t>(bridge));
@@ -1453,15 +1470,17 @@ struct PixelModel {
     EVSTWIN_ALWAYS_INLINE static void soa_sample_words(BlockSoA& h, const std::uint32_t* ids, std::size_t n,
                                                        Philox4x32Key key, BlockScratch& scratch,
                                                        const std::uint32_t*& w0, const std::uint32_t*& w1) {
-        const std::uint64_t* __restrict sample = h.now().n.data();
+        // The counters as BlockSoA keeps them: sample[j] + step (BlockSoA::count).
+        const std::uint64_t* __restrict sample = h.n_base.data();
+        const std::uint64_t step = h.n_step;
         std::uint32_t* __restrict lo = h.spare_lo.data();
         std::uint32_t* __restrict hi = h.spare_hi.data();
         std::uint64_t* __restrict kept_for = h.spare_sample.data();
         std::uint32_t* __restrict s0 = scratch.count_word.data();
         std::uint32_t* __restrict s1 = scratch.word1.data();
-        const bool first_odd = n > 0 && (sample[0] & 1u);
+        const bool first_odd = n > 0 && ((sample[0] + step) & 1u);
         if (first_odd) {
-            if (detail::sample_words_off(kept_for, sample, n) == 0) {
+            if (detail::sample_words_off(kept_for, sample, step, n) == 0) {
                 w0 = lo;
                 w1 = hi;
                 return;
@@ -1469,16 +1488,16 @@ struct PixelModel {
         } else {
             std::uint32_t *__restrict c0 = scratch.ctr0.data(), *__restrict c1 = scratch.ctr1.data(),
                           *__restrict c2 = scratch.ctr2.data();
-            if (!(detail::even_counters(sample, ids, n, c0, c1, c2) & 1u)) {
+            if (!(detail::even_counters(sample, step, ids, n, c0, c1, c2) & 1u)) {
                 philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, s0, s1, lo, hi);
-                detail::keep_for_next(sample, n, kept_for);
+                detail::keep_for_next(sample, step, n, kept_for);
                 w0 = s0;
                 w1 = s1;
                 return;
             }
         }
         batch_sample_words(
-            n, [sample](std::size_t j) { return sample[j]; }, [ids](std::size_t j) { return ids[j]; },
+            n, [sample, step](std::size_t j) { return sample[j] + step; }, [ids](std::size_t j) { return ids[j]; },
             [&](std::size_t j, auto&& use) {
                 std::uint64_t words = static_cast<std::uint64_t>(lo[j]) | (static_cast<std::uint64_t>(hi[j]) << 32);
                 use(words, kept_for[j]);
@@ -1863,7 +1882,7 @@ struct PixelModel {
         BlockSoA::Levels& next = h.next();
         const std::uint32_t* w0 = nullptr;
         const std::uint32_t* w1 = nullptr;
-        const auto count = [&now](std::size_t j) { return now.n[j]; };
+        const auto count = [&h](std::size_t j) { return h.count(j); };
         const auto id = [ids](std::size_t j) { return ids[j]; };
         double* g1s = scratch.u_noise.data();
         double* g2s = scratch.count.data();
@@ -2028,7 +2047,7 @@ struct PixelModel {
         for (std::size_t k = 0; k < m; ++k) {
             const std::size_t j = at[k];
             const double q = q_fire[k];
-            const std::uint64_t sample = now.n[j];
+            const std::uint64_t sample = h.count(j);
             c0[d] = static_cast<std::uint32_t>(sample);
             c1[d] = static_cast<std::uint32_t>(sample >> 32);
             c2[d] = ids[j];
