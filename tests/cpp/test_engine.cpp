@@ -335,6 +335,32 @@ TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
         CHECK(n_slow < n / 20);  // ~1 % of words leave the common path
     }
     CHECK(levels >= 1);
+    // Every layer and sign, with magnitudes at the edges of its rectangle (0, k - 1, k, the
+    // largest): the batches read the tables right (the AVX-512 one by permutes over them) and
+    // give the scalar common path's bits (a zero's sign too) and the same slow flags.
+    std::vector<std::uint32_t> words;
+    for (std::uint32_t layer = 0; layer < 128; ++layer)
+        for (std::uint32_t sign = 0; sign < 2; ++sign)
+            for (std::uint32_t j : {0u, ZIGGURAT.k[layer] - 1u, ZIGGURAT.k[layer], (1u << 24) - 1u})
+                if (j < (1u << 24)) words.push_back((j << 8) | (sign << 7) | layer);
+    const std::size_t m = words.size();
+    std::vector<double> gw(m);
+    std::vector<std::uint8_t> slow_w(m);
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        set_simd_level(l);
+        ziggurat_batch(words.data(), m, gw.data(), slow_w.data());
+        std::size_t wrong = 0, n_slow = 0;
+        for (std::size_t i = 0; i < m; ++i) {
+            double want = 0.0;
+            const bool common = normal_ziggurat_common(words[i], want);
+            wrong += static_cast<bool>(slow_w[i]) == common;
+            if (common) wrong += std::memcmp(&gw[i], &want, sizeof want) != 0;
+            n_slow += slow_w[i];
+        }
+        CHECK(wrong == 0);
+        CHECK(n_slow > 0 && n_slow < m);
+    }
     set_simd_level(before);
 }
 
