@@ -618,8 +618,9 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
     // samples (every noise source on, 10 Hz source follower, alone and behind the pole; a
     // quarter of the pixels at photon rates of their own that change every sample): the same
     // events in the same order and, once the arrays are stored back, every field of every
-    // pixel's state the same bits. x among them, which the arrays leave unwritten with the
-    // source follower alone (BlockSoA::x_is_z); and the terms the pass takes ready-made
+    // pixel's state the same bits. x and nz among them, which the arrays leave unwritten with
+    // the source follower alone (BlockSoA::sf_only: z is x there, and nz 0, on every path);
+    // and the terms the pass takes ready-made
     // (BlockSoA::leak_g, bg_on_rate, bg_off_rate) reach the clocks and references.
     struct Ev {
         double t;
@@ -690,8 +691,13 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
         CHECK(n_busy > 0 && !want.empty());  // the per-pixel path and the comparator were reached
         CHECK(got == want);
         std::size_t differ = 0;
-        for (std::size_t j = 0; j < n; ++j) differ += !same(block[j], per_pixel[j]);
+        std::size_t off_invariant = 0;  // the source follower alone: z is x, nz is 0
+        for (std::size_t j = 0; j < n; ++j) {
+            differ += !same(block[j], per_pixel[j]);
+            off_invariant += !pole && !(per_pixel[j].z == per_pixel[j].x && per_pixel[j].nz == 0.0);
+        }
         CHECK(differ == 0);
+        CHECK(off_invariant == 0);
         std::printf("  %s: %zu events, %zu per-pixel steps, %zu states differ\n", pole ? "pole" : "source follower",
                     want.size(), n_busy, differ);
     }

@@ -439,10 +439,11 @@ struct BlockSoA {
     /// The leak_hz and bg_factor those terms are for (NaN: none; load() forgets them).
     double terms_leak_hz = std::numeric_limits<double>::quiet_NaN();
     double terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
-    /// Whether the levels' x is left unwritten by the quiet pass (QuietChain::SfOnly): with the
-    /// source follower alone z is x (the pole's output is its input), in every state at all
-    /// times, so give() takes x from z and the pass saves a stream of stores.
-    bool x_is_z = false;
+    /// Whether the levels' x and nz are left unwritten by the quiet pass (QuietChain::SfOnly):
+    /// with the source follower alone z is x (no pole between them) and nz is 0 (z carries no
+    /// noise: PixelModel::continuous_levels), in every state at all times, so give() makes
+    /// them and the pass saves a stream of loads and two of stores.
+    bool sf_only = false;
     /// PixelState::spare_words as its two 32-bit halves (the Philox batch writes its third and
     /// fourth words straight into them, and the next odd sample reads them in place), and
     /// spare_sample: changed in place by the word batch.
@@ -492,7 +493,8 @@ struct BlockSoA {
     /// Pixel j's fields back into its state, its changing levels from `from` (the constant
     /// ones are not written).
     EVSTWIN_ALWAYS_INLINE void give(PixelState& s, std::size_t j, const Levels& from) const {
-        s.x = x_is_z ? from.z[j] : from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
+        s.x = sf_only ? from.z[j] : from.x[j]; s.z = from.z[j]; s.y = from.y[j];
+        s.nz = sf_only ? 0.0 : from.nz[j]; s.ny = from.ny[j];
         s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = count(j);
         s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
         s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
@@ -762,7 +764,7 @@ namespace detail {
 /// The continuous block kernel's common path for every pixel of a block: continuous_levels(),
 /// background_spend() and the quiet test of step_block_continuous(), one loop over the arrays
 /// without branches or conditional stores, so it vectorises. Every pixel's new levels (but x
-/// with the source follower alone, which is z: BlockSoA::x_is_z) go to
+/// and nz with the source follower alone, which are z and 0: BlockSoA::sf_only) go to
 /// q.next (a quiet pixel's are final: what continuous_finish() would leave); q.busy says 0 for
 /// quiet, 1 where only the bridge's draw could fire (the bridge stage), 2 for the per-pixel
 /// path, which starts over from q.now. The same operations in
@@ -809,20 +811,22 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
 #pragma GCC ivdep
 #endif
     for (std::size_t j = 0; j < count; ++j) {
-        const double s_x = sx[j], s_z = sz[j], s_y = sy[j], s_nz = snz[j], s_ny = sny[j];
+        const double s_z = sz[j], s_y = sy[j], s_ny = sny[j];
         // continuous_levels(): the pole (if any), the exact source follower, the noise.
         double z = x;
-        if constexpr (pole) z = x + (s_z - s_x) * pole_decay - (x - s_x) * pole_ramp;
+        if constexpr (pole) z = x + (s_z - sx[j]) * pole_decay - (x - sx[j]) * pole_ramp;
         const double yd0 = s_y - s_ny;
         const double yd = z + (yd0 - s_z) * sf_decay - (z - s_z) * sf_ramp;
         double nz = 0.0, ny = 0.0;
         if constexpr (Noise) {
-            nz = phi_zz * s_nz + l_zz * g1[j];
             // With the pole its rate is > 0 wherever there is noise: the two-pole system.
-            if constexpr (pole)
-                ny = phi_yz * s_nz + phi_yy * s_ny + l_yz * g1[j] + l_yy * g2[j];
-            else
+            // Without it z carries no noise (continuous_levels): nz stays 0, unwritten.
+            if constexpr (pole) {
+                nz = phi_zz * snz[j] + l_zz * g1[j];
+                ny = phi_yz * snz[j] + phi_yy * s_ny + l_yz * g1[j] + l_yy * g2[j];
+            } else {
                 ny = phi_yy * s_ny + l_yy * g1[j];
+            }
         }
         const double y = yd + ny;
         // background_spend().
@@ -847,10 +851,10 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         // bridge's draw can make it fire.
         const bool bridge = bridge_stage & plain & (db < th_on) & (db > -th_off) & (d1 < th_on) & (d1 > -th_off);
         oref[j] = y - d1;
-        if constexpr (pole) ox[j] = x;  // else z is x (BlockSoA::x_is_z)
+        if constexpr (pole) ox[j] = x;  // else z is x (BlockSoA::sf_only)
         oz[j] = z;
         oy[j] = y;
-        onz[j] = nz;
+        if constexpr (pole) onz[j] = nz;
         ony[j] = ny;
         oon[j] = on;
         ooff[j] = off;
@@ -1927,7 +1931,7 @@ struct PixelModel {
         q.sf_decay = c.sf_decay; q.sf_ramp = c.sf_ramp; q.dt = c.dt; q.inv_dt = c.inv_dt; q.t0 = c.t0; q.t1 = c.t1;
         // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling.
         q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
-        h.x_is_z = sf_only;
+        h.sf_only = sf_only;
         detail::quiet_pass<Chain>(q, rate, noise, background);
         std::uint64_t* busy = h.busy.data();
         for (std::size_t i = 0; i < n_held; ++i) busy[held[i]] = 0;  // dropped, whatever the pass found
@@ -2397,7 +2401,9 @@ struct PixelModel {
         nz = 0.0;
         ny = 0.0;
         if (D > 0.0) {
-            nz = k.phi_zz * s.nz + k.l_zz * g1;
+            // Without the pole z is x, with no noise of its own (as init_state starts it): nz
+            // stays 0 (the z process would be a random walk, phi_zz = 1, that nothing reads).
+            nz = pole ? k.phi_zz * s.nz + k.l_zz * g1 : 0.0;
             // Without the pole its rate a is 0: the 1-D process of the source follower.
             ny = (pole && cache.a > 0.0 && filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
                                                    : k.phi_yy * s.ny + k.l_yy * g1;
