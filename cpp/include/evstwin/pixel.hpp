@@ -1547,7 +1547,7 @@ struct PixelModel {
         // one's first wedge test in one pass without branches (its polynomial's latency then
         // overlaps across normals); then each finished from a stream that starts with that block.
         std::uint32_t* at = scratch.need_at.data();
-        const std::size_t m = list_flagged(slow1, n, at);
+        std::size_t m = list_flagged(slow1, n, at);
         if (m == 0) return;
         std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
         double* q_first = scratch.noise_d.data();
@@ -1564,6 +1564,34 @@ struct PixelModel {
         }
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_NORMAL, key, pad_batch(scratch, m), r0, r1, r2, r3);
+        // A first normal alone in its stream (its second is not slow) that falls in a wedge and
+        // whose first test accepts clearly (lhs below q (1 - 1e-6), with the stream's first
+        // word: r0) is finished here, as normal_ziggurat_slow would finish it, in a loop
+        // without branches: that accept-or-reject branch, taken about as often as not, was
+        // most of the slow path's time (mispredicted). The others (rejected or undecided
+        // first tests, the tail, two slow normals sharing a stream) are kept, in order, for
+        // the loop below.
+        std::size_t d = 0;
+        for (std::size_t q = 0; q < m; ++q) {
+            const std::size_t j = at[q];
+            const std::uint32_t w = w0[j], layer = w & 127u, wedge = layer != 0 ? layer : 1u;
+            const double x = static_cast<double>(w >> 8) * z.w[layer];
+            const double lhs = z.f[wedge] + uniform_open(r0[q]) * (z.f[wedge - 1] - z.f[wedge]);
+            const bool done = (slow1[j] == 1u) & (layer != 0) & (lhs < q_first[q] * (1.0 - 1e-6));
+            const double g = (1.0 - 2.0 * static_cast<double>((w >> 7) & 1u)) * x;  // sign * x, sign = +-1
+            // g1[j] = done ? g : g1[j] by bit masks: a select here became a mispredicted branch.
+            std::uint64_t g_bits, old_bits;
+            std::memcpy(&g_bits, &g, sizeof g_bits);
+            std::memcpy(&old_bits, &g1[j], sizeof old_bits);
+            const std::uint64_t take = 0u - static_cast<std::uint64_t>(done);
+            const std::uint64_t bits = (g_bits & take) | (old_bits & ~take);
+            std::memcpy(&g1[j], &bits, sizeof bits);
+            at[d] = static_cast<std::uint32_t>(j);
+            r0[d] = r0[q]; r1[d] = r1[q]; r2[d] = r2[q]; r3[d] = r3[q];
+            q_first[d] = q_first[q];
+            d += !done;
+        }
+        m = d;
         for (std::size_t q = 0; q < m; ++q) {
             const std::size_t j = at[q];
             const bool first_slow = slow1[j] & 1u, second_slow = slow1[j] >> 1;
