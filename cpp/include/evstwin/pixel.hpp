@@ -412,7 +412,8 @@ struct TraceSample {
 /// contiguous arrays that the compiler vectorises. The array-of-structures PixelState stays
 /// the state between calls and for the rare pixels that need the whole comparator.
 ///
-/// The fields a sample changes for every pixel are double-buffered: a sample reads `now()`
+/// The fields a sample changes for every pixel are double-buffered (but the sample counter,
+/// which grows by one for every pixel: n_base): a sample reads `now()`
 /// and writes `next()` for every pixel (a quiet pixel's new values, or a busy one's after the
 /// per-pixel path), then flip() makes them current. So the vector loop stores everything
 /// unconditionally (a conditional store, "keep the old value unless quiet", is what stops a
@@ -430,8 +431,8 @@ struct BlockSoA {
     std::uint64_t n_step = 0;
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
     std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
-    /// The quiet pass's per-pixel terms that hold while the block's common rate does (computed
-    /// by prepare_terms, with the same operations as the pass made them before): the leak's
+    /// The quiet pass's per-pixel terms that hold while the block's common rate does (made by
+    /// PixelModel::prepare_quiet_terms, with the operations the pass made them with): the leak's
     /// part of the slope, PixelModel::leak_slope(leak_spread, theta_on, theta_off, leak_hz), and
     /// the background clocks' rates bg_on_hz * bg_factor, bg_off_hz * bg_factor. One stream
     /// each in place of two or three, and their multiplies out of every sample's pass.
@@ -527,7 +528,7 @@ struct QuietPass {
     const BlockSoA::Levels* now;
     BlockSoA::Levels* next;
     const double *refr_until, *next_hot_t, *theta_on, *theta_off;
-    /// BlockSoA's terms for this rate (prepare_terms): the leak's part of the slope, and the
+    /// BlockSoA's terms for this rate (PixelModel::prepare_quiet_terms): the leak's part of the slope, and the
     /// background clocks' rates (bg_on_hz * bg_factor, bg_off_hz * bg_factor).
     const double *leak_g, *bg_on_rate, *bg_off_rate;
     const double *g1, *g2;
