@@ -846,11 +846,14 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         const double d1 = db + g * dt;
         const double on0 = th_on - db, off0 = th_off + db;
         const bool plain = (static_cast<double>(rate[j]) == common) & !ran_out & (hot[j] > t1) & (refr[j] <= t0);
-        const bool quiet = plain & (std::min(on0, off0) > 0.0) &
-                           (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > bridge_bound);
-        // Not quiet, but the line stays between the levels (compare_bridged()'s test): only the
-        // bridge's draw can make it fire.
-        const bool bridge = bridge_stage & plain & (db < th_on) & (db > -th_off) & (d1 < th_on) & (d1 > -th_off);
+        const double on1 = th_on - d1, off1 = th_off + d1;
+        const bool between0 = std::min(on0, off0) > 0.0;
+        const bool quiet = plain & between0 & (std::min(on0 * on1, off0 * off1) > bridge_bound);
+        // Not quiet, but the line stays between the levels (compare_bridged()'s test, db and d1
+        // inside (-theta_off, theta_on)): only the bridge's draw can make it fire. Written with
+        // the differences above (a - b > 0 exactly when a > b; on0, off0 are NaN together, as
+        // on1, off1 are), so the same verdicts with fewer comparisons.
+        const bool bridge = bridge_stage & plain & between0 & (std::min(on1, off1) > 0.0);
         oref[j] = y - d1;
         if constexpr (pole) ox[j] = x;  // else z is x (BlockSoA::sf_only)
         oz[j] = z;
