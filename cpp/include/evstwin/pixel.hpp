@@ -505,6 +505,7 @@ struct BlockSoA {
         resize(m);
         terms_leak_hz = terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
         n_step = 0;
+        sf_only = false;  // x and nz as loaded, until a step of the source follower alone
         for (std::size_t j = 0; j < m; ++j) {
             take(st[j], j, now());
             theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_spread[j] = st[j].leak_spread;
