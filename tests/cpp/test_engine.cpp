@@ -1,6 +1,7 @@
 // C++ tests of the pixel engine: analytic cases, determinism, bad input.
 #include <evstwin/evstwin.hpp>
 
+#include <cmath>
 #include <cstring>
 #include <initializer_list>
 #include <limits>
@@ -334,6 +335,32 @@ TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
         CHECK(n_slow < n / 20);  // ~1 % of words leave the common path
     }
     CHECK(levels >= 1);
+    // Every layer and sign, with magnitudes at the edges of its rectangle (0, k - 1, k, the
+    // largest): the batches read the tables right (the AVX-512 one by permutes over them) and
+    // give the scalar common path's bits (a zero's sign too) and the same slow flags.
+    std::vector<std::uint32_t> words;
+    for (std::uint32_t layer = 0; layer < 128; ++layer)
+        for (std::uint32_t sign = 0; sign < 2; ++sign)
+            for (std::uint32_t j : {0u, ZIGGURAT.k[layer] - 1u, ZIGGURAT.k[layer], (1u << 24) - 1u})
+                if (j < (1u << 24)) words.push_back((j << 8) | (sign << 7) | layer);
+    const std::size_t m = words.size();
+    std::vector<double> gw(m);
+    std::vector<std::uint8_t> slow_w(m);
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        set_simd_level(l);
+        ziggurat_batch(words.data(), m, gw.data(), slow_w.data());
+        std::size_t wrong = 0, n_slow = 0;
+        for (std::size_t i = 0; i < m; ++i) {
+            double want = 0.0;
+            const bool common = normal_ziggurat_common(words[i], want);
+            wrong += static_cast<bool>(slow_w[i]) == common;
+            if (common) wrong += std::memcmp(&gw[i], &want, sizeof want) != 0;
+            n_slow += slow_w[i];
+        }
+        CHECK(wrong == 0);
+        CHECK(n_slow > 0 && n_slow < m);
+    }
     set_simd_level(before);
 }
 
@@ -517,7 +544,7 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
         l.nz[j] = 0.1 * (unit() - 0.5); l.ref[j] = -30.0 + unit();
         h.theta_on[j] = 0.15 + 0.1 * unit(); h.theta_off[j] = 0.1 + 0.1 * unit();
         l.y[j] = l.ref[j] + (unit() - 0.4) * 0.5;  // some past a threshold, most between
-        l.clock_on[j] = 3.0 * unit(); l.clock_off[j] = 0.002 * unit(); l.n[j] = j * 3;
+        l.clock_on[j] = 3.0 * unit(); l.clock_off[j] = 0.002 * unit();
         h.leak_spread[j] = 0.5 + unit(); h.bg_on_hz[j] = 5.0 * unit(); h.bg_off_hz[j] = 5.0 * unit();
         h.refr_until[j] = unit() < 0.1 ? 0.0105 : 0.0;
         h.next_hot_t[j] = unit() < 0.05 ? 0.0101 : 1e300;
@@ -526,19 +553,27 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     }
     QuietPass q{};
     q.now = &h.now(); q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
-    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_spread = h.leak_spread.data();
-    q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data(); q.g1 = g1.data(); q.g2 = g2.data();
+    q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.g1 = g1.data(); q.g2 = g2.data();
     q.count = n; q.rate = 2e6; q.cx = -29.7; q.pole_decay = 0.93; q.pole_ramp = 0.97;
     q.phi_zz = 0.91; q.phi_yz = 0.05; q.phi_yy = 0.94; q.l_zz = 0.013; q.l_yz = 0.004; q.l_yy = 0.011;
-    q.bg_factor = 0.77; q.bridge_bound = 2e-3; q.sf_decay = 0.939; q.sf_ramp = 0.969; q.dt = 1e-3; q.inv_dt = 1e3;
+    q.bridge_bound = 2e-3; q.sf_decay = 0.939; q.sf_ramp = 0.969; q.dt = 1e-3; q.inv_dt = 1e3;
     q.t0 = 0.010; q.t1 = 0.011; q.bridge_stage = true;
-    q.leak_hz = 0.07;  // a fast leak (70 thresholds a second x spread) moves d by up to 0.1 per sample
+    const double leak_hz = 0.07;  // a fast leak (70 thresholds a second x spread) moves d by up to 0.1 per sample
+    const double bg_factor = 0.77;
+    std::vector<double> bg_on_rate(n), bg_off_rate(n);
+    for (std::size_t j = 0; j < n; ++j) {
+        bg_on_rate[j] = h.bg_on_hz[j] * bg_factor;
+        bg_off_rate[j] = h.bg_off_hz[j] * bg_factor;
+    }
+    q.bg_on_rate = bg_on_rate.data(); q.bg_off_rate = bg_off_rate.data();
     const auto pass = [&](SimdLevel l, QuietChain chain, bool noise, bool background, bool leak_off) {
         BlockSoA::Levels out = h.buf[1];
         std::vector<std::uint64_t> busy(n, 7);
         QuietPass qq = q;
-        qq.leak_on_w = leak_off ? 0.0 : 1.0;
-        qq.leak_off_w = leak_off ? 1.0 : 0.0;
+        std::vector<double> leak_g(n);  // PixelModel::leak_slope's term
+        for (std::size_t j = 0; j < n; ++j)
+            leak_g[j] = (leak_hz * h.leak_spread[j]) * (leak_off ? -h.theta_off[j] : h.theta_on[j]);
+        qq.leak_g = leak_g.data();
         qq.next = &out;
         qq.busy = busy.data();
         set_simd_level(l);
@@ -553,7 +588,6 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
         };
         for (const auto* v : {&out.x, &out.z, &out.y, &out.nz, &out.ny, &out.ref, &out.clock_on, &out.clock_off})
             add(v->data(), n * sizeof(double));
-        add(out.n.data(), n * sizeof(std::uint64_t));
         add(busy.data(), n * sizeof(std::uint64_t));
         std::size_t classes[3] = {0, 0, 0};
         for (std::uint64_t b : busy) classes[b < 3 ? b : 0] += b < 3;
@@ -577,6 +611,96 @@ TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
                 }
     set_simd_level(before);
     std::printf("  quiet pass: %d level comparisons\n", compared);
+}
+
+TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
+    // step_block_soa on a block held as arrays against advance() pixel by pixel over the same
+    // samples (every noise source on, 10 Hz source follower, alone and behind the pole; a
+    // quarter of the pixels at photon rates of their own that change every sample): the same
+    // events in the same order and, once the arrays are stored back, every field of every
+    // pixel's state the same bits. x and nz among them, which the arrays leave unwritten with
+    // the source follower alone (BlockSoA::sf_only: z is x there, and nz 0, on every path);
+    // and the terms the pass takes ready-made
+    // (BlockSoA::leak_g, bg_on_rate, bg_off_rate) reach the clocks and references.
+    struct Ev {
+        double t;
+        std::uint32_t pixel;
+        int pol;
+        bool operator==(const Ev& o) const { return t == o.t && pixel == o.pixel && pol == o.pol; }
+    };
+    const auto same = [](const PixelState& a, const PixelState& b) {
+        const auto bits = [](const auto& u, const auto& v) { return std::memcmp(&u, &v, sizeof u) == 0; };
+        return bits(a.x, b.x) && bits(a.z, b.z) && bits(a.y, b.y) && bits(a.ref, b.ref) &&
+               bits(a.refr_until, b.refr_until) && bits(a.theta_on, b.theta_on) && bits(a.theta_off, b.theta_off) &&
+               bits(a.t, b.t) && a.n == b.n && a.spare_words == b.spare_words && a.spare_sample == b.spare_sample &&
+               bits(a.nz, b.nz) && bits(a.ny, b.ny) && bits(a.level_at_event, b.level_at_event) &&
+               bits(a.noise_at_event, b.noise_at_event) && bits(a.leak_spread, b.leak_spread) &&
+               bits(a.bg_on_hz, b.bg_on_hz) && bits(a.bg_off_hz, b.bg_off_hz) && bits(a.hot_hz, b.hot_hz) &&
+               bits(a.next_hot_t, b.next_hot_t) && bits(a.hot_event_t, b.hot_event_t) &&
+               bits(a.hot_switch_t, b.hot_switch_t) && bits(a.hot_last_t, b.hot_last_t) && a.hot_count == b.hot_count &&
+               a.hot_switches == b.hot_switches && a.hot_pol == b.hot_pol && a.hot_active == b.hot_active &&
+               a.hot_chain == b.hot_chain && bits(a.bg_clock_on, b.bg_clock_on) && bits(a.bg_clock_off, b.bg_clock_off);
+    };
+    for (bool pole : {false, true}) {
+        PixelParams p;
+        p.threshold_sigma = 0.03;
+        p.cutoff_hz = 10.0;
+        p.pr_pole = pole;
+        const PixelModel model(p);
+        CHECK(model.has_soa_kernel());
+        const Philox4x32Key key{11u, 12u};
+        const std::size_t n = 203;  // not a multiple of a vector
+        const int samples = 400;
+        std::vector<PixelState> per_pixel(n), block;
+        std::vector<std::uint32_t> ids(n);
+        std::vector<float> rate(n);
+        const auto rates_at = [&](int k) {
+            for (std::size_t j = 0; j < n; ++j)
+                rate[j] = j % 4 == 3 ? static_cast<float>(2e6 * (1.0 + 0.5 * std::sin(0.05 * k + static_cast<double>(j))))
+                                     : 2e6f;
+        };
+        std::vector<Ev> want, got;
+        std::uint32_t pixel = 0;
+        auto emit_want = [&](double t, Polarity pol, std::uint8_t) { want.push_back({t, pixel, static_cast<int>(pol)}); };
+        auto emit_got = [&](double t, Polarity pol, std::uint8_t) { got.push_back({t, pixel, static_cast<int>(pol)}); };
+        PoissonSampler poisson;
+        NoiseCache cache;
+        PixelModel::BlockScratch scratch;
+        BlockSoA h;
+        // The first sample starts every pixel (as Sensor::run's does); then both paths.
+        rates_at(0);
+        for (std::size_t j = 0; j < n; ++j) {
+            ids[j] = static_cast<std::uint32_t>(j);
+            model.init_pixel(per_pixel[j], key, ids[j]);
+            pixel = ids[j];
+            model.advance(per_pixel[j], rate[j], model.constants(-1e-3, 0.0), key, ids[j], poisson, cache, emit_want);
+        }
+        block = per_pixel;
+        h.load(block.data(), n);
+        std::size_t n_busy = 0;
+        for (int k = 1; k < samples; ++k) {
+            rates_at(k);
+            const SampleConstants c = model.constants((k - 1) / 1000.0, k / 1000.0);
+            for (std::size_t j = 0; j < n; ++j) {
+                pixel = ids[j];
+                model.advance(per_pixel[j], rate[j], c, key, ids[j], poisson, cache, emit_want);
+            }
+            n_busy += model.step_block_soa(h, block.data(), ids.data(), n, rate.data(), c, key, scratch, emit_got, pixel);
+        }
+        h.store(block.data(), n, (samples - 1) / 1000.0);
+        CHECK(n_busy > 0 && !want.empty());  // the per-pixel path and the comparator were reached
+        CHECK(got == want);
+        std::size_t differ = 0;
+        std::size_t off_invariant = 0;  // the source follower alone: z is x, nz is 0
+        for (std::size_t j = 0; j < n; ++j) {
+            differ += !same(block[j], per_pixel[j]);
+            off_invariant += !pole && !(per_pixel[j].z == per_pixel[j].x && per_pixel[j].nz == 0.0);
+        }
+        CHECK(differ == 0);
+        CHECK(off_invariant == 0);
+        std::printf("  %s: %zu events, %zu per-pixel steps, %zu states differ\n", pole ? "pole" : "source follower",
+                    want.size(), n_busy, differ);
+    }
 }
 
 TEST(a_leak_grows_with_the_photocurrent_and_fires_its_own_polarity) {

@@ -412,7 +412,8 @@ struct TraceSample {
 /// contiguous arrays that the compiler vectorises. The array-of-structures PixelState stays
 /// the state between calls and for the rare pixels that need the whole comparator.
 ///
-/// The fields a sample changes for every pixel are double-buffered: a sample reads `now()`
+/// The fields a sample changes for every pixel are double-buffered (but the sample counter,
+/// which grows by one for every pixel: n_base): a sample reads `now()`
 /// and writes `next()` for every pixel (a quiet pixel's new values, or a busy one's after the
 /// per-pixel path), then flip() makes them current. So the vector loop stores everything
 /// unconditionally (a conditional store, "keep the old value unless quiet", is what stops a
@@ -420,12 +421,30 @@ struct TraceSample {
 struct BlockSoA {
     struct Levels {
         std::vector<double> x, z, y, nz, ny, ref, clock_on, clock_off;
-        std::vector<std::uint64_t> n;
     };
     Levels buf[2];
     int cur = 0;
+    /// The sample counters (PixelState::n): pixel j's is n_base[j] + n_step (count()). Every
+    /// pixel in the arrays advances one sample a step (flip() counts them), so no pass loads or
+    /// stores a counter that only grows by one; take() and give() translate.
+    std::vector<std::uint64_t> n_base;
+    std::uint64_t n_step = 0;
     std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
     std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
+    /// The quiet pass's per-pixel terms that hold while the block's common rate does (made by
+    /// PixelModel::prepare_quiet_terms, with the operations the pass made them with): the leak's
+    /// part of the slope, PixelModel::leak_slope(leak_spread, theta_on, theta_off, leak_hz), and
+    /// the background clocks' rates bg_on_hz * bg_factor, bg_off_hz * bg_factor. One stream
+    /// each in place of two or three, and their multiplies out of every sample's pass.
+    std::vector<double> leak_g, bg_on_rate, bg_off_rate;
+    /// The leak_hz and bg_factor those terms are for (NaN: none; load() forgets them).
+    double terms_leak_hz = std::numeric_limits<double>::quiet_NaN();
+    double terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
+    /// Whether the levels' x and nz are left unwritten by the quiet pass (QuietChain::SfOnly):
+    /// with the source follower alone z is x (no pole between them) and nz is 0 (z carries no
+    /// noise: PixelModel::continuous_levels), in every state at all times, so give() makes
+    /// them and the pass saves a stream of loads and two of stores.
+    bool sf_only = false;
     /// PixelState::spare_words as its two 32-bit halves (the Philox batch writes its third and
     /// fourth words straight into them, and the next odd sample reads them in place), and
     /// spare_sample: changed in place by the word batch.
@@ -439,24 +458,34 @@ struct BlockSoA {
     Levels& now() { return buf[cur]; }
     const Levels& now() const { return buf[cur]; }
     Levels& next() { return buf[cur ^ 1]; }
-    void flip() { cur ^= 1; }
+    void flip() {
+        cur ^= 1;
+        ++n_step;
+    }
+    /// Pixel j's sample counter (PixelState::n) before the coming step.
+    std::uint64_t count(std::size_t j) const { return n_base[j] + n_step; }
 
     void resize(std::size_t m) {
         if (busy.size() >= m) return;
         for (Levels& l : buf) {
             for (auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off}) v->resize(m);
-            l.n.resize(m);
         }
-        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz}) v->resize(m);
+        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz, &leak_g,
+                        &bg_on_rate, &bg_off_rate})
+            v->resize(m);
         spare_lo.resize(m);
         spare_hi.resize(m);
         spare_sample.resize(m);
+        n_base.resize(m);
         busy.resize(m);
     }
-    /// Pixel j's fields from its state, its changing levels into `into`.
+    /// Pixel j's fields from its state, its changing levels into `into`: now() for a state at
+    /// the coming step's start, next() for one at its end (the per-pixel path's; its counter
+    /// one ahead of count()).
     EVSTWIN_ALWAYS_INLINE void take(const PixelState& s, std::size_t j, Levels& into) {
         into.x[j] = s.x; into.z[j] = s.z; into.y[j] = s.y; into.nz[j] = s.nz; into.ny[j] = s.ny;
-        into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off; into.n[j] = s.n;
+        into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off;
+        n_base[j] = s.n - n_step - static_cast<std::uint64_t>(&into != &now());
         refr_until[j] = s.refr_until; next_hot_t[j] = s.next_hot_t;
         spare_lo[j] = static_cast<std::uint32_t>(s.spare_words);
         spare_hi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
@@ -465,14 +494,18 @@ struct BlockSoA {
     /// Pixel j's fields back into its state, its changing levels from `from` (the constant
     /// ones are not written).
     EVSTWIN_ALWAYS_INLINE void give(PixelState& s, std::size_t j, const Levels& from) const {
-        s.x = from.x[j]; s.z = from.z[j]; s.y = from.y[j]; s.nz = from.nz[j]; s.ny = from.ny[j];
-        s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = from.n[j];
+        s.x = sf_only ? from.z[j] : from.x[j]; s.z = from.z[j]; s.y = from.y[j];
+        s.nz = sf_only ? 0.0 : from.nz[j]; s.ny = from.ny[j];
+        s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = count(j);
         s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
         s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
         s.spare_sample = spare_sample[j];
     }
     void load(const PixelState* st, std::size_t m) {
         resize(m);
+        terms_leak_hz = terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
+        n_step = 0;
+        sf_only = false;  // x and nz as loaded, until a step of the source follower alone
         for (std::size_t j = 0; j < m; ++j) {
             take(st[j], j, now());
             theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_spread[j] = st[j].leak_spread;
@@ -495,18 +528,17 @@ struct BlockSoA {
 struct QuietPass {
     const BlockSoA::Levels* now;
     BlockSoA::Levels* next;
-    const double *refr_until, *next_hot_t, *theta_on, *theta_off, *leak_spread, *bg_on_hz, *bg_off_hz;
+    const double *refr_until, *next_hot_t, *theta_on, *theta_off;
+    /// BlockSoA's terms for this rate (PixelModel::prepare_quiet_terms): the leak's part of the slope, and the
+    /// background clocks' rates (bg_on_hz * bg_factor, bg_off_hz * bg_factor).
+    const double *leak_g, *bg_on_rate, *bg_off_rate;
     const double *g1, *g2;
     std::uint64_t* busy;
     std::size_t count;
     double rate;  ///< the common photon rate: the pixels at any other are left busy
     double cx, pole_decay, pole_ramp;                 ///< NoiseCache's x and pole numbers at that rate
     double phi_zz, phi_yz, phi_yy, l_zz, l_yz, l_yy;  ///< its noise transition and innovation
-    double bg_factor, bridge_bound;
-    /// The leak at that rate: its rate before the pixel's spread (NoiseCache::leak_hz) and its
-    /// direction as weights of the thresholds, leak_on_w theta_on - leak_off_w theta_off (1, 0
-    /// for ON, 0, 1 for OFF), which is exactly PixelModel::leak_theta(), without a select.
-    double leak_hz, leak_on_w, leak_off_w;
+    double bridge_bound;
     double sf_decay, sf_ramp, dt, inv_dt, t0, t1;
     /// Whether a pixel that only the bridge keeps from quiet may be settled by the bridge stage
     /// (step_block_soa_impl): the bridge has a variance and continuous_finish() would not refine.
@@ -648,47 +680,53 @@ inline void bridge_bracket(const double* e_on, const double* e_off, std::size_t 
 
 namespace detail {
 /// soa_sample_words' passes over a block's counters, compiled per SIMD level (the block
-/// kernel itself is compiled for the baseline, where these loops take two counters a step):
+/// kernel itself is compiled for the baseline, where these loops take two counters a step).
+/// A pixel's counter is sample[j] + step (BlockSoA::count):
 /// sample_words_off: nonzero unless every pixel's words are kept for its (odd) sample;
 /// even_counters: the counters of an even sample's Philox batch, and the OR of the samples
 /// (odd bit set: some pixel's sample is odd); keep_for_next: every pixel's words now belong
 /// to its sample | 1.
 EVSTWIN_ALWAYS_INLINE std::uint64_t sample_words_off_body(const std::uint64_t* __restrict kept_for,
-                                                         const std::uint64_t* __restrict sample, std::size_t n) {
+                                                         const std::uint64_t* __restrict sample, std::uint64_t step,
+                                                         std::size_t n) {
     std::uint64_t off = 0;
-    for (std::size_t j = 0; j < n; ++j) off |= (kept_for[j] ^ sample[j]) | (~sample[j] & 1u);
+    for (std::size_t j = 0; j < n; ++j) {
+        const std::uint64_t now = sample[j] + step;
+        off |= (kept_for[j] ^ now) | (~now & 1u);
+    }
     return off;
 }
-EVSTWIN_ALWAYS_INLINE std::uint64_t even_counters_body(const std::uint64_t* __restrict sample,
+EVSTWIN_ALWAYS_INLINE std::uint64_t even_counters_body(const std::uint64_t* __restrict sample, std::uint64_t step,
                                                       const std::uint32_t* __restrict ids, std::size_t n,
                                                       std::uint32_t* __restrict c0, std::uint32_t* __restrict c1,
                                                       std::uint32_t* __restrict c2) {
     std::uint64_t any = 0;
     for (std::size_t j = 0; j < n; ++j) {
-        const std::uint64_t pair = sample[j] >> 1;
+        const std::uint64_t now = sample[j] + step, pair = now >> 1;
         c0[j] = static_cast<std::uint32_t>(pair);
         c1[j] = static_cast<std::uint32_t>(pair >> 32);
         c2[j] = ids[j];
-        any |= sample[j];
+        any |= now;
     }
     return any;
 }
-EVSTWIN_ALWAYS_INLINE void keep_for_next_body(const std::uint64_t* __restrict sample, std::size_t n,
+EVSTWIN_ALWAYS_INLINE void keep_for_next_body(const std::uint64_t* __restrict sample, std::uint64_t step, std::size_t n,
                                               std::uint64_t* __restrict kept_for) {
-    for (std::size_t j = 0; j < n; ++j) kept_for[j] = sample[j] | 1u;
+    for (std::size_t j = 0; j < n; ++j) kept_for[j] = (sample[j] + step) | 1u;
 }
 #define EVSTWIN_WORD_BOOKS_LEVEL(SUFFIX, TARGET)                                                               \
     TARGET inline std::uint64_t sample_words_off_##SUFFIX(const std::uint64_t* k, const std::uint64_t* s,      \
-                                                          std::size_t n) {                                     \
-        return sample_words_off_body(k, s, n);                                                                 \
+                                                          std::uint64_t step, std::size_t n) {                 \
+        return sample_words_off_body(k, s, step, n);                                                           \
     }                                                                                                          \
-    TARGET inline std::uint64_t even_counters_##SUFFIX(const std::uint64_t* s, const std::uint32_t* ids,       \
-                                                       std::size_t n, std::uint32_t* c0, std::uint32_t* c1,    \
-                                                       std::uint32_t* c2) {                                    \
-        return even_counters_body(s, ids, n, c0, c1, c2);                                                      \
+    TARGET inline std::uint64_t even_counters_##SUFFIX(const std::uint64_t* s, std::uint64_t step,             \
+                                                       const std::uint32_t* ids, std::size_t n,                \
+                                                       std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) { \
+        return even_counters_body(s, step, ids, n, c0, c1, c2);                                                \
     }                                                                                                          \
-    TARGET inline void keep_for_next_##SUFFIX(const std::uint64_t* s, std::size_t n, std::uint64_t* k) {       \
-        keep_for_next_body(s, n, k);                                                                           \
+    TARGET inline void keep_for_next_##SUFFIX(const std::uint64_t* s, std::uint64_t step, std::size_t n,       \
+                                              std::uint64_t* k) {                                              \
+        keep_for_next_body(s, step, n, k);                                                                     \
     }
 EVSTWIN_WORD_BOOKS_LEVEL(baseline, )
 #if EVSTWIN_MULTIVERSION
@@ -696,15 +734,16 @@ EVSTWIN_WORD_BOOKS_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
 EVSTWIN_WORD_BOOKS_LEVEL(avx512, EVSTWIN_TARGET_AVX512)
 #endif
 #undef EVSTWIN_WORD_BOOKS_LEVEL
-inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::size_t n) {
-    EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, n)
+inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::uint64_t step,
+                                      std::size_t n) {
+    EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, step, n)
 }
-inline std::uint64_t even_counters(const std::uint64_t* sample, const std::uint32_t* ids, std::size_t n,
-                                   std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) {
-    EVSTWIN_AT_LEVEL(even_counters, sample, ids, n, c0, c1, c2)
+inline std::uint64_t even_counters(const std::uint64_t* sample, std::uint64_t step, const std::uint32_t* ids,
+                                   std::size_t n, std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) {
+    EVSTWIN_AT_LEVEL(even_counters, sample, step, ids, n, c0, c1, c2)
 }
-inline void keep_for_next(const std::uint64_t* sample, std::size_t n, std::uint64_t* kept_for) {
-    EVSTWIN_AT_LEVEL(keep_for_next, sample, n, kept_for)
+inline void keep_for_next(const std::uint64_t* sample, std::uint64_t step, std::size_t n, std::uint64_t* kept_for) {
+    EVSTWIN_AT_LEVEL(keep_for_next, sample, step, n, kept_for)
 }
 }  // namespace detail
 
@@ -726,7 +765,8 @@ namespace detail {
 
 /// The continuous block kernel's common path for every pixel of a block: continuous_levels(),
 /// background_spend() and the quiet test of step_block_continuous(), one loop over the arrays
-/// without branches or conditional stores, so it vectorises. Every pixel's new levels go to
+/// without branches or conditional stores, so it vectorises. Every pixel's new levels (but x
+/// and nz with the source follower alone, which are z and 0: BlockSoA::sf_only) go to
 /// q.next (a quiet pixel's are final: what continuous_finish() would leave); q.busy says 0 for
 /// quiet, 1 where only the bridge's draw could fire (the bridge stage), 2 for the per-pixel
 /// path, which starts over from q.now. The same operations in
@@ -743,7 +783,6 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double* __restrict sref = q.now->ref.data();
     const double* __restrict son = q.now->clock_on.data();
     const double* __restrict soff = q.now->clock_off.data();
-    const std::uint64_t* __restrict sn = q.now->n.data();
     double* __restrict ox = q.next->x.data();
     double* __restrict oz = q.next->z.data();
     double* __restrict oy = q.next->y.data();
@@ -752,14 +791,13 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     double* __restrict oref = q.next->ref.data();
     double* __restrict oon = q.next->clock_on.data();
     double* __restrict ooff = q.next->clock_off.data();
-    std::uint64_t* __restrict on_ = q.next->n.data();
     const double* __restrict refr = q.refr_until;
     const double* __restrict hot = q.next_hot_t;
     const double* __restrict th_on_a = q.theta_on;
     const double* __restrict th_off_a = q.theta_off;
-    const double* __restrict leak_spread = q.leak_spread;
-    const double* __restrict bon = q.bg_on_hz;
-    const double* __restrict boff = q.bg_off_hz;
+    const double* __restrict leak_g = q.leak_g;
+    const double* __restrict bon = q.bg_on_rate;
+    const double* __restrict boff = q.bg_off_rate;
     const double* __restrict g1 = q.g1;
     const double* __restrict g2 = q.g2;
     std::uint64_t* __restrict busy = q.busy;
@@ -767,8 +805,7 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     const double x = q.cx, common = q.rate;
     const double pole_decay = q.pole_decay, pole_ramp = q.pole_ramp, sf_decay = q.sf_decay, sf_ramp = q.sf_ramp;
     const double phi_zz = q.phi_zz, phi_yz = q.phi_yz, phi_yy = q.phi_yy, l_zz = q.l_zz, l_yz = q.l_yz, l_yy = q.l_yy;
-    const double bg_factor = q.bg_factor, bridge_bound = q.bridge_bound, dt = q.dt, inv_dt = q.inv_dt;
-    const double leak_hz = q.leak_hz, leak_on_w = q.leak_on_w, leak_off_w = q.leak_off_w;
+    const double bridge_bound = q.bridge_bound, dt = q.dt, inv_dt = q.inv_dt;
     const double t0 = q.t0, t1 = q.t1;
     const bool bridge_stage = q.bridge_stage;
     const std::size_t count = q.count;
@@ -776,51 +813,56 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
 #pragma GCC ivdep
 #endif
     for (std::size_t j = 0; j < count; ++j) {
-        const double s_x = sx[j], s_z = sz[j], s_y = sy[j], s_nz = snz[j], s_ny = sny[j];
+        const double s_z = sz[j], s_y = sy[j], s_ny = sny[j];
         // continuous_levels(): the pole (if any), the exact source follower, the noise.
         double z = x;
-        if constexpr (pole) z = x + (s_z - s_x) * pole_decay - (x - s_x) * pole_ramp;
+        if constexpr (pole) z = x + (s_z - sx[j]) * pole_decay - (x - sx[j]) * pole_ramp;
         const double yd0 = s_y - s_ny;
         const double yd = z + (yd0 - s_z) * sf_decay - (z - s_z) * sf_ramp;
         double nz = 0.0, ny = 0.0;
         if constexpr (Noise) {
-            nz = phi_zz * s_nz + l_zz * g1[j];
             // With the pole its rate is > 0 wherever there is noise: the two-pole system.
-            if constexpr (pole)
-                ny = phi_yz * s_nz + phi_yy * s_ny + l_yz * g1[j] + l_yy * g2[j];
-            else
+            // Without it z carries no noise (continuous_levels): nz stays 0, unwritten.
+            if constexpr (pole) {
+                nz = phi_zz * snz[j] + l_zz * g1[j];
+                ny = phi_yz * snz[j] + phi_yy * s_ny + l_yz * g1[j] + l_yy * g2[j];
+            } else {
                 ny = phi_yy * s_ny + l_yy * g1[j];
+            }
         }
         const double y = yd + ny;
         // background_spend().
         double on = son[j], off = soff[j];
         bool ran_out = false;
         if constexpr (Background) {
-            on = son[j] - bon[j] * bg_factor * dt;
-            off = soff[j] - boff[j] * bg_factor * dt;
+            // background_spend()'s (bg_on_hz bg_factor) dt, the product in brackets made once.
+            on = son[j] - bon[j] * dt;
+            off = soff[j] - boff[j] * dt;
             ran_out = !((on > 0.0) & (off > 0.0));
         }
         // The quiet test (step_block_continuous()).
         const double th_on = th_on_a[j], th_off = th_off_a[j];
-        const double g = (y - s_y) * inv_dt + (leak_hz * leak_spread[j]) * (leak_on_w * th_on - leak_off_w * th_off);
+        const double g = (y - s_y) * inv_dt + leak_g[j];
         const double db = s_y - sref[j];
         const double d1 = db + g * dt;
         const double on0 = th_on - db, off0 = th_off + db;
         const bool plain = (static_cast<double>(rate[j]) == common) & !ran_out & (hot[j] > t1) & (refr[j] <= t0);
-        const bool quiet = plain & (std::min(on0, off0) > 0.0) &
-                           (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > bridge_bound);
-        // Not quiet, but the line stays between the levels (compare_bridged()'s test): only the
-        // bridge's draw can make it fire.
-        const bool bridge = bridge_stage & plain & (db < th_on) & (db > -th_off) & (d1 < th_on) & (d1 > -th_off);
+        const double on1 = th_on - d1, off1 = th_off + d1;
+        const bool between0 = std::min(on0, off0) > 0.0;
+        const bool quiet = plain & between0 & (std::min(on0 * on1, off0 * off1) > bridge_bound);
+        // Not quiet, but the line stays between the levels (compare_bridged()'s test, db and d1
+        // inside (-theta_off, theta_on)): only the bridge's draw can make it fire. Written with
+        // the differences above (a - b > 0 exactly when a > b; on0, off0 are NaN together, as
+        // on1, off1 are), so the same verdicts with fewer comparisons.
+        const bool bridge = bridge_stage & plain & between0 & (std::min(on1, off1) > 0.0);
         oref[j] = y - d1;
-        ox[j] = x;
+        if constexpr (pole) ox[j] = x;  // else z is x (BlockSoA::sf_only)
         oz[j] = z;
         oy[j] = y;
-        onz[j] = nz;
+        if constexpr (pole) onz[j] = nz;
         ony[j] = ny;
         oon[j] = on;
         ooff[j] = off;
-        on_[j] = sn[j] + 1u;
         // 0, 1 or 2 as arithmetic: a nested select here becomes a branch and stops the vectoriser.
         const std::uint64_t not_quiet = !quiet;
         busy[j] = 2u * not_quiet - (not_quiet & static_cast<std::uint64_t>(bridge));
@@ -1437,15 +1479,17 @@ struct PixelModel {
     EVSTWIN_ALWAYS_INLINE static void soa_sample_words(BlockSoA& h, const std::uint32_t* ids, std::size_t n,
                                                        Philox4x32Key key, BlockScratch& scratch,
                                                        const std::uint32_t*& w0, const std::uint32_t*& w1) {
-        const std::uint64_t* __restrict sample = h.now().n.data();
+        // The counters as BlockSoA keeps them: sample[j] + step (BlockSoA::count).
+        const std::uint64_t* __restrict sample = h.n_base.data();
+        const std::uint64_t step = h.n_step;
         std::uint32_t* __restrict lo = h.spare_lo.data();
         std::uint32_t* __restrict hi = h.spare_hi.data();
         std::uint64_t* __restrict kept_for = h.spare_sample.data();
         std::uint32_t* __restrict s0 = scratch.count_word.data();
         std::uint32_t* __restrict s1 = scratch.word1.data();
-        const bool first_odd = n > 0 && (sample[0] & 1u);
+        const bool first_odd = n > 0 && ((sample[0] + step) & 1u);
         if (first_odd) {
-            if (detail::sample_words_off(kept_for, sample, n) == 0) {
+            if (detail::sample_words_off(kept_for, sample, step, n) == 0) {
                 w0 = lo;
                 w1 = hi;
                 return;
@@ -1453,16 +1497,16 @@ struct PixelModel {
         } else {
             std::uint32_t *__restrict c0 = scratch.ctr0.data(), *__restrict c1 = scratch.ctr1.data(),
                           *__restrict c2 = scratch.ctr2.data();
-            if (!(detail::even_counters(sample, ids, n, c0, c1, c2) & 1u)) {
+            if (!(detail::even_counters(sample, step, ids, n, c0, c1, c2) & 1u)) {
                 philox4x32_batch(c0, c1, c2, PURPOSE_SAMPLE, key, n, s0, s1, lo, hi);
-                detail::keep_for_next(sample, n, kept_for);
+                detail::keep_for_next(sample, step, n, kept_for);
                 w0 = s0;
                 w1 = s1;
                 return;
             }
         }
         batch_sample_words(
-            n, [sample](std::size_t j) { return sample[j]; }, [ids](std::size_t j) { return ids[j]; },
+            n, [sample, step](std::size_t j) { return sample[j] + step; }, [ids](std::size_t j) { return ids[j]; },
             [&](std::size_t j, auto&& use) {
                 std::uint64_t words = static_cast<std::uint64_t>(lo[j]) | (static_cast<std::uint64_t>(hi[j]) << 32);
                 use(words, kept_for[j]);
@@ -1508,7 +1552,7 @@ struct PixelModel {
         // one's first wedge test in one pass without branches (its polynomial's latency then
         // overlaps across normals); then each finished from a stream that starts with that block.
         std::uint32_t* at = scratch.need_at.data();
-        const std::size_t m = list_flagged(slow1, n, at);
+        std::size_t m = list_flagged(slow1, n, at);
         if (m == 0) return;
         std::uint32_t *c0 = scratch.ctr0.data(), *c1 = scratch.ctr1.data(), *c2 = scratch.ctr2.data();
         double* q_first = scratch.noise_d.data();
@@ -1525,6 +1569,34 @@ struct PixelModel {
         }
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_NORMAL, key, pad_batch(scratch, m), r0, r1, r2, r3);
+        // A first normal alone in its stream (its second is not slow) that falls in a wedge and
+        // whose first test accepts clearly (lhs below q (1 - 1e-6), with the stream's first
+        // word: r0) is finished here, as normal_ziggurat_slow would finish it, in a loop
+        // without branches: that accept-or-reject branch, taken about as often as not, was
+        // most of the slow path's time (mispredicted). The others (rejected or undecided
+        // first tests, the tail, two slow normals sharing a stream) are kept, in order, for
+        // the loop below.
+        std::size_t d = 0;
+        for (std::size_t q = 0; q < m; ++q) {
+            const std::size_t j = at[q];
+            const std::uint32_t w = w0[j], layer = w & 127u, wedge = layer != 0 ? layer : 1u;
+            const double x = static_cast<double>(w >> 8) * z.w[layer];
+            const double lhs = z.f[wedge] + uniform_open(r0[q]) * (z.f[wedge - 1] - z.f[wedge]);
+            const bool done = (slow1[j] == 1u) & (layer != 0) & (lhs < q_first[q] * (1.0 - 1e-6));
+            const double g = (1.0 - 2.0 * static_cast<double>((w >> 7) & 1u)) * x;  // sign * x, sign = +-1
+            // g1[j] = done ? g : g1[j] by bit masks: a select here became a mispredicted branch.
+            std::uint64_t g_bits, old_bits;
+            std::memcpy(&g_bits, &g, sizeof g_bits);
+            std::memcpy(&old_bits, &g1[j], sizeof old_bits);
+            const std::uint64_t take = 0u - static_cast<std::uint64_t>(done);
+            const std::uint64_t bits = (g_bits & take) | (old_bits & ~take);
+            std::memcpy(&g1[j], &bits, sizeof bits);
+            at[d] = static_cast<std::uint32_t>(j);
+            r0[d] = r0[q]; r1[d] = r1[q]; r2[d] = r2[q]; r3[d] = r3[q];
+            q_first[d] = q_first[q];
+            d += !done;
+        }
+        m = d;
         for (std::size_t q = 0; q < m; ++q) {
             const std::size_t j = at[q];
             const bool first_slow = slow1[j] & 1u, second_slow = slow1[j] >> 1;
@@ -1847,7 +1919,7 @@ struct PixelModel {
         BlockSoA::Levels& next = h.next();
         const std::uint32_t* w0 = nullptr;
         const std::uint32_t* w1 = nullptr;
-        const auto count = [&now](std::size_t j) { return now.n[j]; };
+        const auto count = [&h](std::size_t j) { return h.count(j); };
         const auto id = [ids](std::size_t j) { return ids[j]; };
         double* g1s = scratch.u_noise.data();
         double* g2s = scratch.count.data();
@@ -1877,8 +1949,9 @@ struct PixelModel {
         q.now = &now;
         q.next = &next;
         q.refr_until = h.refr_until.data(); q.next_hot_t = h.next_hot_t.data();
-        q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data(); q.leak_spread = h.leak_spread.data();
-        q.bg_on_hz = h.bg_on_hz.data(); q.bg_off_hz = h.bg_off_hz.data();
+        q.theta_on = h.theta_on.data(); q.theta_off = h.theta_off.data();
+        prepare_quiet_terms(h, n, common, background);
+        q.leak_g = h.leak_g.data(); q.bg_on_rate = h.bg_on_rate.data(); q.bg_off_rate = h.bg_off_rate.data();
         q.g1 = g1s; q.g2 = g2s; q.busy = h.busy.data(); q.count = n;
         // The pass takes the two-pole noise wherever there is noise behind the pole, which holds
         // when the pole's rate is > 0; were it not (a current that underflows), no pixel is
@@ -1887,11 +1960,11 @@ struct PixelModel {
         q.cx = common.x; q.pole_decay = common.pole_decay; q.pole_ramp = common.pole_ramp;
         q.phi_zz = common.k.phi_zz; q.phi_yz = common.k.phi_yz; q.phi_yy = common.k.phi_yy;
         q.l_zz = common.k.l_zz; q.l_yz = common.k.l_yz; q.l_yy = common.k.l_yy;
-        q.bg_factor = common.bg_factor; q.bridge_bound = common.bridge_bound;
-        q.leak_hz = common.leak_hz; q.leak_on_w = leak_off ? 0.0 : 1.0; q.leak_off_w = leak_off ? 1.0 : 0.0;
+        q.bridge_bound = common.bridge_bound;
         q.sf_decay = c.sf_decay; q.sf_ramp = c.sf_ramp; q.dt = c.dt; q.inv_dt = c.inv_dt; q.t0 = c.t0; q.t1 = c.t1;
         // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling.
         q.bridge_stage = common.k.bridge_var > 0.0 && (sf_only || !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
+        h.sf_only = sf_only;
         detail::quiet_pass<Chain>(q, rate, noise, background);
         std::uint64_t* busy = h.busy.data();
         for (std::size_t i = 0; i < n_held; ++i) busy[held[i]] = 0;  // dropped, whatever the pass found
@@ -1938,6 +2011,24 @@ struct PixelModel {
         }
         h.flip();
         return n_busy;
+    }
+
+    /// The quiet pass's per-pixel terms at the common rate's numbers (BlockSoA::leak_g,
+    /// bg_on_rate, bg_off_rate), unless the arrays hold them already: they change only with
+    /// the common rate (its leak_hz and bg_factor), so most calls make them once per block.
+    void prepare_quiet_terms(BlockSoA& h, std::size_t n, const NoiseCache& common, bool background) const {
+        if (!(h.terms_leak_hz == common.leak_hz)) {
+            for (std::size_t j = 0; j < n; ++j)
+                h.leak_g[j] = leak_slope(h.leak_spread[j], h.theta_on[j], h.theta_off[j], common.leak_hz);
+            h.terms_leak_hz = common.leak_hz;
+        }
+        if (background && !(h.terms_bg_factor == common.bg_factor)) {
+            for (std::size_t j = 0; j < n; ++j) {
+                h.bg_on_rate[j] = h.bg_on_hz[j] * common.bg_factor;
+                h.bg_off_rate[j] = h.bg_off_hz[j] * common.bg_factor;
+            }
+            h.terms_bg_factor = common.bg_factor;
+        }
     }
 
     /// The pixels the quiet pass left to the bridge alone (h.busy 1): their levels in h.next()
@@ -1993,7 +2084,7 @@ struct PixelModel {
         for (std::size_t k = 0; k < m; ++k) {
             const std::size_t j = at[k];
             const double q = q_fire[k];
-            const std::uint64_t sample = now.n[j];
+            const std::uint64_t sample = h.count(j);
             c0[d] = static_cast<std::uint32_t>(sample);
             c1[d] = static_cast<std::uint32_t>(sample >> 32);
             c2[d] = ids[j];
@@ -2343,7 +2434,9 @@ struct PixelModel {
         nz = 0.0;
         ny = 0.0;
         if (D > 0.0) {
-            nz = k.phi_zz * s.nz + k.l_zz * g1;
+            // Without the pole z is x, with no noise of its own (as init_state starts it): nz
+            // stays 0 (the z process would be a random walk, phi_zz = 1, that nothing reads).
+            nz = pole ? k.phi_zz * s.nz + k.l_zz * g1 : 0.0;
             // Without the pole its rate a is 0: the 1-D process of the source follower.
             ny = (pole && cache.a > 0.0 && filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
                                                    : k.phi_yy * s.ny + k.l_yy * g1;
