@@ -2,6 +2,9 @@
 
 #include <pybind11/stl.h>
 
+#include <cstdlib>
+#include <mutex>
+#include <new>
 #include <optional>
 #include <string>
 
@@ -67,29 +70,134 @@ TimesArray checked_times(py::array t_s, py::ssize_t n) {
     return t;
 }
 
+/// Event output buffers for NumPy, and one spare. A call's events go into malloc'd memory that
+/// the returned array owns (no copy, and not zero-filled first as std::vector's resize would:
+/// every event is written). A large allocation is fresh pages from the kernel on every call,
+/// which it zeroes and maps on first touch: for the event-heavy load (250 samples of 346 x 260,
+/// ~19 M events, 246 MB a call) the faults cost more than the sort. So the buffer of the last
+/// array that was freed is kept and handed to the next call that fits it: a program that
+/// drops (or writes out) each call's events before the next reuses one buffer. One spare at
+/// most, between SPARE_MIN_BYTES and SPARE_MAX_BYTES; the memory and the events are the same.
+class EventBuffers {
+public:
+    static constexpr std::size_t SPARE_MIN_BYTES = std::size_t{1} << 20;
+    static constexpr std::size_t SPARE_MAX_BYTES = std::size_t{1} << 30;
+
+    /// Room for n >= 1 events: the spare if it holds n to 2n of them, else new memory.
+    /// *capacity: how many it holds. Thread-safe (called without the GIL).
+    static evstwin::Event* take(std::size_t n, std::size_t* capacity) {
+        {
+            std::lock_guard<std::mutex> lock(mutex());
+            Spare& spare = spare_();
+            if (spare.data && spare.capacity >= n && spare.capacity / 2 <= n) {
+                evstwin::Event* p = spare.data;
+                *capacity = spare.capacity;
+                spare = Spare{};
+                return p;
+            }
+        }
+        auto* p = static_cast<evstwin::Event*>(std::malloc(n * sizeof(evstwin::Event)));
+        if (!p) throw std::bad_alloc();
+        evstwin::detail::advise_huge_pages(p, n * sizeof(evstwin::Event));  // before the first touch
+        *capacity = n;
+        return p;
+    }
+
+    /// A buffer from take() no longer used: kept as the spare (replacing the older one) or freed.
+    static void give_back(evstwin::Event* p, std::size_t capacity) noexcept {
+        const std::size_t bytes = capacity * sizeof(evstwin::Event);
+        if (bytes < SPARE_MIN_BYTES || bytes > SPARE_MAX_BYTES) {
+            std::free(p);
+            return;
+        }
+        evstwin::Event* old = nullptr;
+        {
+            std::lock_guard<std::mutex> lock(mutex());
+            Spare& spare = spare_();
+            old = spare.data;
+            spare = Spare{p, capacity};
+        }
+        std::free(old);
+    }
+
+private:
+    struct Spare {
+        evstwin::Event* data = nullptr;
+        std::size_t capacity = 0;
+    };
+    // Never destroyed: arrays may be freed during interpreter shutdown, after static destructors.
+    static std::mutex& mutex() {
+        static auto* m = new std::mutex;
+        return *m;
+    }
+    static Spare& spare_() {
+        static auto* s = new Spare;
+        return *s;
+    }
+};
+
+/// One call's events on their way to NumPy: storage() for Sensor::run_into, then array().
+class EventsOut {
+public:
+    EventsOut() = default;
+    EventsOut(const EventsOut&) = delete;
+    EventsOut& operator=(const EventsOut&) = delete;
+    ~EventsOut() {
+        if (data_) EventBuffers::give_back(data_, capacity_);
+    }
+    evstwin::EventStorage storage() {
+        return [this](std::size_t n) {
+            data_ = EventBuffers::take(n, &capacity_);
+            return data_;
+        };
+    }
+    /// The n events written as an EVENT_DTYPE array that owns their buffer (GIL held).
+    py::array_t<evstwin::Event> array(std::size_t n) {
+        if (n == 0 || !data_) return py::array_t<evstwin::Event>(0);
+        struct Owned {
+            evstwin::Event* data;
+            std::size_t capacity;
+        };
+        auto* owned = new Owned{data_, capacity_};
+        data_ = nullptr;
+        py::capsule free_when_done(owned, [](void* p) {
+            auto* o = static_cast<Owned*>(p);
+            EventBuffers::give_back(o->data, o->capacity);
+            delete o;
+        });
+        return py::array_t<evstwin::Event>({static_cast<py::ssize_t>(n)}, owned->data, free_when_done);
+    }
+
+private:
+    evstwin::Event* data_ = nullptr;
+    std::size_t capacity_ = 0;
+};
+
 template <class Real>
-std::vector<evstwin::Event> run_typed(Sensor& s, const py::array& rate, const TimesArray& t,
-                                      const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace,
-                                      bool static_frame) {
+std::size_t run_typed(Sensor& s, const evstwin::EventStorage& storage, const py::array& rate, const TimesArray& t,
+                      const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace,
+                      bool static_frame) {
     const Real* data = static_cast<const Real*>(rate.data());
     const double* times = t.data();
     const std::size_t n = static_cast<std::size_t>(rate.shape(0));
     py::gil_scoped_release release;
-    return s.run(data, times, n, probe, trace, static_frame);
+    return s.run_into(storage, data, times, n, probe, trace, static_frame);
 }
 
-std::vector<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, const std::vector<std::uint32_t>* probe,
+py::array_t<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, const std::vector<std::uint32_t>* probe,
                                     std::vector<evstwin::TraceSample>* trace) {
     const bool static_frame = rate.dtype().kind() == 'f' && rate.ndim() == 3 && rate.shape(1) == s.height() &&
                               rate.shape(2) == s.width() && is_static_frames(rate);
     const bool raw_ok = rate.dtype().attr("isnative").cast<bool>() && rate.attr("flags").attr("aligned").cast<bool>();
     if (!static_frame || !raw_ok || (rate.itemsize() != 4 && rate.itemsize() != 8)) rate = checked_rates(s, rate);
     auto t = checked_times(t_s, rate.shape(0));
-    if (rate.itemsize() == 4) return run_typed<float>(s, rate, t, probe, trace, static_frame);
-    return run_typed<double>(s, rate, t, probe, trace, static_frame);
+    EventsOut out;
+    const std::size_t n = rate.itemsize() == 4 ? run_typed<float>(s, out.storage(), rate, t, probe, trace, static_frame)
+                                               : run_typed<double>(s, out.storage(), rate, t, probe, trace, static_frame);
+    return out.array(n);
 }
 
-std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::array rate, py::array t_s) {
+py::array_t<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::array rate, py::array t_s) {
     if (pixels.dtype().kind() != 'i' && pixels.dtype().kind() != 'u')
         throw py::type_error("pixels must be an integer array of row-major pixel indices; got dtype " +
                              std::string(py::str(pixels.dtype())));
@@ -120,9 +228,15 @@ std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::arra
     const double* times = t.data();
     const void* data = rate.data();
     const bool single = rate.itemsize() == 4;
-    py::gil_scoped_release release;
-    if (single) return s.run_pixels(px.data(), px.size(), static_cast<const float*>(data), times, T);
-    return s.run_pixels(px.data(), px.size(), static_cast<const double*>(data), times, T);
+    EventsOut out;
+    const evstwin::EventStorage storage = out.storage();
+    std::size_t n_events = 0;
+    {
+        py::gil_scoped_release release;
+        n_events = single ? s.run_pixels_into(storage, px.data(), px.size(), static_cast<const float*>(data), times, T)
+                   : s.run_pixels_into(storage, px.data(), px.size(), static_cast<const double*>(data), times, T);
+    }
+    return out.array(n_events);
 }
 
 int threads_arg(const std::optional<int>& n) {
@@ -144,7 +258,7 @@ void register_sensor(py::module_& m) {
              py::arg("width"), py::arg("height"), py::arg("params"), py::arg("seed") = 0,
              py::arg("num_threads") = py::none())
         .def("run",
-             [](Sensor& s, py::array rate, py::array t_s) { return to_numpy(run_any(s, rate, t_s, nullptr, nullptr)); },
+             [](Sensor& s, py::array rate, py::array t_s) { return run_any(s, rate, t_s, nullptr, nullptr); },
              py::arg("photon_rate"), py::arg("t_s"))
         .def("run_probe",
              [](Sensor& s, py::array rate, py::array t_s, std::vector<std::uint32_t> pixels) {
@@ -152,12 +266,12 @@ void register_sensor(py::module_& m) {
                  auto ev = run_any(s, rate, t_s, &pixels, &trace);
                  const auto n = static_cast<py::ssize_t>(pixels.size());
                  const auto T = static_cast<py::ssize_t>(trace.size()) / std::max<py::ssize_t>(n, 1);
-                 return py::make_tuple(to_numpy(std::move(ev)), to_numpy(std::move(trace), {T, n}));
+                 return py::make_tuple(std::move(ev), to_numpy(std::move(trace), {T, n}));
              },
              py::arg("photon_rate"), py::arg("t_s"), py::arg("pixels"))
         .def("run_pixels",
              [](Sensor& s, py::array pixels, py::array rate, py::array t_s) {
-                 return to_numpy(run_pixels_any(s, pixels, rate, t_s));
+                 return run_pixels_any(s, pixels, rate, t_s);
              },
              py::arg("pixels"), py::arg("photon_rate"), py::arg("t_s"))
         .def("reset", &Sensor::reset)

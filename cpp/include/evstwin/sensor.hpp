@@ -14,6 +14,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <exception>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -73,6 +74,25 @@ inline void advise_huge_pages(void* p, std::size_t bytes) {
     (void)p;
     (void)bytes;
 #endif
+}
+}  // namespace detail
+
+/// Where run_into() / run_pixels_into() put a call's events: called once, from one thread,
+/// once the call's count n_events is known and before any event is written; returns room for
+/// that many (contents not needed: every one is written, by the call's threads in parallel).
+/// Sensor::run() gives a std::vector; the Python bindings a buffer they hand to NumPy, which
+/// they need not fill with zeros first nor fault in on one thread.
+using EventStorage = std::function<Event*(std::size_t n_events)>;
+
+namespace detail {
+/// EventStorage for a std::vector (Sensor::run's return).
+inline EventStorage vector_storage(std::vector<Event>& out) {
+    return [&out](std::size_t n) {
+        out.reserve(n);  // allocated, not yet touched: the hint comes before the faults
+        advise_huge_pages(out.data(), n * sizeof(Event));
+        out.resize(n);
+        return out.data();
+    };
 }
 }  // namespace detail
 
@@ -268,11 +288,22 @@ public:
     std::vector<Event> run(const Real* photon_rate, const double* t_s, std::size_t n_samples,
                            const std::vector<std::uint32_t>* probe_pixels = nullptr,
                            std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
+        std::vector<Event> events;
+        run_into(detail::vector_storage(events), photon_rate, t_s, n_samples, probe_pixels, trace, static_frame);
+        return events;
+    }
+
+    /// run() with the events written into `storage` (called once with their number, unless
+    /// there are none); returns that number.
+    template <class Real>
+    std::size_t run_into(const EventStorage& storage, const Real* photon_rate, const double* t_s,
+                         std::size_t n_samples, const std::vector<std::uint32_t>* probe_pixels = nullptr,
+                         std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
         const std::size_t npix = state_.size();
         check_usable();
         if (n_samples == 0) {
             labels_.clear();
-            return {};
+            return 0;
         }
         check_times(t_s, n_samples);
         // The rates are checked at the start of the call's parallel region (RateCheck), before
@@ -302,6 +333,7 @@ public:
         start_call(nblocks, n_samples);
 
         CollectPlan plan;
+        plan.storage = &storage;
         plan.t_s = t_s;
         plan.t_before = last_t_;
         guarded_for_each_block(
@@ -323,7 +355,7 @@ public:
         samples_ += n_samples;
         last_t_ = t_s[n_samples - 1];
         collect_finish();
-        return std::move(plan.events);
+        return plan.total;
     }
 
     /// Advance only the listed pixels through their own sample times: the sparse second
@@ -337,10 +369,19 @@ public:
     template <class Real>
     std::vector<Event> run_pixels(const std::uint32_t* pixels, std::size_t n_pixels, const Real* photon_rate,
                                   const double* t_s, std::size_t n_samples) {
+        std::vector<Event> events;
+        run_pixels_into(detail::vector_storage(events), pixels, n_pixels, photon_rate, t_s, n_samples);
+        return events;
+    }
+
+    /// run_pixels() with the events written into `storage` (as run_into); returns their number.
+    template <class Real>
+    std::size_t run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
+                                const Real* photon_rate, const double* t_s, std::size_t n_samples) {
         check_usable();
         if (n_pixels == 0 || n_samples == 0) {
             labels_.clear();
-            return {};
+            return 0;
         }
         const std::size_t npix = state_.size();
         std::vector<char> seen(npix, 0);
@@ -389,6 +430,7 @@ public:
         // The listed pixels need not be in increasing order: each sample's events are sorted
         // by (t, pixel), not only by t.
         CollectPlan plan;
+        plan.storage = &storage;
         guarded_for_each_block(
             nblocks, n_pixels * n_samples, rate_check,
             [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
@@ -401,7 +443,7 @@ public:
             throw_bad_rate("photon_rate[" + std::to_string(bad / n_pixels) + ", " + std::to_string(bad % n_pixels) + "]",
                            static_cast<double>(photon_rate[bad]));
         collect_finish();
-        return std::move(plan.events);
+        return plan.total;
     }
 
 private:
@@ -902,7 +944,9 @@ private:
     /// What collect_prepare() lays out for collect_sample(): the output, the blocks that made
     /// events, and where each sample's events start in the output.
     struct CollectPlan {
-        std::vector<Event> events;
+        const EventStorage* storage = nullptr;
+        Event* events = nullptr;  ///< storage's room for the call's `total` events
+        std::size_t total = 0;
         std::vector<std::uint32_t> busy;  ///< the blocks with events, in order
         std::vector<std::size_t> base;    ///< sample k's events go to [base[k], base[k + 1])
         bool pixel_ordered = true;
@@ -942,11 +986,10 @@ private:
         }
         plan.pixel_ordered = pixel_ordered;
         plan.row = detail::PixelDivider(static_cast<std::uint32_t>(width_));
-        plan.events.reserve(total);  // allocated, not yet touched: the hint comes before the faults
-        detail::advise_huge_pages(plan.events.data(), total * sizeof(Event));
-        plan.events.resize(total);
         labels_.resize(total);
         if (total == 0) return 0;
+        plan.events = (*plan.storage)(total);
+        plan.total = total;
         for (std::size_t b = 0; b < nblocks; ++b)
             if (!block_events_[b].empty()) plan.busy.push_back(static_cast<std::uint32_t>(b));
         plan.base.assign(n_samples + 1, 0);
@@ -967,7 +1010,7 @@ private:
     void collect_sample(CollectPlan& plan, std::size_t k, SortScratch& sort) {
         const std::size_t base = plan.base[k], n_k = plan.base[k + 1] - base;
         if (n_k == 0) return;
-        Event* events = plan.events.data() + base;
+        Event* events = plan.events + base;
         std::uint8_t* labels = labels_.data() + base;
         const detail::PixelDivider row = plan.row;
         const auto put = [&](std::size_t j, const RawEvent& e) {
