@@ -96,10 +96,13 @@ public:
                 return p;
             }
         }
-        auto* p = static_cast<evstwin::Event*>(std::malloc(n * sizeof(evstwin::Event)));
+        // An eighth more than asked, so that the next call, if it has a few more events, still
+        // fits when this one comes back: pages never written are never faulted in.
+        const std::size_t cap = n + n / 8;
+        auto* p = static_cast<evstwin::Event*>(std::malloc(cap * sizeof(evstwin::Event)));
         if (!p) throw std::bad_alloc();
-        evstwin::detail::advise_huge_pages(p, n * sizeof(evstwin::Event));  // before the first touch
-        *capacity = n;
+        evstwin::detail::advise_huge_pages(p, cap * sizeof(evstwin::Event));  // before the first touch
+        *capacity = cap;
         return p;
     }
 
