@@ -4,14 +4,12 @@
 // sets the source follower's cutoff: 200 Hz makes the event-heavy load (the 18,000 e-/s dark
 // current's shot noise then crosses the thresholds ~180 times a pixel a second). THREADS
 // (default 1) is the engine's thread count. "pole" is "continuous" with the photoreceptor pole
-// (pr_pole, as the DAVIS346 presets and mcreynolds have it). A fifth argument "reuse" hands the
-// events over as the Python bindings do (Sensor::run_into, into one buffer kept from call to
-// call and never zero-filled) instead of Sensor::run's fresh std::vector: the same events.
+// (pr_pole, as the DAVIS346 presets and mcreynolds have it).
 //
 //   g++ -std=c++17 -O3 -DNDEBUG -fopenmp -Icpp/include bench/engine_driver.cpp -o /tmp/engine_driver
 //   valgrind --tool=callgrind /tmp/engine_driver continuous 64          # or: sampled 64
 //   valgrind --tool=callgrind /tmp/engine_driver continuous 64 200      # event-heavy
-//   time /tmp/engine_driver continuous 260 [CUTOFF_HZ [THREADS [reuse]]]
+//   time /tmp/engine_driver continuous 260 [CUTOFF_HZ [THREADS]]
 #include <evstwin/evstwin.hpp>
 
 #include <cstdio>
@@ -21,13 +19,11 @@
 
 int main(int argc, char** argv) {
     const bool pole = argc >= 2 && std::strcmp(argv[1], "pole") == 0;
-    if (argc < 3 || argc > 6 ||
-        (std::strcmp(argv[1], "continuous") != 0 && std::strcmp(argv[1], "sampled") != 0 && !pole) ||
-        (argc == 6 && std::strcmp(argv[5], "reuse") != 0)) {
-        std::fprintf(stderr, "usage: %s continuous|pole|sampled HEIGHT [CUTOFF_HZ [THREADS [reuse]]]\n", argv[0]);
+    if (argc < 3 || argc > 5 ||
+        (std::strcmp(argv[1], "continuous") != 0 && std::strcmp(argv[1], "sampled") != 0 && !pole)) {
+        std::fprintf(stderr, "usage: %s continuous|pole|sampled HEIGHT [CUTOFF_HZ [THREADS]]\n", argv[0]);
         return 2;
     }
-    const bool reuse = argc == 6;
     evstwin::PixelParams p;
     p.threshold_sigma = 0.03;
     p.noise_model = std::strcmp(argv[1], "sampled") == 0 ? evstwin::NoiseModel::Sampled : evstwin::NoiseModel::Continuous;
@@ -49,29 +45,12 @@ int main(int argc, char** argv) {
     };
     for (int call = 0; call < 4; ++call) {
         for (int i = 0; i < samples; ++i) t[i] = (call * samples + i) / 1000.0;
-        std::vector<evstwin::Event> fresh;
-        static std::vector<evstwin::Event> kept;  // reuse: grown, never shrunk or zero-filled again
-        std::size_t n_call = 0;
-        const evstwin::Event* events = nullptr;
-        if (reuse) {
-            n_call = sensor.run_into(
-                [](std::size_t m) {
-                    if (kept.size() < m) kept.resize(m + m / 8);
-                    return kept.data();
-                },
-                rate.data(), t.data(), samples, nullptr, nullptr, true);
-            events = kept.data();
-        } else {
-            fresh = sensor.run(rate.data(), t.data(), samples, nullptr, nullptr, true);
-            n_call = fresh.size();
-            events = fresh.data();
-        }
-        for (std::size_t i = 0; i < n_call; ++i) {
-            const evstwin::Event& e = events[i];
+        const auto events = sensor.run(rate.data(), t.data(), samples, nullptr, nullptr, true);
+        for (const auto& e : events) {
             mix(static_cast<std::uint64_t>(e.t));
             mix((static_cast<std::uint64_t>(e.y) << 32) | (static_cast<std::uint64_t>(e.x) << 8) | e.p);
         }
-        n += n_call;
+        n += events.size();
     }
     // The digest tells builds apart that should give the same events (e.g. -march=native).
     std::printf("%zu events, digest %016llx\n", n, static_cast<unsigned long long>(digest));

@@ -3,7 +3,6 @@
 #include <pybind11/stl.h>
 
 #include <cstdlib>
-#include <mutex>
 #include <new>
 #include <optional>
 #include <string>
@@ -70,74 +69,16 @@ TimesArray checked_times(py::array t_s, py::ssize_t n) {
     return t;
 }
 
-/// Event output buffers for NumPy, and one spare. A call's events go into malloc'd memory that
-/// the returned array owns (no copy, and not zero-filled first as std::vector's resize would:
-/// every event is written). A large allocation is fresh pages from the kernel on every call,
-/// which it zeroes and maps on first touch: for the event-heavy load (250 samples of 346 x 260,
-/// ~19 M events, 246 MB a call) the faults cost more than the sort. So the buffer of the last
-/// array that was freed is kept and handed to the next call that fits it: a program that
-/// drops (or writes out) each call's events before the next reuses one buffer. One spare at
-/// most, between SPARE_MIN_BYTES and SPARE_MAX_BYTES; the memory and the events are the same.
-class EventBuffers {
-public:
-    static constexpr std::size_t SPARE_MIN_BYTES = std::size_t{1} << 20;
-    static constexpr std::size_t SPARE_MAX_BYTES = std::size_t{1} << 30;
-
-    /// Room for n >= 1 events: the spare if it holds n to 2n of them, else new memory.
-    /// *capacity: how many it holds. Thread-safe (called without the GIL).
-    static evstwin::Event* take(std::size_t n, std::size_t* capacity) {
-        {
-            std::lock_guard<std::mutex> lock(mutex());
-            Spare& spare = spare_();
-            if (spare.data && spare.capacity >= n && spare.capacity / 2 <= n) {
-                evstwin::Event* p = spare.data;
-                *capacity = spare.capacity;
-                spare = Spare{};
-                return p;
-            }
-        }
-        // An eighth more than asked, so that the next call, if it has a few more events, still
-        // fits when this one comes back: pages never written are never faulted in.
-        const std::size_t cap = n + n / 8;
-        auto* p = static_cast<evstwin::Event*>(std::malloc(cap * sizeof(evstwin::Event)));
-        if (!p) throw std::bad_alloc();
-        evstwin::detail::advise_huge_pages(p, cap * sizeof(evstwin::Event));  // before the first touch
-        *capacity = cap;
-        return p;
-    }
-
-    /// A buffer from take() no longer used: kept as the spare (replacing the older one) or freed.
-    static void give_back(evstwin::Event* p, std::size_t capacity) noexcept {
-        const std::size_t bytes = capacity * sizeof(evstwin::Event);
-        if (bytes < SPARE_MIN_BYTES || bytes > SPARE_MAX_BYTES) {
-            std::free(p);
-            return;
-        }
-        evstwin::Event* old = nullptr;
-        {
-            std::lock_guard<std::mutex> lock(mutex());
-            Spare& spare = spare_();
-            old = spare.data;
-            spare = Spare{p, capacity};
-        }
-        std::free(old);
-    }
-
-private:
-    struct Spare {
-        evstwin::Event* data = nullptr;
-        std::size_t capacity = 0;
-    };
-    // Never destroyed: arrays may be freed during interpreter shutdown, after static destructors.
-    static std::mutex& mutex() {
-        static auto* m = new std::mutex;
-        return *m;
-    }
-    static Spare& spare_() {
-        static auto* s = new Spare;
-        return *s;
-    }
-};
+/// Room for a call's n >= 1 events, for NumPy: malloc'd, not zero-filled (every event is
+/// written) and hinted for huge pages before the first touch, so the call's threads fault its
+/// pages in as they fill them. std::vector's resize value-initialised the whole output on one
+/// thread first: 246 MB a call of the event-heavy load, while the other thread waited.
+evstwin::Event* new_event_buffer(std::size_t n) {
+    auto* p = static_cast<evstwin::Event*>(std::malloc(n * sizeof(evstwin::Event)));
+    if (!p) throw std::bad_alloc();
+    evstwin::detail::advise_huge_pages(p, n * sizeof(evstwin::Event));
+    return p;
+}
 
 /// One call's events on their way to NumPy: storage() for Sensor::run_into, then array().
 class EventsOut {
@@ -145,35 +86,24 @@ public:
     EventsOut() = default;
     EventsOut(const EventsOut&) = delete;
     EventsOut& operator=(const EventsOut&) = delete;
-    ~EventsOut() {
-        if (data_) EventBuffers::give_back(data_, capacity_);
-    }
+    ~EventsOut() { std::free(data_); }
     evstwin::EventStorage storage() {
         return [this](std::size_t n) {
-            data_ = EventBuffers::take(n, &capacity_);
+            data_ = new_event_buffer(n);
             return data_;
         };
     }
     /// The n events written as an EVENT_DTYPE array that owns their buffer (GIL held).
     py::array_t<evstwin::Event> array(std::size_t n) {
         if (n == 0 || !data_) return py::array_t<evstwin::Event>(0);
-        struct Owned {
-            evstwin::Event* data;
-            std::size_t capacity;
-        };
-        auto* owned = new Owned{data_, capacity_};
-        data_ = nullptr;
-        py::capsule free_when_done(owned, [](void* p) {
-            auto* o = static_cast<Owned*>(p);
-            EventBuffers::give_back(o->data, o->capacity);
-            delete o;
-        });
-        return py::array_t<evstwin::Event>({static_cast<py::ssize_t>(n)}, owned->data, free_when_done);
+        evstwin::Event* data = data_;
+        py::capsule free_when_done(data, [](void* p) { std::free(p); });
+        data_ = nullptr;  // the capsule owns it now
+        return py::array_t<evstwin::Event>({static_cast<py::ssize_t>(n)}, data, free_when_done);
     }
 
 private:
     evstwin::Event* data_ = nullptr;
-    std::size_t capacity_ = 0;
 };
 
 template <class Real>

@@ -388,30 +388,6 @@ def test_events_reach_numpy_without_a_copy() -> None:
     assert type(events.base).__name__ == "PyCapsule"
 
 
-def test_a_freed_event_buffer_is_reused_and_a_live_one_is_not() -> None:
-    # Above 1 MiB (~80,000 events) the bindings keep the buffer of the last event array freed
-    # and hand it to the next call it fits (n to 2n events): no fresh pages to fault in. The
-    # events are those of a sensor that never reuses anything, and an array still alive is
-    # never written over.
-    w, h, n, cut = 128, 64, 30, 18
-    rate = np.full((n, h, w), 2e6, dtype=np.float32)
-    t = np.arange(n) * 1e-3
-    whole = Sensor(w, h, EVENT_HEAVY, seed=3, num_threads=2).run(rate, t)
-    sensor = Sensor(w, h, EVENT_HEAVY, seed=3, num_threads=2)
-    first = sensor.run(rate[:cut], t[:cut])
-    assert len(first) * EVENT_DTYPE.itemsize > 2**20
-    first_copy = first.copy()
-    del first  # its buffer becomes the spare
-    second = sensor.run(rate[cut:], t[cut:])
-    assert len(first_copy) / 2 <= len(second) <= len(first_copy)  # so it fits the spare
-    assert np.concatenate([first_copy, second]).tobytes() == whole.tobytes()
-    second_copy = second.copy()
-    other = Sensor(w, h, EVENT_HEAVY, seed=4, num_threads=2).run(rate[:cut], t[:cut])
-    assert not np.shares_memory(other, second)
-    assert second.tobytes() == second_copy.tobytes()
-    assert other.tobytes() != first_copy.tobytes()
-
-
 def test_reset_replays_the_same_events() -> None:
     rate, t = moving_spot(50, 20, 10)
     sensor = Sensor(20, 10, NOISY, seed=4)

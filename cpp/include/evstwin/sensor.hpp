@@ -1091,14 +1091,11 @@ private:
         return n_samples;
     }
 
-    /// Block b's events of sample k in the order it made them, as fn(t_us, record) with each
-    /// one's full time (event_time from the sample's end end_us, or the block's full_t): until
-    /// fn returns false. Returns whether it never did.
     /// Block b's events of sample k as fn(d, record) with each one's offset d = t_us - lo from
     /// a microsecond lo less than 2^31 before the sample's end, where t_us - lo lies in [0, 2^31);
-    /// any other event gives some d >= 2^31; until fn returns false. Returns whether it never did. Where the block
-    /// keeps only the low bits, an event lies within 2^31 us of its sample's end (emit()), so
-    /// the difference of the low bits is the offset.
+    /// any other event gives some d >= 2^31; until fn returns false. Returns whether it never
+    /// did. Where the block keeps only the low bits, an event lies within 2^31 us of its
+    /// sample's end (emit()), so the difference of the low bits is the offset.
     template <class Fn>
     bool for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const {
         const RawEvent* out = block_events_[b].data();
@@ -1117,6 +1114,9 @@ private:
         return true;
     }
 
+    /// Block b's events of sample k in the order it made them, as fn(t_us, record) with each
+    /// one's full time (event_time from the sample's end end_us, or the block's full_t): until
+    /// fn returns false. Returns whether it never did.
     template <class Fn>
     bool for_each_in_sample(std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn) const {
         const RawEvent* out = block_events_[b].data();
