@@ -2,6 +2,8 @@
 
 #include <pybind11/stl.h>
 
+#include <cstdlib>
+#include <new>
 #include <optional>
 #include <string>
 
@@ -67,29 +69,68 @@ TimesArray checked_times(py::array t_s, py::ssize_t n) {
     return t;
 }
 
+/// Room for a call's n >= 1 events, for NumPy: malloc'd, not zero-filled (every event is
+/// written) and hinted for huge pages before the first touch, so the call's threads fault its
+/// pages in as they fill them. std::vector's resize value-initialised the whole output on one
+/// thread first: 246 MB a call of the event-heavy load, while the other thread waited.
+evstwin::Event* new_event_buffer(std::size_t n) {
+    auto* p = static_cast<evstwin::Event*>(std::malloc(n * sizeof(evstwin::Event)));
+    if (!p) throw std::bad_alloc();
+    evstwin::detail::advise_huge_pages(p, n * sizeof(evstwin::Event));
+    return p;
+}
+
+/// One call's events on their way to NumPy: storage() for Sensor::run_into, then array().
+class EventsOut {
+public:
+    EventsOut() = default;
+    EventsOut(const EventsOut&) = delete;
+    EventsOut& operator=(const EventsOut&) = delete;
+    ~EventsOut() { std::free(data_); }
+    evstwin::EventStorage storage() {
+        return [this](std::size_t n) {
+            data_ = new_event_buffer(n);
+            return data_;
+        };
+    }
+    /// The n events written as an EVENT_DTYPE array that owns their buffer (GIL held).
+    py::array_t<evstwin::Event> array(std::size_t n) {
+        if (n == 0 || !data_) return py::array_t<evstwin::Event>(0);
+        evstwin::Event* data = data_;
+        py::capsule free_when_done(data, [](void* p) { std::free(p); });
+        data_ = nullptr;  // the capsule owns it now
+        return py::array_t<evstwin::Event>({static_cast<py::ssize_t>(n)}, data, free_when_done);
+    }
+
+private:
+    evstwin::Event* data_ = nullptr;
+};
+
 template <class Real>
-std::vector<evstwin::Event> run_typed(Sensor& s, const py::array& rate, const TimesArray& t,
-                                      const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace,
-                                      bool static_frame) {
+std::size_t run_typed(Sensor& s, const evstwin::EventStorage& storage, const py::array& rate, const TimesArray& t,
+                      const std::vector<std::uint32_t>* probe, std::vector<evstwin::TraceSample>* trace,
+                      bool static_frame) {
     const Real* data = static_cast<const Real*>(rate.data());
     const double* times = t.data();
     const std::size_t n = static_cast<std::size_t>(rate.shape(0));
     py::gil_scoped_release release;
-    return s.run(data, times, n, probe, trace, static_frame);
+    return s.run_into(storage, data, times, n, probe, trace, static_frame);
 }
 
-std::vector<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, const std::vector<std::uint32_t>* probe,
+py::array_t<evstwin::Event> run_any(Sensor& s, py::array rate, py::array t_s, const std::vector<std::uint32_t>* probe,
                                     std::vector<evstwin::TraceSample>* trace) {
     const bool static_frame = rate.dtype().kind() == 'f' && rate.ndim() == 3 && rate.shape(1) == s.height() &&
                               rate.shape(2) == s.width() && is_static_frames(rate);
     const bool raw_ok = rate.dtype().attr("isnative").cast<bool>() && rate.attr("flags").attr("aligned").cast<bool>();
     if (!static_frame || !raw_ok || (rate.itemsize() != 4 && rate.itemsize() != 8)) rate = checked_rates(s, rate);
     auto t = checked_times(t_s, rate.shape(0));
-    if (rate.itemsize() == 4) return run_typed<float>(s, rate, t, probe, trace, static_frame);
-    return run_typed<double>(s, rate, t, probe, trace, static_frame);
+    EventsOut out;
+    const std::size_t n = rate.itemsize() == 4 ? run_typed<float>(s, out.storage(), rate, t, probe, trace, static_frame)
+                                               : run_typed<double>(s, out.storage(), rate, t, probe, trace, static_frame);
+    return out.array(n);
 }
 
-std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::array rate, py::array t_s) {
+py::array_t<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::array rate, py::array t_s) {
     if (pixels.dtype().kind() != 'i' && pixels.dtype().kind() != 'u')
         throw py::type_error("pixels must be an integer array of row-major pixel indices; got dtype " +
                              std::string(py::str(pixels.dtype())));
@@ -120,9 +161,15 @@ std::vector<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::arra
     const double* times = t.data();
     const void* data = rate.data();
     const bool single = rate.itemsize() == 4;
-    py::gil_scoped_release release;
-    if (single) return s.run_pixels(px.data(), px.size(), static_cast<const float*>(data), times, T);
-    return s.run_pixels(px.data(), px.size(), static_cast<const double*>(data), times, T);
+    EventsOut out;
+    const evstwin::EventStorage storage = out.storage();
+    std::size_t n_events = 0;
+    {
+        py::gil_scoped_release release;
+        n_events = single ? s.run_pixels_into(storage, px.data(), px.size(), static_cast<const float*>(data), times, T)
+                   : s.run_pixels_into(storage, px.data(), px.size(), static_cast<const double*>(data), times, T);
+    }
+    return out.array(n_events);
 }
 
 int threads_arg(const std::optional<int>& n) {
@@ -144,7 +191,7 @@ void register_sensor(py::module_& m) {
              py::arg("width"), py::arg("height"), py::arg("params"), py::arg("seed") = 0,
              py::arg("num_threads") = py::none())
         .def("run",
-             [](Sensor& s, py::array rate, py::array t_s) { return to_numpy(run_any(s, rate, t_s, nullptr, nullptr)); },
+             [](Sensor& s, py::array rate, py::array t_s) { return run_any(s, rate, t_s, nullptr, nullptr); },
              py::arg("photon_rate"), py::arg("t_s"))
         .def("run_probe",
              [](Sensor& s, py::array rate, py::array t_s, std::vector<std::uint32_t> pixels) {
@@ -152,12 +199,12 @@ void register_sensor(py::module_& m) {
                  auto ev = run_any(s, rate, t_s, &pixels, &trace);
                  const auto n = static_cast<py::ssize_t>(pixels.size());
                  const auto T = static_cast<py::ssize_t>(trace.size()) / std::max<py::ssize_t>(n, 1);
-                 return py::make_tuple(to_numpy(std::move(ev)), to_numpy(std::move(trace), {T, n}));
+                 return py::make_tuple(std::move(ev), to_numpy(std::move(trace), {T, n}));
              },
              py::arg("photon_rate"), py::arg("t_s"), py::arg("pixels"))
         .def("run_pixels",
              [](Sensor& s, py::array pixels, py::array rate, py::array t_s) {
-                 return to_numpy(run_pixels_any(s, pixels, rate, t_s));
+                 return run_pixels_any(s, pixels, rate, t_s);
              },
              py::arg("pixels"), py::arg("photon_rate"), py::arg("t_s"))
         .def("reset", &Sensor::reset)

@@ -139,6 +139,28 @@ def test_leak_alone_gives_on_events_at_f_leak() -> None:
     np.testing.assert_allclose(ev["t"], np.arange(1, 13) / f_leak * 1e6, atol=0.5)
 
 
+def test_leak_events_keep_their_times_across_sample_intervals_of_hours() -> None:
+    # The engine's working records keep an event's microsecond modulo 2^32 and take the rest
+    # from its sample's end; an event more than 2^31 us (35.8 min) before that end makes its
+    # block keep full times. Leak events every 900 s over intervals of 1000 s and 5000 s (the
+    # second holds events up to 4200 s before its end), on run() and on run_pixels() (listed
+    # out of order: the comparison sort), on 1 and 2 threads: every time the analytic one.
+    f_leak = 1 / 900.0
+    params = IDEAL.replace(leak_rate_hz=f_leak, leak_random_phase=False)
+    t = np.array([0.0, 1000.0, 6000.0, 6001.0])
+    want = np.arange(1, 7) / f_leak * 1e6  # 900 s ... 5400 s
+    h, w = 2, 3
+    for threads in (1, 2):
+        ev = Sensor(w, h, params, seed=1, num_threads=threads).run(np.full((4, h, w), 1e9), t)
+        assert len(ev) == len(want) * h * w and np.all(ev["p"] == 1)
+        np.testing.assert_allclose(ev["t"][:: h * w], want, atol=0.5)
+        assert np.all(ev["t"].reshape(len(want), h * w) == ev["t"][:: h * w, None])
+        sensor = Sensor(w, h, params, seed=1, num_threads=threads)
+        sub = sensor.run_pixels(np.array([4, 1]), np.full((4, 2), 1e9), t)
+        assert len(sub) == 2 * len(want) and np.all(sub["y"] * w + sub["x"] == np.tile([1, 4], len(want)))
+        np.testing.assert_allclose(sub["t"][::2], want, atol=0.5)
+
+
 def test_statistical_shot_noise_rates_follow_eq12() -> None:
     rn, factor = 2.0, 0.25
     params = IDEAL.replace(shot_noise_rate_hz=rn, shot_noise_factor=factor)
@@ -719,7 +741,7 @@ def test_an_event_flood_stops_at_max_events_before_memory_runs_out() -> None:
     t4 = np.arange(1, 5) * 1e-3
     for threads in (1, 2):
         sensor = Sensor(64, 64, p, num_threads=threads, max_events=200_000)
-        with pytest.raises(ValueError, match=r"more than max_events=200000 events \(about 50 bytes each.*use shorter "
+        with pytest.raises(ValueError, match=r"more than max_events=200000 events \(about 30 bytes each.*use shorter "
                                              r"chunks, or raise max_events"):
             sensor.run(rates, t4)
         # Its pixels are half advanced: refused until reset, then as new.

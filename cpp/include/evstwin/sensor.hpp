@@ -14,6 +14,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <exception>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -76,6 +77,25 @@ inline void advise_huge_pages(void* p, std::size_t bytes) {
 }
 }  // namespace detail
 
+/// Where run_into() / run_pixels_into() put a call's events: called once, from one thread,
+/// once the call's count n_events is known and before any event is written; returns room for
+/// that many (contents not needed: every one is written, by the call's threads in parallel).
+/// Sensor::run() gives a std::vector; the Python bindings a buffer they hand to NumPy, which
+/// they need not fill with zeros first nor fault in on one thread.
+using EventStorage = std::function<Event*(std::size_t n_events)>;
+
+namespace detail {
+/// EventStorage for a std::vector (Sensor::run's return).
+inline EventStorage vector_storage(std::vector<Event>& out) {
+    return [&out](std::size_t n) {
+        out.reserve(n);  // allocated, not yet touched: the hint comes before the faults
+        advise_huge_pages(out.data(), n * sizeof(Event));
+        out.resize(n);
+        return out.data();
+    };
+}
+}  // namespace detail
+
 class Sensor {
 public:
     /// Pixels per block: the unit of parallel work and of event bookkeeping.
@@ -103,8 +123,8 @@ public:
     /// Most engine threads accepted: far above any machine's cores, far below the counts
     /// (5000, 2^31 - 1) at which the OpenMP runtime exits or crashes.
     static constexpr int MAX_THREADS = 1024;
-    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 4 GB at the
-    /// peak (16-byte working records with their vectors' growth slack, the 13-byte output and
+    /// Default cap on the events of one run / run_pixels call: 1e8 events are about 3 GB at the
+    /// peak (8-byte working records with their vectors' growth slack, the 13-byte output and
     /// its labels),
     /// far above any real chunk (a long simulation is cut into short calls) and below a
     /// machine's memory. Exceeding it throws std::length_error while the events are produced:
@@ -268,11 +288,22 @@ public:
     std::vector<Event> run(const Real* photon_rate, const double* t_s, std::size_t n_samples,
                            const std::vector<std::uint32_t>* probe_pixels = nullptr,
                            std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
+        std::vector<Event> events;
+        run_into(detail::vector_storage(events), photon_rate, t_s, n_samples, probe_pixels, trace, static_frame);
+        return events;
+    }
+
+    /// run() with the events written into `storage` (called once with their number, unless
+    /// there are none); returns that number.
+    template <class Real>
+    std::size_t run_into(const EventStorage& storage, const Real* photon_rate, const double* t_s,
+                         std::size_t n_samples, const std::vector<std::uint32_t>* probe_pixels = nullptr,
+                         std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
         const std::size_t npix = state_.size();
         check_usable();
         if (n_samples == 0) {
             labels_.clear();
-            return {};
+            return 0;
         }
         check_times(t_s, n_samples);
         // The rates are checked at the start of the call's parallel region (RateCheck), before
@@ -302,6 +333,8 @@ public:
         start_call(nblocks, n_samples);
 
         CollectPlan plan;
+        plan.storage = &storage;
+        plan.sample_end_s = t_s;
         plan.t_s = t_s;
         plan.t_before = last_t_;
         guarded_for_each_block(
@@ -323,7 +356,7 @@ public:
         samples_ += n_samples;
         last_t_ = t_s[n_samples - 1];
         collect_finish();
-        return std::move(plan.events);
+        return plan.total;
     }
 
     /// Advance only the listed pixels through their own sample times: the sparse second
@@ -337,10 +370,19 @@ public:
     template <class Real>
     std::vector<Event> run_pixels(const std::uint32_t* pixels, std::size_t n_pixels, const Real* photon_rate,
                                   const double* t_s, std::size_t n_samples) {
+        std::vector<Event> events;
+        run_pixels_into(detail::vector_storage(events), pixels, n_pixels, photon_rate, t_s, n_samples);
+        return events;
+    }
+
+    /// run_pixels() with the events written into `storage` (as run_into); returns their number.
+    template <class Real>
+    std::size_t run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
+                                const Real* photon_rate, const double* t_s, std::size_t n_samples) {
         check_usable();
         if (n_pixels == 0 || n_samples == 0) {
             labels_.clear();
-            return {};
+            return 0;
         }
         const std::size_t npix = state_.size();
         std::vector<char> seen(npix, 0);
@@ -389,6 +431,8 @@ public:
         // The listed pixels need not be in increasing order: each sample's events are sorted
         // by (t, pixel), not only by t.
         CollectPlan plan;
+        plan.storage = &storage;
+        plan.sample_end_s = t_s;
         guarded_for_each_block(
             nblocks, n_pixels * n_samples, rate_check,
             [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
@@ -401,7 +445,7 @@ public:
             throw_bad_rate("photon_rate[" + std::to_string(bad / n_pixels) + ", " + std::to_string(bad % n_pixels) + "]",
                            static_cast<double>(photon_rate[bad]));
         collect_finish();
-        return std::move(plan.events);
+        return plan.total;
     }
 
 private:
@@ -542,18 +586,60 @@ private:
         if (error) std::rethrow_exception(error);
     }
 
+    /// A block's working record of an event, 8 bytes (it was 16: the event-heavy load writes,
+    /// counts and copies hundreds of MB of them a call): the low 32 bits of its microsecond
+    /// (round_us) and its pixel, label and polarity in one word. The rest of the time is its
+    /// sample's: an event lies within 2^31 us (35 min) of its sample's end, so event_time()
+    /// recovers it from that end; emit() checks, and a block with an event that does not (a
+    /// sample interval of over half an hour) keeps its events' full times beside the records
+    /// from then on (keep_full_time; the same output either way).
     struct RawEvent {
-        std::int64_t t_us;  ///< the event time in the output's microseconds
-        std::uint32_t pixel;
-        std::uint8_t p;
-        std::uint8_t label;  ///< EventLabel: why it fired
+        std::uint32_t t_lo;  ///< the event's microsecond, modulo 2^32
+        std::uint32_t code;  ///< pixel << 4 | label << 1 | polarity (event_code)
         RawEvent() = default;
         /// For emplace_back: the fields stored straight into the list. push_back of a braced
-        /// record built it on the stack with four small stores and copied it with one 16-byte
-        /// load, which the processor cannot forward from them (a stall on every event).
-        RawEvent(std::int64_t t_us_, std::uint32_t pixel_, std::uint8_t p_, std::uint8_t label_)
-            : t_us(t_us_), pixel(pixel_), p(p_), label(label_) {}
+        /// record built it on the stack and copied it with one wider load, which the processor
+        /// cannot forward from the small stores (a stall on every event).
+        RawEvent(std::uint32_t t_lo_, std::uint32_t code_) : t_lo(t_lo_), code(code_) {}
+        std::uint32_t pixel() const { return code >> 4; }
+        std::uint8_t label() const { return static_cast<std::uint8_t>((code >> 1) & 7u); }
+        std::uint8_t p() const { return static_cast<std::uint8_t>(code & 1u); }
     };
+    static_assert(sizeof(RawEvent) == 8, "RawEvent is two 32-bit words");
+    static_assert(LABEL_HOT_PIXEL < 8, "RawEvent::code keeps the label in 3 bits");
+    static_assert(MAX_PIXELS <= (std::uint64_t{1} << 28), "RawEvent::code keeps the pixel in 28 bits");
+    static std::uint32_t event_code(std::uint32_t pixel, Polarity pol, std::uint8_t label) {
+        return pixel << 4 | static_cast<std::uint32_t>(label) << 1 | (static_cast<std::uint32_t>(pol) & 1u);
+    }
+    /// The microsecond whose low 32 bits are t_lo nearest end_us: the event's own where it lies
+    /// within [end_us - 2^31, end_us + 2^31), which emit() ensures (else the full time is kept).
+    static std::int64_t event_time(std::int64_t end_us, std::uint32_t t_lo) {
+        const std::uint32_t d = t_lo - static_cast<std::uint32_t>(end_us);  // modulo 2^32
+        return end_us + static_cast<std::int64_t>(d) - (d >= 0x80000000u ? std::int64_t{1} << 32 : 0);
+    }
+    /// Whether event_time(end_us, t_us's low bits) gives t_us back (t_us and end_us lie within
+    /// +-2^63 us / 2, as round_us' times do: run() takes times below 9.2e12 s).
+    static bool near_sample_end(std::int64_t t_us, std::int64_t end_us) {
+        return static_cast<std::uint64_t>(t_us - end_us) + 0x80000000ull < 0x100000000ull;
+    }
+    /// emit()'s sample end once its block keeps full times: near_sample_end() false for every
+    /// event time (|t_us| < 9.2e18), so every event takes keep_full_time().
+    static constexpr std::int64_t FULL_TIMES = std::numeric_limits<std::int64_t>::min() / 2;
+    /// emit()'s rare path, out of line: the block's full event times (full_t), kept once an
+    /// event lies too far from its sample's end for event_time(): the earlier events' times are
+    /// filled in from theirs (end_us(j): sample j's end in microseconds; ends: the block's counts
+    /// after each sample before `sample`, the current one), then t_us is added for the newest.
+    template <class EndUs>
+    EVSTWIN_NOINLINE static void keep_full_time(std::vector<std::int64_t>& full_t, const std::vector<RawEvent>& out,
+                                                const std::uint32_t* ends, std::size_t sample, const EndUs& end_us,
+                                                std::int64_t t_us) {
+        std::size_t j = 0;
+        for (std::size_t e = full_t.size(); e + 1 < out.size(); ++e) {
+            while (j < sample && e >= ends[j]) ++j;
+            full_t.push_back(event_time(end_us(j), out[e].t_lo));
+        }
+        full_t.push_back(t_us);
+    }
 
     /// A block's event list, taken out of block_events_ while the block runs and put back
     /// after it (also when it throws). The vectors' headers lie side by side in block_events_,
@@ -561,14 +647,23 @@ private:
     /// lists wrote the same cache line (the end pointer) on every event: false sharing that
     /// cost the event-heavy load ~15 % more CPU an event on 2 threads than on 1.
     struct TakenEvents {
-        explicit TakenEvents(std::vector<RawEvent>& home) : home_(home) { out.swap(home_); }
-        ~TakenEvents() { out.swap(home_); }
+        TakenEvents(std::vector<RawEvent>& home, std::vector<std::int64_t>& full_t_home)
+            : home_(home), full_t_home_(full_t_home) {
+            out.swap(home_);
+            full_t.swap(full_t_home_);
+        }
+        ~TakenEvents() {
+            out.swap(home_);
+            full_t.swap(full_t_home_);
+        }
         TakenEvents(const TakenEvents&) = delete;
         TakenEvents& operator=(const TakenEvents&) = delete;
         std::vector<RawEvent> out;
+        std::vector<std::int64_t> full_t;  ///< empty, or every event's time (keep_full_time)
 
     private:
         std::vector<RawEvent>& home_;
+        std::vector<std::int64_t>& full_t_home_;
     };
 
     /// The event's time in integer microseconds, rounded half away from zero as std::llround
@@ -587,10 +682,12 @@ private:
         samples_in_call_ = n_samples;
         if (block_events_.size() < nblocks) {
             block_events_.resize(nblocks);
+            block_full_t_.resize(nblocks);
             block_sample_ends_.resize(nblocks);
         }
         for (std::size_t b = 0; b < nblocks; ++b) {
             block_events_[b].clear();
+            block_full_t_[b].clear();
             block_sample_ends_[b].assign(n_samples, 0);
         }
         events_in_call_.store(0, std::memory_order_relaxed);
@@ -691,12 +788,20 @@ private:
                    std::size_t n_probe, TraceSample* trace) {
         const std::size_t npix = state_.size();
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
-        TakenEvents taken(block_events_[b]);
+        TakenEvents taken(block_events_[b], block_full_t_[b]);
         std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-        auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
-            out.emplace_back(round_us(t), pixel, static_cast<std::uint8_t>(pol), label);
+        std::size_t sample = 0;
+        std::int64_t end_us = 0;  // the current sample's end (RawEvent)
+        const auto sample_end_us = [&consts](std::size_t j) { return round_us(consts[j].t1); };
+        auto emit = [&](double t, Polarity pol, std::uint8_t label) {
+            const std::int64_t t_us = round_us(t);
+            out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
+            if (!near_sample_end(t_us, end_us)) {  // always false once the block keeps full times
+                keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
+                end_us = FULL_TIMES;
+            }
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         const bool kernel = !probe_slot && model_.has_block_kernel();
@@ -727,6 +832,8 @@ private:
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
+            sample = k;
+            end_us = taken.full_t.empty() ? round_us(c.t1) : FULL_TIMES;
             std::size_t n_active = hi - lo;
             bool eligible = kernel && synced;
             if (kernel && !synced && in_soa) {
@@ -819,12 +926,20 @@ private:
                          const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
                          PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
         const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
-        TakenEvents taken(block_events_[b]);
+        TakenEvents taken(block_events_[b], block_full_t_[b]);
         std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-        auto emit = [this, &out, &pixel](double t, Polarity pol, std::uint8_t label) {
-            out.emplace_back(round_us(t), pixel, static_cast<std::uint8_t>(pol), label);
+        std::size_t sample = 0;
+        std::int64_t end_us = round_us(t_s[0]);  // the current sample's end (RawEvent)
+        const auto sample_end_us = [t_s](std::size_t j) { return round_us(t_s[j]); };
+        auto emit = [&](double t, Polarity pol, std::uint8_t label) {
+            const std::int64_t t_us = round_us(t);
+            out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
+            if (!near_sample_end(t_us, end_us)) {  // always false once the block keeps full times
+                keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
+                end_us = FULL_TIMES;
+            }
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
@@ -855,6 +970,8 @@ private:
             // Every pixel now stands at t_s[0]: the rest of the samples on the block's arrays.
             scratch.soa.load(local.data(), m);
             for (; k < n_samples; ++k) {
+                sample = k;
+                end_us = taken.full_t.empty() ? round_us(t_s[k]) : FULL_TIMES;
                 model_.step_block_soa(scratch.soa, local.data(), pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
                                       scratch, emit, pixel);
                 ends[k] = static_cast<std::uint32_t>(out.size());
@@ -862,6 +979,8 @@ private:
             scratch.soa.store(local.data(), m, t_s[n_samples - 1]);
         }
         for (; k < n_samples; ++k) {
+            sample = k;
+            end_us = taken.full_t.empty() ? round_us(t_s[k]) : FULL_TIMES;
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
                 model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
@@ -888,21 +1007,29 @@ private:
     /// when the call's events exceed max_events) and its text do not depend on the threads.
     [[noreturn]] void throw_max_events() const {
         throw std::length_error("a run call produced more than max_events=" + std::to_string(max_events_) +
-                                " events (about 50 bytes each while collected); use shorter chunks, or raise "
+                                " events (about 30 bytes each while collected); use shorter chunks, or raise "
                                 "max_events if memory allows");
     }
+
+    /// A record with its full time, for collect_sample()'s comparison sort.
+    struct TimedEvent {
+        std::int64_t t_us;
+        RawEvent e;
+    };
 
     /// collect_sample()'s working memory for one thread: the counting sort's slots, or a sample's
     /// events for the comparison sort.
     struct SortScratch {
         std::vector<std::uint32_t> slots;
-        std::vector<RawEvent> sample_events;
+        std::vector<TimedEvent> sample_events;
     };
 
     /// What collect_prepare() lays out for collect_sample(): the output, the blocks that made
     /// events, and where each sample's events start in the output.
     struct CollectPlan {
-        std::vector<Event> events;
+        const EventStorage* storage = nullptr;
+        Event* events = nullptr;  ///< storage's room for the call's `total` events
+        std::size_t total = 0;
         std::vector<std::uint32_t> busy;  ///< the blocks with events, in order
         std::vector<std::size_t> base;    ///< sample k's events go to [base[k], base[k + 1])
         bool pixel_ordered = true;
@@ -913,6 +1040,9 @@ private:
         /// range without a pass to find it.
         const double* t_s = nullptr;
         double t_before = 0.0;
+        /// The call's sample times (run() and run_pixels()): the ends from which event_time()
+        /// recovers each sample's events' times.
+        const double* sample_end_s = nullptr;
     };
 
     /// The call's events in output order: by time in microseconds; within one microsecond,
@@ -942,11 +1072,10 @@ private:
         }
         plan.pixel_ordered = pixel_ordered;
         plan.row = detail::PixelDivider(static_cast<std::uint32_t>(width_));
-        plan.events.reserve(total);  // allocated, not yet touched: the hint comes before the faults
-        detail::advise_huge_pages(plan.events.data(), total * sizeof(Event));
-        plan.events.resize(total);
         labels_.resize(total);
         if (total == 0) return 0;
+        plan.events = (*plan.storage)(total);
+        plan.total = total;
         for (std::size_t b = 0; b < nblocks; ++b)
             if (!block_events_[b].empty()) plan.busy.push_back(static_cast<std::uint32_t>(b));
         plan.base.assign(n_samples + 1, 0);
@@ -962,58 +1091,98 @@ private:
         return n_samples;
     }
 
+    /// Block b's events of sample k as fn(d, record) with each one's offset d = t_us - lo from
+    /// a microsecond lo less than 2^31 before the sample's end, where t_us - lo lies in [0, 2^31);
+    /// any other event gives some d >= 2^31; until fn returns false. Returns whether it never
+    /// did. Where the block keeps only the low bits, an event lies within 2^31 us of its
+    /// sample's end (emit()), so the difference of the low bits is the offset.
+    template <class Fn>
+    bool for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const {
+        const RawEvent* out = block_events_[b].data();
+        const std::uint32_t first = k == 0 ? 0u : block_sample_ends_[b][k - 1], end = block_sample_ends_[b][k];
+        if (block_full_t_[b].empty()) {
+            const std::uint32_t lo_bits = static_cast<std::uint32_t>(lo);
+            for (std::uint32_t e = first; e < end; ++e)
+                if (!fn(out[e].t_lo - lo_bits, out[e])) return false;
+        } else {
+            const std::int64_t* full_t = block_full_t_[b].data();
+            for (std::uint32_t e = first; e < end; ++e) {
+                const std::uint64_t d = static_cast<std::uint64_t>(full_t[e]) - static_cast<std::uint64_t>(lo);
+                if (!fn(static_cast<std::uint32_t>(std::min<std::uint64_t>(d, 0xFFFFFFFFu)), out[e])) return false;
+            }
+        }
+        return true;
+    }
+
+    /// Block b's events of sample k in the order it made them, as fn(t_us, record) with each
+    /// one's full time (event_time from the sample's end end_us, or the block's full_t): until
+    /// fn returns false. Returns whether it never did.
+    template <class Fn>
+    bool for_each_in_sample(std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn) const {
+        const RawEvent* out = block_events_[b].data();
+        const std::uint32_t first = k == 0 ? 0u : block_sample_ends_[b][k - 1], end = block_sample_ends_[b][k];
+        if (block_full_t_[b].empty()) {
+            for (std::uint32_t e = first; e < end; ++e)
+                if (!fn(event_time(end_us, out[e].t_lo), out[e])) return false;
+        } else {
+            const std::int64_t* full_t = block_full_t_[b].data();
+            for (std::uint32_t e = first; e < end; ++e)
+                if (!fn(full_t[e], out[e])) return false;
+        }
+        return true;
+    }
+
     /// Sample k's events of all blocks, sorted, into their place of the output (see
     /// collect_prepare). Touches only that place: samples may run concurrently.
     void collect_sample(CollectPlan& plan, std::size_t k, SortScratch& sort) {
         const std::size_t base = plan.base[k], n_k = plan.base[k + 1] - base;
         if (n_k == 0) return;
-        Event* events = plan.events.data() + base;
+        Event* events = plan.events + base;
         std::uint8_t* labels = labels_.data() + base;
         const detail::PixelDivider row = plan.row;
-        const auto put = [&](std::size_t j, const RawEvent& e) {
-            const std::uint32_t y = row.quotient(e.pixel);
-            events[j] = Event{e.t_us, static_cast<std::uint16_t>(e.pixel - y * row.divisor()), static_cast<std::uint16_t>(y),
-                              e.p};
-            labels[j] = e.label;
+        const std::int64_t end_us = round_us(plan.sample_end_s[k]);
+        const auto put = [&](std::size_t j, std::int64_t t_us, RawEvent e) {
+            const std::uint32_t pixel = e.pixel(), y = row.quotient(pixel);
+            events[j] = Event{t_us, static_cast<std::uint16_t>(pixel - y * row.divisor()), static_cast<std::uint16_t>(y),
+                              e.p()};
+            labels[j] = e.label();
         };
-        const auto first = [this, k](std::uint32_t b) { return k == 0 ? 0u : block_sample_ends_[b][k - 1]; };
-        if (plan.pixel_ordered && plan.t_s && counting_sort_in_interval(plan, k, sort, put, first)) return;
+        if (plan.pixel_ordered && plan.t_s && counting_sort_in_interval(plan, k, end_us, sort, put)) return;
         std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
-        for (const std::uint32_t b : plan.busy) {
-            const RawEvent* out = block_events_[b].data();
-            const std::uint32_t end = block_sample_ends_[b][k];
-            for (std::uint32_t e = first(b); e < end; ++e) {
-                lo = std::min(lo, out[e].t_us);
-                hi = std::max(hi, out[e].t_us);
-            }
-        }
+        for (const std::uint32_t b : plan.busy)
+            for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent) {
+                lo = std::min(lo, t_us);
+                hi = std::max(hi, t_us);
+                return true;
+            });
         const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
         if (plan.pixel_ordered && span <= 4 * n_k + 4096) {
             // Counting sort: slots[d] = where the events of microsecond lo + d start.
             std::vector<std::uint32_t>& slots = sort.slots;
             slots.assign(span + 2, 0);
-            for (const std::uint32_t b : plan.busy) {
-                const RawEvent* out = block_events_[b].data();
-                const std::uint32_t end = block_sample_ends_[b][k];
-                for (std::uint32_t e = first(b); e < end; ++e) ++slots[static_cast<std::size_t>(out[e].t_us - lo) + 1];
-            }
+            for (const std::uint32_t b : plan.busy)
+                for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent) {
+                    ++slots[static_cast<std::size_t>(t_us - lo) + 1];
+                    return true;
+                });
             for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
-            for (const std::uint32_t b : plan.busy) {
-                const RawEvent* out = block_events_[b].data();
-                const std::uint32_t end = block_sample_ends_[b][k];
-                for (std::uint32_t e = first(b); e < end; ++e) put(slots[static_cast<std::size_t>(out[e].t_us - lo)]++, out[e]);
-            }
+            for (const std::uint32_t b : plan.busy)
+                for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
+                    put(slots[static_cast<std::size_t>(t_us - lo)]++, t_us, e);
+                    return true;
+                });
         } else {
-            std::vector<RawEvent>& sample_events = sort.sample_events;
+            std::vector<TimedEvent>& sample_events = sort.sample_events;
             sample_events.clear();
-            for (const std::uint32_t b : plan.busy) {
-                const std::vector<RawEvent>& out = block_events_[b];
-                sample_events.insert(sample_events.end(), out.begin() + first(b), out.begin() + block_sample_ends_[b][k]);
-            }
-            std::stable_sort(sample_events.begin(), sample_events.end(), [](const RawEvent& a, const RawEvent& b) {
-                return a.t_us != b.t_us ? a.t_us < b.t_us : a.pixel < b.pixel;
+            for (const std::uint32_t b : plan.busy)
+                for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
+                    sample_events.push_back(TimedEvent{t_us, e});
+                    return true;
+                });
+            std::stable_sort(sample_events.begin(), sample_events.end(), [](const TimedEvent& a, const TimedEvent& b) {
+                return a.t_us != b.t_us ? a.t_us < b.t_us : a.e.pixel() < b.e.pixel();
             });
-            for (std::size_t e = 0; e < n_k; ++e) put(e, sample_events[e]);
+            for (std::size_t e = 0; e < n_k; ++e) put(e, sample_events[e].t_us, sample_events[e].e);
         }
     }
 
@@ -1023,32 +1192,33 @@ private:
     /// for the events (as collect_sample() decides on the events' own range), or an event lies
     /// outside it (none does: the guard keeps the slots in bounds); collect_sample() then sorts
     /// as before. Either way the same order: by t_us, then block and place in the block.
-    template <class Put, class First>
-    bool counting_sort_in_interval(const CollectPlan& plan, std::size_t k, SortScratch& sort, Put& put,
-                                   First& first) const {
+    template <class Put>
+    bool counting_sort_in_interval(const CollectPlan& plan, std::size_t k, std::int64_t end_us, SortScratch& sort,
+                                   Put& put) const {
         const double t0 = k == 0 ? plan.t_before : plan.t_s[k - 1];
         if (!std::isfinite(t0)) return false;
         const std::size_t n_k = plan.base[k + 1] - plan.base[k];
-        const std::int64_t lo = round_us(t0), hi = round_us(plan.t_s[k]);
+        const std::int64_t lo = round_us(t0), hi = end_us;
         const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
-        if (!(hi >= lo && span <= 4 * n_k + 4096)) return false;
+        if (!(hi >= lo && span <= 4 * n_k + 4096 && span < 0x80000000u)) return false;
+        // Offsets from lo on 32 bits (for_each_offset_in_sample: lo lies within 2^31 us of the
+        // sample's end, since span is small); one outside [0, span] makes the general sort take over.
         std::vector<std::uint32_t>& slots = sort.slots;
         slots.assign(span + 2, 0);
         for (const std::uint32_t b : plan.busy) {
-            const RawEvent* out = block_events_[b].data();
-            const std::uint32_t end = block_sample_ends_[b][k];
-            for (std::uint32_t e = first(b); e < end; ++e) {
-                const std::uint64_t d = static_cast<std::uint64_t>(out[e].t_us) - static_cast<std::uint64_t>(lo);
+            const bool inside = for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent) {
                 if (d > span) return false;
                 ++slots[d + 1];
-            }
+                return true;
+            });
+            if (!inside) return false;
         }
         for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
-        for (const std::uint32_t b : plan.busy) {
-            const RawEvent* out = block_events_[b].data();
-            const std::uint32_t end = block_sample_ends_[b][k];
-            for (std::uint32_t e = first(b); e < end; ++e) put(slots[static_cast<std::size_t>(out[e].t_us - lo)]++, out[e]);
-        }
+        for (const std::uint32_t b : plan.busy)
+            for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent e) {
+                put(slots[d]++, lo + static_cast<std::int64_t>(d), e);
+                return true;
+            });
         return true;
     }
 
@@ -1056,6 +1226,8 @@ private:
     void collect_finish() {
         for (auto& b : block_events_)
             if (b.capacity() > (std::size_t{1} << 18)) std::vector<RawEvent>().swap(b);
+        for (auto& b : block_full_t_)
+            if (b.capacity() > (std::size_t{1} << 17)) std::vector<std::int64_t>().swap(b);
     }
 
     PixelModel model_;
@@ -1067,6 +1239,7 @@ private:
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
     std::vector<std::vector<RawEvent>> block_events_;
+    std::vector<std::vector<std::int64_t>> block_full_t_;  ///< each block's full event times, if kept (RawEvent)
     std::vector<std::vector<std::uint32_t>> block_sample_ends_;  ///< each block's event count after each sample
     std::size_t blocks_in_call_ = 0, samples_in_call_ = 0;
     std::vector<std::uint8_t> labels_;
