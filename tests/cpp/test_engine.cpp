@@ -778,6 +778,40 @@ TEST(build_without_openmp_or_one_thread_matches_two_threads) {
     CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
 }
 
+TEST(run_into_writes_the_events_of_run_into_the_callers_memory) {
+    PixelParams p;  // all noise on
+    p.threshold_sigma = 0.05;
+    p.leak_rate_hz = 5.0;
+    const int w = 24, h = 16, n = 12;
+    std::vector<double> rate(n * w * h), t(n);
+    for (int k = 0; k < n; ++k) {
+        t[k] = k * 1e-3;
+        for (int i = 0; i < w * h; ++i) rate[k * w * h + i] = 1e6 * (1.0 + (i % 5) * (k % 4));
+    }
+    Sensor a(w, h, p, 11, 2), b(w, h, p, 11, 2);
+    const auto want = a.run(rate.data(), t.data(), n);
+    // Room with a guard word after it: the engine writes exactly the count it asked for.
+    std::vector<Event> room;
+    int calls = 0;
+    const std::size_t got = b.run_into(
+        [&](std::size_t m) {
+            ++calls;
+            room.assign(m + 1, Event{-7, 7, 7, 7});
+            return room.data();
+        },
+        rate.data(), t.data(), n);
+    CHECK(!want.empty());
+    CHECK(calls == 1 && got == want.size() && room.size() == want.size() + 1);
+    CHECK(got == want.size() && std::memcmp(room.data(), want.data(), got * sizeof(Event)) == 0);
+    CHECK(room.back().t == -7 && room.back().x == 7);
+    // A call without events does not ask for room.
+    Sensor quiet(w, h, ideal(), 11);
+    std::vector<double> flat(2 * w * h, 1e6), t2{0.0, 1e-3};
+    calls = 0;
+    CHECK(quiet.run_into([&](std::size_t) { ++calls; return room.data(); }, flat.data(), t2.data(), 2) == 0);
+    CHECK(calls == 0);
+}
+
 TEST(bad_input_throws_before_changing_state) {
     Sensor s(2, 1, ideal());
     const double rate[2] = {1e6, -1.0};
