@@ -778,6 +778,25 @@ TEST(build_without_openmp_or_one_thread_matches_two_threads) {
     CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
 }
 
+TEST(leak_events_keep_their_times_far_from_zero_after_sample_intervals_of_hours) {
+    // The working records keep an event's microsecond modulo 2^32 and take the rest from its
+    // sample's end; an event more than 2^31 us before that end makes its block keep full
+    // times. Leak events every 900 s over a 5000 s interval, with the times based near -2^62 us
+    // (where a sentinel of -2^62 once aliased a real time) and at +5e12 s (where the
+    // difference from it overflowed): every event at its analytic time (ulp of t ~1 ms there).
+    PixelParams p = ideal();
+    p.leak_rate_hz = 1.0 / 900.0;
+    p.leak_random_phase = false;
+    for (const double t0 : {-4611686018427.387904 - 6000.0, 0.0, 5e12, -5e12}) {
+        Sensor s(1, 1, p, 1, 1);
+        const double t[4] = {t0, t0 + 1000.0, t0 + 6000.0, t0 + 6400.0};
+        const float rate[4] = {1e9f, 1e9f, 1e9f, 1e9f};
+        const auto ev = s.run(rate, t, 4);
+        CHECK(ev.size() == 7);  // 900 s ... 6300 s
+        for (std::size_t k = 0; k < ev.size(); ++k) CHECK_NEAR(double(ev[k].t) * 1e-6, t0 + (k + 1) * 900.0, 0.01);
+    }
+}
+
 TEST(run_into_writes_the_events_of_run_into_the_callers_memory) {
     PixelParams p;  // all noise on
     p.threshold_sigma = 0.05;

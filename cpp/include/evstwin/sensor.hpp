@@ -617,14 +617,12 @@ private:
         const std::uint32_t d = t_lo - static_cast<std::uint32_t>(end_us);  // modulo 2^32
         return end_us + static_cast<std::int64_t>(d) - (d >= 0x80000000u ? std::int64_t{1} << 32 : 0);
     }
-    /// Whether event_time(end_us, t_us's low bits) gives t_us back (t_us and end_us lie within
-    /// +-2^63 us / 2, as round_us' times do: run() takes times below 9.2e12 s).
+    /// Whether event_time(end_us, t_us's low bits) gives t_us back. The difference is taken
+    /// modulo 2^64, so it cannot overflow: two of round_us' times (run() takes |t| < 9.2e12 s)
+    /// differ by less than 2^64 - 2^31, so only a true difference within 2^31 passes.
     static bool near_sample_end(std::int64_t t_us, std::int64_t end_us) {
-        return static_cast<std::uint64_t>(t_us - end_us) + 0x80000000ull < 0x100000000ull;
+        return static_cast<std::uint64_t>(t_us) - static_cast<std::uint64_t>(end_us) + 0x80000000ull < 0x100000000ull;
     }
-    /// emit()'s sample end once its block keeps full times: near_sample_end() false for every
-    /// event time (|t_us| < 9.2e18), so every event takes keep_full_time().
-    static constexpr std::int64_t FULL_TIMES = std::numeric_limits<std::int64_t>::min() / 2;
     /// emit()'s rare path, out of line: the block's full event times (full_t), kept once an
     /// event lies too far from its sample's end for event_time(): the earlier events' times are
     /// filled in from theirs (end_us(j): sample j's end in microseconds; ends: the block's counts
@@ -794,13 +792,14 @@ private:
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         std::size_t sample = 0;
         std::int64_t end_us = 0;  // the current sample's end (RawEvent)
+        bool full_times = !taken.full_t.empty();  // the block keeps its events' full times (keep_full_time)
         const auto sample_end_us = [&consts](std::size_t j) { return round_us(consts[j].t1); };
         auto emit = [&](double t, Polarity pol, std::uint8_t label) {
             const std::int64_t t_us = round_us(t);
             out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
-            if (!near_sample_end(t_us, end_us)) {  // always false once the block keeps full times
+            if (full_times || !near_sample_end(t_us, end_us)) {
                 keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
-                end_us = FULL_TIMES;
+                full_times = true;
             }
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
@@ -833,7 +832,7 @@ private:
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
             sample = k;
-            end_us = taken.full_t.empty() ? round_us(c.t1) : FULL_TIMES;
+            end_us = round_us(c.t1);
             std::size_t n_active = hi - lo;
             bool eligible = kernel && synced;
             if (kernel && !synced && in_soa) {
@@ -932,13 +931,14 @@ private:
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         std::size_t sample = 0;
         std::int64_t end_us = round_us(t_s[0]);  // the current sample's end (RawEvent)
+        bool full_times = !taken.full_t.empty();  // the block keeps its events' full times (keep_full_time)
         const auto sample_end_us = [t_s](std::size_t j) { return round_us(t_s[j]); };
         auto emit = [&](double t, Polarity pol, std::uint8_t label) {
             const std::int64_t t_us = round_us(t);
             out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
-            if (!near_sample_end(t_us, end_us)) {  // always false once the block keeps full times
+            if (full_times || !near_sample_end(t_us, end_us)) {
                 keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
-                end_us = FULL_TIMES;
+                full_times = true;
             }
             if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
         };
@@ -971,7 +971,7 @@ private:
             scratch.soa.load(local.data(), m);
             for (; k < n_samples; ++k) {
                 sample = k;
-                end_us = taken.full_t.empty() ? round_us(t_s[k]) : FULL_TIMES;
+                end_us = round_us(t_s[k]);
                 model_.step_block_soa(scratch.soa, local.data(), pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
                                       scratch, emit, pixel);
                 ends[k] = static_cast<std::uint32_t>(out.size());
@@ -980,7 +980,7 @@ private:
         }
         for (; k < n_samples; ++k) {
             sample = k;
-            end_us = taken.full_t.empty() ? round_us(t_s[k]) : FULL_TIMES;
+            end_us = round_us(t_s[k]);
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
                 model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
