@@ -2435,7 +2435,8 @@ struct PixelModel {
         ny = 0.0;
         if (D > 0.0) {
             // Without the pole z is x, with no noise of its own (as init_state starts it): nz
-            // stays 0 (the z process would be a random walk, phi_zz = 1, that nothing reads).
+            // stays 0, the bits phi_zz * s.nz + l_zz * g1 gave (the one-pole coefficients leave
+            // phi_zz and l_zz at 0, noise.hpp), without the two multiplies.
             nz = pole ? k.phi_zz * s.nz + k.l_zz * g1 : 0.0;
             // Without the pole its rate a is 0: the 1-D process of the source follower.
             ny = (pole && cache.a > 0.0 && filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
