@@ -1103,10 +1103,13 @@ struct PixelModel {
             const double lambda = rho / (leak0_hz * theta);
             const double sd = std::sqrt(noise_var_y);
             CounterStream more(key, pixel, 0, PURPOSE_INIT + 1u);
+            // The truncated exponential's normaliser, once: the loop's attempts are mostly
+            // rejected where the noise is strong, and libm calls are not hoisted for us.
+            const bool truncated_exp = lambda * theta > 1e-9;
+            const double exp_span = truncated_exp ? std::expm1(-lambda * theta) : 0.0;
             for (int attempt = 0; attempt < 64; ++attempt) {
                 const double u = attempt == 0 ? uniform_open(w[2]) : more.uniform();
-                const double d0 = lambda * theta > 1e-9 ? -std::log1p(u * std::expm1(-lambda * theta)) / lambda
-                                                        : u * theta;
+                const double d0 = truncated_exp ? -std::log1p(u * exp_span) / lambda : u * theta;
                 const double n_then = sd > 0.0 ? sd * normal_from_uniforms(more.uniform(), more.uniform()) : s.ny;
                 const double d = (leak_off ? -d0 : d0) + s.ny - n_then;
                 if (sd > 0.0) {
