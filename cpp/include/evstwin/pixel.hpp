@@ -1882,8 +1882,14 @@ struct PixelModel {
     static constexpr std::size_t ARGS = 8;
 
     /// Whether step_block_soa() handles this configuration: the continuous model with the exact
-    /// source follower, behind the photoreceptor pole or not.
-    bool has_soa_kernel() const { return continuous && has_filter && !euler; }
+    /// source follower, behind the photoreceptor pole or not; or with neither (the ideal
+    /// pixel, noiseless: continuous noise needs a low-pass). That one takes the SfOnly chain
+    /// as it is: without a filter the sample's sf_decay and sf_ramp are 0, so its
+    /// z + (y - z_before) * 0 - (z - z_before) * 0 is z, bit for bit, for every finite level
+    /// (x is a log, never -0), which is what the per-pixel path's y = z gives; a level of
+    /// -inf gives NaN there, which the quiet test sends to the per-pixel path. With the pole
+    /// and no filter the noise is the pole's 1-D process, which the PoleSf chain does not do.
+    bool has_soa_kernel() const { return continuous && !euler && (has_filter || !p.pr_pole); }
 
     /// step_block_continuous() for every pixel of a block held as a structure of arrays (h,
     /// loaded from st; all pixels stand at c.t0 with n > 0): the random words and normals in
