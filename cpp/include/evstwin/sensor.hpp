@@ -334,8 +334,8 @@ public:
 
         CollectPlan plan;
         plan.storage = &storage;
-        plan.sample_end_s = t_s;
         plan.t_s = t_s;
+        plan.intervals_known = true;
         plan.t_before = last_t_;
         guarded_for_each_block(
             nblocks, npix * n_samples, rate_check,
@@ -432,7 +432,7 @@ public:
         // by (t, pixel), not only by t.
         CollectPlan plan;
         plan.storage = &storage;
-        plan.sample_end_s = t_s;
+        plan.t_s = t_s;
         guarded_for_each_block(
             nblocks, n_pixels * n_samples, rate_check,
             [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
@@ -664,6 +664,37 @@ private:
         std::vector<std::int64_t>& full_t_home_;
     };
 
+    /// run_block's and run_pixel_block's emit(t, polarity, label): the event's record onto the
+    /// block's list (pixel: the one the model is stepping), kept with its full time once one
+    /// lies too far from its sample's end for the record's low bits (keep_full_time), and the
+    /// call's count checked as the list grows. start_sample(k) before sample k's steps.
+    template <class SampleEndUs>
+    struct BlockEmit {
+        Sensor& sensor;
+        TakenEvents& taken;
+        const std::uint32_t* ends;
+        const std::uint32_t& pixel;
+        SampleEndUs sample_end_us;  ///< sample j's end in microseconds
+        std::size_t sample = 0;
+        std::int64_t end_us = 0;                  ///< the current sample's end
+        bool full_times = !taken.full_t.empty();  ///< the block keeps its events' full times
+
+        void start_sample(std::size_t k) {
+            sample = k;
+            end_us = sample_end_us(k);
+        }
+        void operator()(double t, Polarity pol, std::uint8_t label) {
+            std::vector<RawEvent>& out = taken.out;
+            const std::int64_t t_us = round_us(t);
+            out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
+            if (full_times || !near_sample_end(t_us, end_us)) {
+                keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
+                full_times = true;
+            }
+            if (out.size() % EVENT_COUNT_STEP == 0) sensor.note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
+        }
+    };
+
     /// The event's time in integer microseconds, rounded half away from zero as std::llround
     /// (without its library call): the truncation is exact, and so is the remainder x - i for
     /// any |x| < 2^63 (at and above 2^52, x is an integer and the remainder 0).
@@ -790,19 +821,8 @@ private:
         std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-        std::size_t sample = 0;
-        std::int64_t end_us = 0;  // the current sample's end (RawEvent)
-        bool full_times = !taken.full_t.empty();  // the block keeps its events' full times (keep_full_time)
         const auto sample_end_us = [&consts](std::size_t j) { return round_us(consts[j].t1); };
-        auto emit = [&](double t, Polarity pol, std::uint8_t label) {
-            const std::int64_t t_us = round_us(t);
-            out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
-            if (full_times || !near_sample_end(t_us, end_us)) {
-                keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
-                full_times = true;
-            }
-            if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
-        };
+        BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
         const bool kernel = !probe_slot && model_.has_block_kernel();
         const bool soa_kernel = kernel && model_.has_soa_kernel();
         std::uint32_t ids[BLOCK], active[BLOCK];
@@ -831,8 +851,7 @@ private:
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
-            sample = k;
-            end_us = round_us(c.t1);
+            emit.start_sample(k);
             std::size_t n_active = hi - lo;
             bool eligible = kernel && synced;
             if (kernel && !synced && in_soa) {
@@ -929,19 +948,9 @@ private:
         std::vector<RawEvent>& out = taken.out;
         std::uint32_t pixel = 0;
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-        std::size_t sample = 0;
-        std::int64_t end_us = round_us(t_s[0]);  // the current sample's end (RawEvent)
-        bool full_times = !taken.full_t.empty();  // the block keeps its events' full times (keep_full_time)
         const auto sample_end_us = [t_s](std::size_t j) { return round_us(t_s[j]); };
-        auto emit = [&](double t, Polarity pol, std::uint8_t label) {
-            const std::int64_t t_us = round_us(t);
-            out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
-            if (full_times || !near_sample_end(t_us, end_us)) {
-                keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
-                full_times = true;
-            }
-            if (out.size() % EVENT_COUNT_STEP == 0) note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
-        };
+        BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
+        emit.start_sample(0);
         // The listed pixels' states are gathered into a contiguous block, advanced sample-major
         // (each sample reads one contiguous stretch of its row of rates) and scattered back.
         // The first interval starts at each pixel's own last sample; after it, every pixel
@@ -970,8 +979,7 @@ private:
             // Every pixel now stands at t_s[0]: the rest of the samples on the block's arrays.
             scratch.soa.load(local.data(), m);
             for (; k < n_samples; ++k) {
-                sample = k;
-                end_us = round_us(t_s[k]);
+                emit.start_sample(k);
                 model_.step_block_soa(scratch.soa, local.data(), pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
                                       scratch, emit, pixel);
                 ends[k] = static_cast<std::uint32_t>(out.size());
@@ -979,8 +987,7 @@ private:
             scratch.soa.store(local.data(), m, t_s[n_samples - 1]);
         }
         for (; k < n_samples; ++k) {
-            sample = k;
-            end_us = round_us(t_s[k]);
+            emit.start_sample(k);
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
                 model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
@@ -1034,15 +1041,15 @@ private:
         std::vector<std::size_t> base;    ///< sample k's events go to [base[k], base[k + 1])
         bool pixel_ordered = true;
         detail::PixelDivider row{1};      ///< pixel -> (x, y) without a division
-        /// run()'s sample times and the time before the first (nullptr: not known, run_pixels):
-        /// sample k's events lie in [t_s[k - 1], t_s[k]], so its microseconds lie between those
-        /// times' (round_us is monotone), which collect_sample() takes as the counting sort's
-        /// range without a pass to find it.
+        /// The call's sample times: the ends from which event_time() recovers each sample's
+        /// events' times.
         const double* t_s = nullptr;
+        /// run()'s (not run_pixels'): sample k's events lie in [t_s[k - 1], t_s[k]] (t_before
+        /// before the first), so its microseconds lie between those times' (round_us is
+        /// monotone), which collect_sample() takes as the counting sort's range without a pass
+        /// to find it.
+        bool intervals_known = false;
         double t_before = 0.0;
-        /// The call's sample times (run() and run_pixels()): the ends from which event_time()
-        /// recovers each sample's events' times.
-        const double* sample_end_s = nullptr;
     };
 
     /// The call's events in output order: by time in microseconds; within one microsecond,
@@ -1091,45 +1098,49 @@ private:
         return n_samples;
     }
 
-    /// Block b's events of sample k as fn(d, record) with each one's offset d = t_us - lo from
-    /// a microsecond lo less than 2^31 before the sample's end, where t_us - lo lies in [0, 2^31);
-    /// any other event gives some d >= 2^31; until fn returns false. Returns whether it never
-    /// did. Where the block keeps only the low bits, an event lies within 2^31 us of its
-    /// sample's end (emit()), so the difference of the low bits is the offset.
-    template <class Fn>
-    bool for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const {
+    /// Block b's events of sample k in the order it made them, as fn(time, record) until fn
+    /// returns false; returns whether it never did. time: from_low(the record's t_lo) where the
+    /// block keeps only the low bits, else from_full(the block's full_t of it).
+    template <class FromLow, class FromFull, class Fn>
+    bool for_each_event_in_sample(std::uint32_t b, std::size_t k, FromLow&& from_low, FromFull&& from_full,
+                                  Fn&& fn) const {
         const RawEvent* out = block_events_[b].data();
         const std::uint32_t first = k == 0 ? 0u : block_sample_ends_[b][k - 1], end = block_sample_ends_[b][k];
-        if (block_full_t_[b].empty()) {
-            const std::uint32_t lo_bits = static_cast<std::uint32_t>(lo);
+        const std::int64_t* full_t = block_full_t_[b].empty() ? nullptr : block_full_t_[b].data();
+        if (!full_t) {
             for (std::uint32_t e = first; e < end; ++e)
-                if (!fn(out[e].t_lo - lo_bits, out[e])) return false;
+                if (!fn(from_low(out[e].t_lo), out[e])) return false;
         } else {
-            const std::int64_t* full_t = block_full_t_[b].data();
-            for (std::uint32_t e = first; e < end; ++e) {
-                const std::uint64_t d = static_cast<std::uint64_t>(full_t[e]) - static_cast<std::uint64_t>(lo);
-                if (!fn(static_cast<std::uint32_t>(std::min<std::uint64_t>(d, 0xFFFFFFFFu)), out[e])) return false;
-            }
+            for (std::uint32_t e = first; e < end; ++e)
+                if (!fn(from_full(full_t[e]), out[e])) return false;
         }
         return true;
     }
 
-    /// Block b's events of sample k in the order it made them, as fn(t_us, record) with each
-    /// one's full time (event_time from the sample's end end_us, or the block's full_t): until
-    /// fn returns false. Returns whether it never did.
+    /// for_each_event_in_sample with each event's offset d = t_us - lo from a microsecond lo
+    /// less than 2^31 before the sample's end, where t_us - lo lies in [0, 2^31); any other
+    /// event gives some d >= 2^31. Where the block keeps only the low bits, an event lies
+    /// within 2^31 us of its sample's end (emit()), so the difference of the low bits is the
+    /// offset: 32-bit arithmetic in the counting sort's loops.
+    template <class Fn>
+    bool for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const {
+        const std::uint32_t lo_bits = static_cast<std::uint32_t>(lo);
+        return for_each_event_in_sample(
+            b, k, [lo_bits](std::uint32_t t_lo) { return t_lo - lo_bits; },
+            [lo](std::int64_t t_us) {
+                const std::uint64_t d = static_cast<std::uint64_t>(t_us) - static_cast<std::uint64_t>(lo);
+                return static_cast<std::uint32_t>(std::min<std::uint64_t>(d, 0xFFFFFFFFu));
+            },
+            fn);
+    }
+
+    /// for_each_event_in_sample with each event's full time (event_time from the sample's end
+    /// end_us, or the block's full_t).
     template <class Fn>
     bool for_each_in_sample(std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn) const {
-        const RawEvent* out = block_events_[b].data();
-        const std::uint32_t first = k == 0 ? 0u : block_sample_ends_[b][k - 1], end = block_sample_ends_[b][k];
-        if (block_full_t_[b].empty()) {
-            for (std::uint32_t e = first; e < end; ++e)
-                if (!fn(event_time(end_us, out[e].t_lo), out[e])) return false;
-        } else {
-            const std::int64_t* full_t = block_full_t_[b].data();
-            for (std::uint32_t e = first; e < end; ++e)
-                if (!fn(full_t[e], out[e])) return false;
-        }
-        return true;
+        return for_each_event_in_sample(
+            b, k, [end_us](std::uint32_t t_lo) { return event_time(end_us, t_lo); },
+            [](std::int64_t t_us) { return t_us; }, fn);
     }
 
     /// Sample k's events of all blocks, sorted, into their place of the output (see
@@ -1140,14 +1151,14 @@ private:
         Event* events = plan.events + base;
         std::uint8_t* labels = labels_.data() + base;
         const detail::PixelDivider row = plan.row;
-        const std::int64_t end_us = round_us(plan.sample_end_s[k]);
+        const std::int64_t end_us = round_us(plan.t_s[k]);
         const auto put = [&](std::size_t j, std::int64_t t_us, RawEvent e) {
             const std::uint32_t pixel = e.pixel(), y = row.quotient(pixel);
             events[j] = Event{t_us, static_cast<std::uint16_t>(pixel - y * row.divisor()), static_cast<std::uint16_t>(y),
                               e.p()};
             labels[j] = e.label();
         };
-        if (plan.pixel_ordered && plan.t_s && counting_sort_in_interval(plan, k, end_us, sort, put)) return;
+        if (plan.pixel_ordered && plan.intervals_known && counting_sort_in_interval(plan, k, end_us, sort, put)) return;
         std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
         for (const std::uint32_t b : plan.busy)
             for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent) {
@@ -1186,7 +1197,7 @@ private:
         }
     }
 
-    /// collect_sample()'s counting sort over the microseconds of sample k's interval (plan.t_s),
+    /// collect_sample()'s counting sort over the microseconds of sample k's interval (plan.t_s, intervals_known),
     /// without the pass that finds the events' own range: one pass counts, one puts. Returns
     /// false, having written nothing, where that range is unknown (no previous time), too wide
     /// for the events (as collect_sample() decides on the events' own range), or an event lies
