@@ -379,8 +379,8 @@ def test_event_heavy_run_pixels_sort_in_any_pixel_order_and_thread_count() -> No
 
 
 def test_events_reach_numpy_without_a_copy() -> None:
-    # The engine's event vector becomes the array's memory (a capsule frees it with the
-    # array): NumPy does not own, and so did not copy, the data.
+    # The buffer the engine wrote the events into (Sensor::run_into) becomes the array's memory
+    # (a capsule frees it with the array): NumPy does not own, and so did not copy, the data.
     rate, t = moving_spot(40, 16, 8)
     events = Sensor(16, 8, NOISY, seed=2).run(rate, t)
     assert len(events) > 0 and events.dtype == EVENT_DTYPE
