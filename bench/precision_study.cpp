@@ -404,6 +404,143 @@ void ziggurat_batch(const std::uint32_t* w, std::size_t n, float* g, std::uint8_
     EVSTWIN_AT_LEVEL(ziggurat_batch, w, n, g, slow)
 }
 
+// GCC 12 does not use gather instructions for the loops above (its generic tuning turns them
+// off): both the engine's batch and the float one above look the tables up lane by lane
+// (extracts and inserts), which is most of their cost. So the precision's share is measured
+// against table look-ups written with AVX-512 intrinsics too, in both precisions: a gather,
+// and in-register permutes of the 128-entry tables (no memory access per lane). The double
+// ones give the engine's normals bit for bit (checked in speed()): the sign by an XOR, as
+// x * (1 - 2 bit) flips it exactly. The last n % 16 words go to the plain loops.
+
+// GCC 12's AVX-512 intrinsics leave an undefined vector that -Wmaybe-uninitialized reports (GCC
+// bug 105593, as simd.hpp notes): silenced for these functions only.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+/// A lane mask's flags as bytes 0 / 1 (the engine's slow flags).
+#define STUDY_STORE_FLAGS16(P, M) _mm_storeu_si128(reinterpret_cast<__m128i*>(P), _mm_maskz_mov_epi8(M, _mm_set1_epi8(1)))
+
+EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_gather_d(const std::uint32_t* w, std::size_t n,
+                                                                      double* g, std::uint8_t* slow) {
+    const double* tw = evstwin::ZIGGURAT.w;
+    const int* tk = reinterpret_cast<const int*>(evstwin::ZIGGURAT.k);
+    const __m512i m127 = _mm512_set1_epi32(127), one = _mm512_set1_epi32(1);
+    std::size_t i = 0;
+    for (; i + 16 <= n; i += 16) {
+        const __m512i wi = _mm512_loadu_si512(w + i);
+        const __m512i layer = _mm512_and_si512(wi, m127), j = _mm512_srli_epi32(wi, 8);
+        const __m512i sign = _mm512_and_si512(_mm512_srli_epi32(wi, 7), one);
+        const __mmask16 s = _mm512_cmpge_epu32_mask(j, _mm512_i32gather_epi32(layer, tk, 4));
+        STUDY_STORE_FLAGS16(slow + i, s);
+        for (int h = 0; h < 2; ++h) {
+            const __m256i lh = h ? _mm512_extracti64x4_epi64(layer, 1) : _mm512_castsi512_si256(layer);
+            const __m256i jh = h ? _mm512_extracti64x4_epi64(j, 1) : _mm512_castsi512_si256(j);
+            const __m256i sh = h ? _mm512_extracti64x4_epi64(sign, 1) : _mm512_castsi512_si256(sign);
+            const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(jh), _mm512_i32gather_pd(lh, tw, 8));
+            const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(sh), 63);
+            _mm512_storeu_pd(g + i + 8 * h, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
+        }
+    }
+    evstwin::detail::ziggurat_batch_avx512(w + i, n - i, g + i, slow + i);
+}
+
+EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_gather_f(const std::uint32_t* w, std::size_t n,
+                                                                      float* g, std::uint8_t* slow) {
+    const __m512i m127 = _mm512_set1_epi32(127), one = _mm512_set1_epi32(1);
+    std::size_t i = 0;
+    for (; i + 16 <= n; i += 16) {
+        const __m512i wi = _mm512_loadu_si512(w + i);
+        const __m512i layer = _mm512_and_si512(wi, m127), j = _mm512_srli_epi32(wi, 8);
+        const __m512 x = _mm512_mul_ps(_mm512_cvtepi32_ps(j), _mm512_i32gather_ps(layer, ZIG_F.w, 4));
+        const __m512i bits = _mm512_slli_epi32(_mm512_and_si512(_mm512_srli_epi32(wi, 7), one), 31);
+        _mm512_storeu_ps(g + i, _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(x), bits)));
+        const __mmask16 s =
+            _mm512_cmpge_epu32_mask(j, _mm512_i32gather_epi32(layer, reinterpret_cast<const int*>(ZIG_F.k), 4));
+        STUDY_STORE_FLAGS16(slow + i, s);
+    }
+    ziggurat_batch_avx512(w + i, n - i, g + i, slow + i);
+}
+
+/// The 128-entry table t (16 lanes a register) at index bits 0-6 of idx: four two-register
+/// permutes (bits 0-4) and a choice by bits 5 and 6. For 32-bit entries.
+#define STUDY_LOOKUP128_32(RESULT, PERM, BLEND, T, IDX)                                          \
+    do {                                                                                         \
+        const __mmask16 b5 = _mm512_test_epi32_mask(IDX, _mm512_set1_epi32(32));                 \
+        const __mmask16 b6 = _mm512_test_epi32_mask(IDX, _mm512_set1_epi32(64));                 \
+        const auto q0 = PERM(T[0], IDX, T[1]), q1 = PERM(T[2], IDX, T[3]);                       \
+        const auto q2 = PERM(T[4], IDX, T[5]), q3 = PERM(T[6], IDX, T[7]);                       \
+        RESULT = BLEND(b6, BLEND(b5, q0, q1), BLEND(b5, q2, q3));                                \
+    } while (0)
+
+EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_permute_f(const std::uint32_t* w, std::size_t n,
+                                                                       float* g, std::uint8_t* slow) {
+    __m512 tw[8];
+    __m512i tk[8];
+    for (int r = 0; r < 8; ++r) {
+        tw[r] = _mm512_loadu_ps(ZIG_F.w + 16 * r);
+        tk[r] = _mm512_loadu_si512(ZIG_F.k + 16 * r);
+    }
+    const __m512i m127 = _mm512_set1_epi32(127), one = _mm512_set1_epi32(1);
+    std::size_t i = 0;
+    for (; i + 16 <= n; i += 16) {
+        const __m512i wi = _mm512_loadu_si512(w + i);
+        const __m512i layer = _mm512_and_si512(wi, m127), j = _mm512_srli_epi32(wi, 8);
+        __m512 width;
+        __m512i k;
+        STUDY_LOOKUP128_32(width, _mm512_permutex2var_ps, _mm512_mask_blend_ps, tw, layer);
+        STUDY_LOOKUP128_32(k, _mm512_permutex2var_epi32, _mm512_mask_blend_epi32, tk, layer);
+        const __m512 x = _mm512_mul_ps(_mm512_cvtepi32_ps(j), width);
+        const __m512i bits = _mm512_slli_epi32(_mm512_and_si512(_mm512_srli_epi32(wi, 7), one), 31);
+        _mm512_storeu_ps(g + i, _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(x), bits)));
+        STUDY_STORE_FLAGS16(slow + i, _mm512_cmpge_epu32_mask(j, k));
+    }
+    ziggurat_batch_avx512(w + i, n - i, g + i, slow + i);
+}
+
+EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_permute_d(const std::uint32_t* w, std::size_t n,
+                                                                       double* g, std::uint8_t* slow) {
+    // The widths: 128 doubles in 16 registers; a two-register permute covers 16 (bits 0-3),
+    // bits 4-6 choose among the eight.
+    __m512d tw[16];
+    __m512i tk[8];
+    for (int r = 0; r < 16; ++r) tw[r] = _mm512_loadu_pd(evstwin::ZIGGURAT.w + 8 * r);
+    for (int r = 0; r < 8; ++r) tk[r] = _mm512_loadu_si512(evstwin::ZIGGURAT.k + 16 * r);
+    const __m512i m127 = _mm512_set1_epi32(127), one = _mm512_set1_epi32(1);
+    std::size_t i = 0;
+    for (; i + 16 <= n; i += 16) {
+        const __m512i wi = _mm512_loadu_si512(w + i);
+        const __m512i layer = _mm512_and_si512(wi, m127), j = _mm512_srli_epi32(wi, 8);
+        const __m512i sign = _mm512_and_si512(_mm512_srli_epi32(wi, 7), one);
+        __m512i k;
+        STUDY_LOOKUP128_32(k, _mm512_permutex2var_epi32, _mm512_mask_blend_epi32, tk, layer);
+        STUDY_STORE_FLAGS16(slow + i, _mm512_cmpge_epu32_mask(j, k));
+        for (int h = 0; h < 2; ++h) {
+            const __m256i lh = h ? _mm512_extracti64x4_epi64(layer, 1) : _mm512_castsi512_si256(layer);
+            const __m256i jh = h ? _mm512_extracti64x4_epi64(j, 1) : _mm512_castsi512_si256(j);
+            const __m256i sh = h ? _mm512_extracti64x4_epi64(sign, 1) : _mm512_castsi512_si256(sign);
+            const __m512i idx = _mm512_cvtepu32_epi64(lh);
+            const __mmask8 b4 = _mm512_test_epi64_mask(idx, _mm512_set1_epi64(16));
+            const __mmask8 b5 = _mm512_test_epi64_mask(idx, _mm512_set1_epi64(32));
+            const __mmask8 b6 = _mm512_test_epi64_mask(idx, _mm512_set1_epi64(64));
+            __m512d q[8];
+            for (int r = 0; r < 8; ++r) q[r] = _mm512_permutex2var_pd(tw[2 * r], idx, tw[2 * r + 1]);
+            const __m512d a0 = _mm512_mask_blend_pd(b4, q[0], q[1]), a1 = _mm512_mask_blend_pd(b4, q[2], q[3]);
+            const __m512d a2 = _mm512_mask_blend_pd(b4, q[4], q[5]), a3 = _mm512_mask_blend_pd(b4, q[6], q[7]);
+            const __m512d width = _mm512_mask_blend_pd(b6, _mm512_mask_blend_pd(b5, a0, a1), _mm512_mask_blend_pd(b5, a2, a3));
+            const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(jh), width);
+            const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(sh), 63);
+            _mm512_storeu_pd(g + i + 8 * h, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
+        }
+    }
+    evstwin::detail::ziggurat_batch_avx512(w + i, n - i, g + i, slow + i);
+}
+#undef STUDY_LOOKUP128_32
+#undef STUDY_STORE_FLAGS16
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
 }  // namespace study
 
 namespace {
@@ -422,23 +559,29 @@ void speed() {
     EngineBlock kernel_block(3000);
     const double kernel_ns =
         min_seconds_per_call([&] { kernel_block.step(); }, 200, 60) / BLOCK * 1e9;
-    std::size_t n_quiet = 0;
-    study::FloatBlock<float, float> fa;
-    study::FloatPass<float, float> qa{};
-    study::load(fa, e, qa);
-    study::FloatBlock<float, double> fm;
-    study::FloatPass<float, double> qm{};
-    study::load(fm, e, qm);
-    study::FloatBlock<double, double> fl;
-    study::FloatPass<double, double> ql{};
-    study::load(fl, e, ql);
+    // The study's float passes: <Clock, Time> = float or double each.
+    study::FloatBlock<float, float> b_ff;
+    study::FloatPass<float, float> q_ff{};
+    study::load(b_ff, e, q_ff);
+    study::FloatBlock<float, double> b_fd;
+    study::FloatPass<float, double> q_fd{};
+    study::load(b_fd, e, q_fd);
+    study::FloatBlock<double, float> b_df;
+    study::FloatPass<double, float> q_df{};
+    study::load(b_df, e, q_df);
+    study::FloatBlock<double, double> b_dd;
+    study::FloatPass<double, double> q_dd{};
+    study::load(b_dd, e, q_dd);
     const SimdLevel levels[] = {SimdLevel::AVX512, SimdLevel::AVX2, SimdLevel::Baseline};
     std::printf("engine step_block_soa, whole (reference pixel, background block, %s): %.2f ns\n",
                 evstwin::simd_level_name(evstwin::simd_level()), kernel_ns);
-    std::printf("\n%-10s %28s %30s %30s %30s\n", "level", "engine double quiet_pass",
-                "float levels, float clocks,", "float levels, float clocks,", "float levels only");
-    std::printf("%-10s %28s %30s %30s %30s\n", "", "", "float times (offsets)", "double times",
-                "(clocks, times double)");
+    std::printf("\n-- quiet pass (levels in float are re-based; in brackets: speed-up on the engine's) --\n");
+    std::printf("%-10s %14s %20s %20s %20s %20s\n", "level", "engine", "float levels", "float levels", "float levels",
+                "float levels");
+    std::printf("%-10s %14s %20s %20s %20s %20s\n", "", "double", "float clocks", "float clocks", "double clocks",
+                "double clocks");
+    std::printf("%-10s %14s %20s %20s %20s %20s\n", "", "", "float times", "double times", "float times",
+                "double times");
     for (SimdLevel l : levels) {
         if (!evstwin::simd_level_supported(l)) continue;
         evstwin::set_simd_level(l);
@@ -446,27 +589,26 @@ void speed() {
         const double d = min_seconds_per_call(
             [&] { evstwin::detail::quiet_pass<QuietChain::SfOnly>(e.q, block.rate.data(), true, true); keep(e.q.busy[0]); },
             calls, reps) / BLOCK * 1e9;
-        const double a = min_seconds_per_call([&] { study::quiet_pass(qa, block.rate.data()); keep(qa.busy[0]); }, calls, reps) /
-                         BLOCK * 1e9;
-        const double m = min_seconds_per_call([&] { study::quiet_pass(qm, block.rate.data()); keep(qm.busy[0]); }, calls, reps) /
-                         BLOCK * 1e9;
-        const double o = min_seconds_per_call([&] { study::quiet_pass(ql, block.rate.data()); keep(ql.busy[0]); }, calls, reps) /
-                         BLOCK * 1e9;
-        std::printf("%-10s %28.3f %22.3f (%4.2fx) %22.3f (%4.2fx) %22.3f (%4.2fx)\n", level_names[static_cast<int>(l)], d,
-                    a, d / a, m, d / m, o, d / o);
+        const auto time = [&](const auto& q) {
+            return min_seconds_per_call([&] { study::quiet_pass(q, block.rate.data()); keep(q.busy[0]); }, calls, reps) /
+                   BLOCK * 1e9;
+        };
+        const double t[4] = {time(q_ff), time(q_fd), time(q_df), time(q_dd)};
+        std::printf("%-10s %14.3f", level_names[static_cast<int>(l)], d);
+        for (double v : t) std::printf(" %12.3f (%4.2fx)", v, d / v);
+        std::printf("\n");
     }
     evstwin::set_simd_level(evstwin::best_simd_level());
-    // The verdicts: the float pass must settle the same pixels (part 3 measures how often it
-    // would not over a run); on this snapshot:
+    // The verdicts on this snapshot (part 3 measures how often they would differ over a run).
     evstwin::detail::quiet_pass<QuietChain::SfOnly>(e.q, block.rate.data(), true, true);
-    study::quiet_pass(qa, block.rate.data());
-    std::size_t differ = 0;
+    study::quiet_pass(q_ff, block.rate.data());
+    std::size_t differ = 0, n_quiet = 0;
     for (std::size_t j = 0; j < BLOCK; ++j) {
         n_quiet += e.q.busy[j] == 0;
-        differ += e.q.busy[j] != qa.busy[j];
+        differ += e.q.busy[j] != q_ff.busy[j];
     }
-    std::printf("snapshot verdicts: %zu of %zu pixels quiet (engine), %zu verdicts differ (float-all)\n", n_quiet, BLOCK,
-                differ);
+    std::printf("snapshot verdicts: %zu of %zu pixels quiet (engine), %zu verdicts differ (float, all float)\n", n_quiet,
+                BLOCK, differ);
 
     // Part 2: the normals of the reference load (one a pixel-update: the source follower alone).
     std::printf("\n-- normals (reference load: one normal a pixel-update) --\n");
@@ -540,33 +682,88 @@ void speed() {
     std::printf("  float ziggurat saves %.3f ns; every Philox word used (one call / 4 updates, any precision) saves %.3f ns\n",
                 zd_ns - zf_ns, philox_ns / 4);
     keep(common_ns);
+
+    // The table look-ups written with AVX-512 intrinsics (study::ziggurat_gather_*, _permute_*).
+    if (!evstwin::simd_level_supported(SimdLevel::AVX512)) return;
+    std::vector<double> gd2(BLOCK);
+    std::vector<float> gf2(BLOCK);
+    std::vector<std::uint8_t> slow2(BLOCK);
+    evstwin::set_simd_level(SimdLevel::AVX512);
+    evstwin::ziggurat_batch(r0.data(), BLOCK, gd.data(), slow.data());
+    study::ziggurat_batch(r0.data(), BLOCK, gf.data(), slow2.data());
+    const auto same_d = [&] {
+        return std::memcmp(gd.data(), gd2.data(), BLOCK * sizeof(double)) == 0 && slow == slow2;
+    };
+    const auto same_f = [&] { return std::memcmp(gf.data(), gf2.data(), BLOCK * sizeof(float)) == 0 && slow == slow2; };
+    // The float normals against the engine's double ones (common path only).
+    double rel = 0.0;
+    for (std::size_t j = 0; j < BLOCK; ++j)
+        if (!slow[j] && gd[j] != 0.0) rel = std::max(rel, std::fabs(static_cast<double>(gf[j]) - gd[j]) / std::fabs(gd[j]));
+    const int calls = 400, reps = 60;
+    std::printf("\n-- ziggurat common path at avx512 with the table look-ups written by hand, ns per normal --\n");
+    std::printf("%-34s %10s %26s\n", "", "ns", "same as the engine's batch");
+    std::printf("%-34s %10.3f %26s\n", "double, engine (GCC: lane by lane)", zd_ns, "-");
+    study::ziggurat_gather_d(r0.data(), BLOCK, gd2.data(), slow2.data());
+    bool ok = same_d();
+    double t = min_seconds_per_call([&] { study::ziggurat_gather_d(r0.data(), BLOCK, gd2.data(), slow2.data()); keep(gd2[0]); },
+                                    calls, reps) / BLOCK * 1e9;
+    std::printf("%-34s %10.3f %26s\n", "double, gather", t, ok ? "yes, bit for bit" : "NO");
+    const double zd_gather = t;
+    std::fill(gd2.begin(), gd2.end(), 0.0);
+    study::ziggurat_permute_d(r0.data(), BLOCK, gd2.data(), slow2.data());
+    ok = same_d();
+    t = min_seconds_per_call([&] { study::ziggurat_permute_d(r0.data(), BLOCK, gd2.data(), slow2.data()); keep(gd2[0]); },
+                             calls, reps) / BLOCK * 1e9;
+    std::printf("%-34s %10.3f %26s\n", "double, permutes (no memory)", t, ok ? "yes, bit for bit" : "NO");
+    const double zd_best = std::min(zd_gather, t);
+    std::printf("%-34s %10.3f %26s\n", "float, plain loop (GCC)", zf_ns, "float: the study's batch");
+    study::ziggurat_gather_f(r0.data(), BLOCK, gf2.data(), slow2.data());
+    ok = same_f();
+    t = min_seconds_per_call([&] { study::ziggurat_gather_f(r0.data(), BLOCK, gf2.data(), slow2.data()); keep(gf2[0]); },
+                             calls, reps) / BLOCK * 1e9;
+    std::printf("%-34s %10.3f %26s\n", "float, gather", t, ok ? "yes, bit for bit" : "NO");
+    const double zf_gather = t;
+    std::fill(gf2.begin(), gf2.end(), 0.0f);
+    study::ziggurat_permute_f(r0.data(), BLOCK, gf2.data(), slow2.data());
+    ok = same_f();
+    t = min_seconds_per_call([&] { study::ziggurat_permute_f(r0.data(), BLOCK, gf2.data(), slow2.data()); keep(gf2[0]); },
+                             calls, reps) / BLOCK * 1e9;
+    std::printf("%-34s %10.3f %26s\n", "float, permutes (no memory)", t, ok ? "yes, bit for bit" : "NO");
+    const double zf_best = std::min(zf_gather, t);
+    std::printf("float normals against the engine's double: largest relative difference %.2e (common path)\n", rel);
+    std::printf("best double look-up saves %.3f ns on the engine's batch (bit for bit); float's best saves a further %.3f\n",
+                zd_ns - zd_best, zd_best - zf_best);
+    evstwin::set_simd_level(evstwin::best_simd_level());
 }
 
 // ---------------------------------------------------------------------------------------------
 // Part 3: fidelity.
 
-/// One pixel's quiet-pass state in precision T (the reference load's chain: SfOnly, noise and
-/// background on), levels relative to `base` (0: absolute).
-template <class T>
+/// One pixel's quiet-pass state, levels in precision T (the reference load's chain: SfOnly,
+/// noise and background on) relative to a base level kept outside (0: absolute), eq. 12's
+/// clocks in C.
+template <class T, class C = T>
 struct Track {
-    T z, y, ny, ref, on, off;
+    T z, y, ny, ref;
+    C on, off;
 };
 
 /// The quiet pass's arithmetic for one pixel and sample, in T (quiet_pass_body's operations in
 /// its order); returns d1, sets quiet (the pass's verdict without the time and rate terms).
-template <class T>
-T quiet_step(Track<T>& s, T x, T g, T th_on, T th_off, T leak_g, T bon, T boff, T sf_decay, T sf_ramp, T phi_yy,
-             T l_yy, T bridge_bound, T dt, T inv_dt, bool& quiet, bool& ran_out) {
+template <class T, class C>
+T quiet_step(Track<T, C>& s, T x, T g, T th_on, T th_off, T leak_g, C bon, C boff, T sf_decay, T sf_ramp, T phi_yy,
+             T l_yy, T bridge_bound, T dt, T inv_dt, C clock_dt, bool& quiet, bool& ran_out, T& db_out) {
     const T z = x;
     const T yd0 = s.y - s.ny;
     const T yd = z + (yd0 - s.z) * sf_decay - (z - s.z) * sf_ramp;
     const T ny = phi_yy * s.ny + l_yy * g;
     const T y = yd + ny;
-    const T on = s.on - bon * dt, off = s.off - boff * dt;
-    ran_out = !((on > T(0)) & (off > T(0)));
+    const C on = s.on - bon * clock_dt, off = s.off - boff * clock_dt;
+    ran_out = !((on > C(0)) & (off > C(0)));
     const T gs = (y - s.y) * inv_dt + leak_g;
     const T db = s.y - s.ref;
     const T d1 = db + gs * dt;
+    db_out = db;
     const T on0 = th_on - db, off0 = th_off + db, on1 = th_on - d1, off1 = th_off + d1;
     quiet = !ran_out & (std::min(on0, off0) > T(0)) & (std::min(on0 * on1, off0 * off1) > bridge_bound);
     s.ref = y - d1;
@@ -582,65 +779,83 @@ struct StudyEvent {
     std::uint32_t pixel;
     std::uint32_t sample;
     std::int8_t pol;      ///< +1 ON, -1 OFF (crossing); +2 / -2 eq. 12's background
-    double t_offset;      ///< a background event's time after the sample's end [s] (clock / rate)
+    double t;             ///< its time [s]: a crossing's on the line from d0 to d1, a background one's from its clock
     bool operator<(const StudyEvent& o) const {
         return pixel != o.pixel ? pixel < o.pixel : sample != o.sample ? sample < o.sample : pol < o.pol;
     }
 };
 
-/// How two event lists (sorted) agree: events at the same pixel, sample and polarity; those
-/// within +-k samples; and the largest background-timestamp difference among the matched.
-void compare_events(const char* name, const std::vector<StudyEvent>& ref, const std::vector<StudyEvent>& other) {
-    std::size_t same = 0, near1 = 0, near10 = 0, bg_matched = 0;
-    double bg_dt_max = 0.0, bg_dt_sum = 0.0;
+/// How two event lists (sorted) agree: events at the same pixel, sample and polarity; for the
+/// others, the nearest event of the same pixel and polarity; the pixels whose lists agree
+/// entirely; the counts of each kind; and the timestamps of the background events matched.
+void compare_events(const char* name, const std::vector<StudyEvent>& ref, const std::vector<StudyEvent>& other,
+                    std::size_t n_pix) {
+    std::size_t same = 0, near1 = 0, near10 = 0;
+    // The matched events' times, crossings [0] and background [1]: mean and largest
+    // difference, and how many microsecond timestamps (the engine's) differ.
+    std::size_t matched[2] = {}, other_us[2] = {};
+    double dt_max[2] = {}, dt_sum[2] = {};
+    std::vector<char> pixel_differs(n_pix, 0);
     std::size_t i = 0, j = 0;
-    // Exact matches by a merge.
-    std::vector<char> used(other.size(), 0);
-    while (i < ref.size() && j < other.size()) {
-        if (ref[i].pixel == other[j].pixel && ref[i].sample == other[j].sample && ref[i].pol == other[j].pol) {
+    while (i < ref.size() && j < other.size()) {  // exact matches by a merge
+        const StudyEvent &a = ref[i], &b = other[j];
+        if (a.pixel == b.pixel && a.sample == b.sample && a.pol == b.pol) {
             ++same;
-            used[j] = 1;
-            if (ref[i].pol == 2 || ref[i].pol == -2) {
-                const double d = std::fabs(ref[i].t_offset - other[j].t_offset);
-                bg_dt_max = std::max(bg_dt_max, d);
-                bg_dt_sum += d;
-                ++bg_matched;
-            }
+            const int kind = a.pol == 2 || a.pol == -2;
+            const double d = std::fabs(a.t - b.t);
+            dt_max[kind] = std::max(dt_max[kind], d);
+            dt_sum[kind] += d;
+            ++matched[kind];
+            other_us[kind] += std::llround(a.t * 1e6) != std::llround(b.t * 1e6);
             ++i; ++j;
-        } else if (ref[i] < other[j]) {
+        } else if (a < b) {
+            pixel_differs[a.pixel] = 1;
             ++i;
         } else {
+            pixel_differs[b.pixel] = 1;
             ++j;
         }
     }
-    // The rest: the nearest unmatched event of the same pixel and polarity.
-    std::size_t unmatched_ref = ref.size() - same;
-    {
-        std::size_t a = 0;
-        for (const StudyEvent& ev : ref) {
-            while (a < other.size() && (other[a].pixel < ev.pixel)) ++a;
-            // (a linear scan per pixel: the lists are short per pixel)
-            std::uint32_t best = std::numeric_limits<std::uint32_t>::max();
-            bool exact = false;
-            for (std::size_t b = a; b < other.size() && other[b].pixel == ev.pixel; ++b) {
-                if (other[b].pol != ev.pol) continue;
-                const std::uint32_t d = ev.sample > other[b].sample ? ev.sample - other[b].sample : other[b].sample - ev.sample;
-                if (d == 0) exact = true;
-                best = std::min(best, d);
-            }
-            if (exact) continue;
-            near1 += best <= 1;
-            near10 += best <= 10;
+    for (; i < ref.size(); ++i) pixel_differs[ref[i].pixel] = 1;
+    for (; j < other.size(); ++j) pixel_differs[other[j].pixel] = 1;
+    // The unmatched: the nearest event of the same pixel and polarity (the lists are short per pixel).
+    std::size_t a = 0;
+    for (const StudyEvent& ev : ref) {
+        while (a < other.size() && other[a].pixel < ev.pixel) ++a;
+        std::uint32_t best = std::numeric_limits<std::uint32_t>::max();
+        for (std::size_t b = a; b < other.size() && other[b].pixel == ev.pixel; ++b) {
+            if (other[b].pol != ev.pol) continue;
+            best = std::min(best, ev.sample > other[b].sample ? ev.sample - other[b].sample : other[b].sample - ev.sample);
         }
+        if (best == 0) continue;
+        near1 += best <= 1;
+        near10 += best <= 10;
     }
-    std::printf("  %-16s %9zu events (double %zu): %9zu identical (%6.3f %%); of the %zu others %zu within 1 sample, "
-                "%zu within 10\n",
-                name, other.size(), ref.size(), same, 100.0 * static_cast<double>(same) / static_cast<double>(ref.size()),
-                unmatched_ref, near1, near10);
-    if (bg_matched)
-        std::printf("  %-16s background events at the same sample: %zu, their timestamps differ by %.2f us on average, "
-                    "%.2f us at most\n",
-                    "", bg_matched, 1e6 * bg_dt_sum / static_cast<double>(bg_matched), 1e6 * bg_dt_max);
+    const auto kinds = [](const std::vector<StudyEvent>& v, std::size_t& cross, std::size_t& bg) {
+        cross = bg = 0;
+        for (const StudyEvent& e : v) (e.pol == 1 || e.pol == -1 ? cross : bg) += 1;
+    };
+    std::size_t cross_d, bg_d, cross_o, bg_o;
+    kinds(ref, cross_d, bg_d);
+    kinds(other, cross_o, bg_o);
+    std::size_t differ = 0;
+    for (char c : pixel_differs) differ += c;
+    const std::size_t others = ref.size() - same;
+    std::printf("  %-18s %8zu events (double %zu; crossings %+.3f %%, background %+.3f %%): %6.2f %% identical; of the %zu "
+                "others %zu within 1 sample, %zu within 10; %5.2f %% of pixels differ somewhere\n",
+                name, other.size(), ref.size(),
+                100.0 * (static_cast<double>(cross_o) - static_cast<double>(cross_d)) / static_cast<double>(cross_d),
+                100.0 * (static_cast<double>(bg_o) - static_cast<double>(bg_d)) / static_cast<double>(bg_d),
+                100.0 * static_cast<double>(same) / static_cast<double>(ref.size()), others, near1, near10,
+                100.0 * static_cast<double>(differ) / static_cast<double>(n_pix));
+    const char* kind_name[2] = {"crossings", "background"};
+    for (int kind = 0; kind < 2; ++kind)
+        if (matched[kind])
+            std::printf("  %-18s %-10s at the same sample: %7zu; times differ by %.4f us on average, %.3f us at most; "
+                        "%zu (%.3f %%) microsecond timestamps differ\n",
+                        "", kind_name[kind], matched[kind], 1e6 * dt_sum[kind] / static_cast<double>(matched[kind]),
+                        1e6 * dt_max[kind], other_us[kind],
+                        100.0 * static_cast<double>(other_us[kind]) / static_cast<double>(matched[kind]));
 }
 
 void fidelity() {
@@ -704,21 +919,25 @@ void fidelity() {
                 double g, u;
                 draws(static_cast<std::uint32_t>(j), k + 1, g, u);
                 bool q, r;
-                quiet_step<double>(d, cache.x, g, s.theta_on, s.theta_off, leak_g[j], bon[j], boff[j], c.sf_decay,
-                                   c.sf_ramp, cache.k.phi_yy, cache.k.l_yy, cache.bridge_bound, c.dt, c.inv_dt, q, r);
-                quiet_step<float>(fa, static_cast<float>(cache.x), static_cast<float>(g), static_cast<float>(s.theta_on),
+                double db_d;
+                float db_f;
+                quiet_step<double, double>(d, cache.x, g, s.theta_on, s.theta_off, leak_g[j], bon[j], boff[j],
+                                           c.sf_decay, c.sf_ramp, cache.k.phi_yy, cache.k.l_yy, cache.bridge_bound, c.dt,
+                                           c.inv_dt, c.dt, q, r, db_d);
+                quiet_step<float, float>(fa, static_cast<float>(cache.x), static_cast<float>(g), static_cast<float>(s.theta_on),
                                   static_cast<float>(s.theta_off), static_cast<float>(leak_g[j]),
                                   static_cast<float>(bon[j]), static_cast<float>(boff[j]), static_cast<float>(c.sf_decay),
                                   static_cast<float>(c.sf_ramp), static_cast<float>(cache.k.phi_yy),
                                   static_cast<float>(cache.k.l_yy), static_cast<float>(cache.bridge_bound),
-                                  static_cast<float>(c.dt), static_cast<float>(c.inv_dt), q, r);
-                quiet_step<float>(fr, static_cast<float>(cache.x - base), static_cast<float>(g),
+                                  static_cast<float>(c.dt), static_cast<float>(c.inv_dt), static_cast<float>(c.dt), q,
+                                  r, db_f);
+                quiet_step<float, float>(fr, static_cast<float>(cache.x - base), static_cast<float>(g),
                                   static_cast<float>(s.theta_on), static_cast<float>(s.theta_off),
                                   static_cast<float>(leak_g[j]), static_cast<float>(bon[j]), static_cast<float>(boff[j]),
                                   static_cast<float>(c.sf_decay), static_cast<float>(c.sf_ramp),
                                   static_cast<float>(cache.k.phi_yy), static_cast<float>(cache.k.l_yy),
                                   static_cast<float>(cache.bridge_bound), static_cast<float>(c.dt),
-                                  static_cast<float>(c.inv_dt), q, r);
+                                  static_cast<float>(c.inv_dt), static_cast<float>(c.dt), q, r, db_f);
             }
             const double dd = d.y - d.ref;
             const double da = static_cast<double>(fa.y) - static_cast<double>(fa.ref);
@@ -751,10 +970,10 @@ void fidelity() {
     }
 
     // 3b and 3c: the comparator on (the study's: an event where the sample's end level lies past
-    // a threshold, the reference then set to the level; eq. 12's clocks fire background events
-    // and get a fresh budget -ln u). 3b: lockstep, each float verdict from the double state of
-    // the same sample, so one sample's disagreement does not carry over. 3c: each precision
-    // runs freely and the event lists are compared.
+    // a threshold, the reference then set to the level; eq. 12's clocks fire background events,
+    // which also set the reference, and get a fresh budget -ln u). 3b: lockstep, each float
+    // verdict from the double state of the same sample, so one sample's disagreement does not
+    // carry over. 3c: each precision runs freely and the event lists are compared.
     struct Scenario {
         const char* name;
         double amplitude;  // the light's log level swings by this (1 Hz sine), on every pixel
@@ -763,42 +982,59 @@ void fidelity() {
                               Scenario{"flickering light: ln I swings +-1 at 1 Hz (signal events)", 1.0}}) {
         std::printf("\n%s:\n", sc.name);
         const double base = cache.x;
-        std::size_t verdict_abs = 0, verdict_reb = 0, cross_abs = 0, cross_reb = 0, busy_dbl = 0, cross_dbl = 0;
-        std::vector<StudyEvent> ev_d, ev_a, ev_r;
+        constexpr int TRACKS = 3;  // float absolute; float re-based; float re-based with double clocks
+        const char* names[TRACKS] = {"float, absolute", "float, re-based", "re-based, dbl clk"};
+        std::size_t verdict[TRACKS] = {}, crossing[TRACKS] = {}, busy_dbl = 0, cross_dbl = 0;
+        std::vector<StudyEvent> ev_d, ev[TRACKS];
         for (std::size_t j = 0; j < n_pix; ++j) {
             const PixelState& s = st[j];
             const auto id = static_cast<std::uint32_t>(j);
+            // A track's state from a double one (levels re-based by b, rounded).
+            const auto from = [](const Track<double>& t, double b, auto& out) {
+                using T = std::decay_t<decltype(out.y)>;
+                using C = std::decay_t<decltype(out.on)>;
+                out = {static_cast<T>(t.z - b), static_cast<T>(t.y - b), static_cast<T>(t.ny), static_cast<T>(t.ref - b),
+                       static_cast<C>(t.on), static_cast<C>(t.off)};
+            };
             Track<double> d{s.z, s.y, s.ny, s.ref, s.bg_clock_on, s.bg_clock_off};
-            Track<float> fa{static_cast<float>(s.z), static_cast<float>(s.y), static_cast<float>(s.ny),
-                            static_cast<float>(s.ref), static_cast<float>(s.bg_clock_on), static_cast<float>(s.bg_clock_off)};
-            Track<float> fr{static_cast<float>(s.z - base), static_cast<float>(s.y - base), static_cast<float>(s.ny),
-                            static_cast<float>(s.ref - base), static_cast<float>(s.bg_clock_on),
-                            static_cast<float>(s.bg_clock_off)};
-            // One sample of a track in T with base b; records its events.
+            Track<float> fa{}, fr{};
+            Track<float, double> fc{};
+            from(d, 0.0, fa);
+            from(d, base, fr);
+            from(d, base, fc);
+            // One sample of a track with base b; records its events.
             const auto run = [&](auto& tr, double b, double x, double g, double u, std::uint32_t k,
-                                 std::vector<StudyEvent>* out, bool& quiet, int& crossing) {
+                                 std::vector<StudyEvent>* out, bool& quiet, int& cross) {
                 using T = std::decay_t<decltype(tr.y)>;
+                using C = std::decay_t<decltype(tr.on)>;
                 bool ran_out;
-                const T d1 = quiet_step<T>(tr, static_cast<T>(x - b), static_cast<T>(g), static_cast<T>(s.theta_on),
-                                           static_cast<T>(s.theta_off), static_cast<T>(leak_g[j]), static_cast<T>(bon[j]),
-                                           static_cast<T>(boff[j]), static_cast<T>(c.sf_decay), static_cast<T>(c.sf_ramp),
-                                           static_cast<T>(cache.k.phi_yy), static_cast<T>(cache.k.l_yy),
-                                           static_cast<T>(cache.bridge_bound), static_cast<T>(c.dt),
-                                           static_cast<T>(c.inv_dt), quiet, ran_out);
-                crossing = d1 >= static_cast<T>(s.theta_on) ? 1 : d1 <= -static_cast<T>(s.theta_off) ? -1 : 0;
+                T db;
+                const T d1 = quiet_step<T, C>(tr, static_cast<T>(x - b), static_cast<T>(g), static_cast<T>(s.theta_on),
+                                              static_cast<T>(s.theta_off), static_cast<T>(leak_g[j]),
+                                              static_cast<C>(bon[j]), static_cast<C>(boff[j]), static_cast<T>(c.sf_decay),
+                                              static_cast<T>(c.sf_ramp), static_cast<T>(cache.k.phi_yy),
+                                              static_cast<T>(cache.k.l_yy), static_cast<T>(cache.bridge_bound),
+                                              static_cast<T>(c.dt), static_cast<T>(c.inv_dt), static_cast<C>(c.dt), quiet,
+                                              ran_out, db);
+                cross = d1 >= static_cast<T>(s.theta_on) ? 1 : d1 <= -static_cast<T>(s.theta_off) ? -1 : 0;
                 if (!out) return;
-                if (crossing) {
-                    out->push_back({id, k, static_cast<std::int8_t>(crossing), 0.0});
+                if (cross) {
+                    // Where the line from d0 to d1 meets the threshold, in double from the track's
+                    // numbers (as the engine's per-pixel path would place it from a float state).
+                    const double th = cross > 0 ? s.theta_on : -s.theta_off;
+                    const double f = (th - static_cast<double>(db)) / (static_cast<double>(d1) - static_cast<double>(db));
+                    out->push_back({id, k, static_cast<std::int8_t>(cross), (k + f) * DT});
                     tr.ref = tr.y;
                 }
                 if (ran_out) {
-                    const bool on = !(tr.on > T(0));
+                    const bool on = !(tr.on > C(0));
+                    // Its time after the sample's end, as background_fire: the budget left / rate.
                     const double left = on ? static_cast<double>(tr.on) / bon[j] : static_cast<double>(tr.off) / boff[j];
-                    out->push_back({id, k, static_cast<std::int8_t>(on ? 2 : -2), left});
-                    if (on) tr.on = tr.on + static_cast<T>(-std::log(u));
-                    else tr.off = tr.off + static_cast<T>(-std::log(u));
-                    if (!(tr.on > T(0))) tr.on = static_cast<T>(1e-30);
-                    if (!(tr.off > T(0))) tr.off = static_cast<T>(1e-30);
+                    out->push_back({id, k, static_cast<std::int8_t>(on ? 2 : -2), (k + 1) * DT + left});
+                    if (on) tr.on = tr.on + static_cast<C>(-std::log(u));
+                    else tr.off = tr.off + static_cast<C>(-std::log(u));
+                    if (!(tr.on > C(0))) tr.on = static_cast<C>(1e-30);
+                    if (!(tr.off > C(0))) tr.off = static_cast<C>(1e-30);
                     tr.ref = tr.y;
                 }
             };
@@ -806,43 +1042,44 @@ void fidelity() {
                 double g, u;
                 draws(id, k + 1, g, u);
                 const double x = cache.x + sc.amplitude * std::sin(2.0 * evstwin::PI * 1.0 * (k + 1) * DT);
-                // 3b: the float verdicts from the double state as it stands (rounded to float).
-                Track<float> la{static_cast<float>(d.z), static_cast<float>(d.y), static_cast<float>(d.ny),
-                                static_cast<float>(d.ref), static_cast<float>(d.on), static_cast<float>(d.off)};
-                Track<float> lr{static_cast<float>(d.z - base), static_cast<float>(d.y - base), static_cast<float>(d.ny),
-                                static_cast<float>(d.ref - base), static_cast<float>(d.on), static_cast<float>(d.off)};
-                bool q_d, q_a, q_r;
-                int x_d, x_a, x_r;
-                run(la, 0.0, x, g, u, k, nullptr, q_a, x_a);
-                run(lr, base, x, g, u, k, nullptr, q_r, x_r);
+                // 3b: the float verdicts from the double state as it stands.
+                Track<float> la{}, lr{};
+                Track<float, double> lc{};
+                from(d, 0.0, la);
+                from(d, base, lr);
+                from(d, base, lc);
+                bool q_d, q[TRACKS];
+                int x_d, xs[TRACKS];
+                run(la, 0.0, x, g, u, k, nullptr, q[0], xs[0]);
+                run(lr, base, x, g, u, k, nullptr, q[1], xs[1]);
+                run(lc, base, x, g, u, k, nullptr, q[2], xs[2]);
                 run(d, 0.0, x, g, u, k, &ev_d, q_d, x_d);
                 busy_dbl += !q_d;
                 cross_dbl += x_d != 0;
-                verdict_abs += q_a != q_d;
-                verdict_reb += q_r != q_d;
-                cross_abs += x_a != x_d;
-                cross_reb += x_r != x_d;
+                for (int t = 0; t < TRACKS; ++t) {
+                    verdict[t] += q[t] != q_d;
+                    crossing[t] += xs[t] != x_d;
+                }
                 // 3c: the free-running float tracks.
-                run(fa, 0.0, x, g, u, k, &ev_a, q_a, x_a);
-                run(fr, base, x, g, u, k, &ev_r, q_r, x_r);
+                run(fa, 0.0, x, g, u, k, &ev[0], q[0], xs[0]);
+                run(fr, base, x, g, u, k, &ev[1], q[1], xs[1]);
+                run(fc, base, x, g, u, k, &ev[2], q[2], xs[2]);
             }
         }
         const double total = static_cast<double>(n_pix) * static_cast<double>(n_samples);
         std::printf("3b. lockstep (one sample from the same double state), of %.0f pixel-samples: double busy %.4f %%, "
                     "crossing %.4f %%\n",
                     total, 100.0 * static_cast<double>(busy_dbl) / total, 100.0 * static_cast<double>(cross_dbl) / total);
-        std::printf("  %-16s quiet/busy verdict differs %zu times (%.2e), crossing differs %zu times (%.2e)\n",
-                    "float, absolute", verdict_abs, static_cast<double>(verdict_abs) / total, cross_abs,
-                    static_cast<double>(cross_abs) / total);
-        std::printf("  %-16s quiet/busy verdict differs %zu times (%.2e), crossing differs %zu times (%.2e)\n",
-                    "float, re-based", verdict_reb, static_cast<double>(verdict_reb) / total, cross_reb,
-                    static_cast<double>(cross_reb) / total);
-        std::printf("3c. free-running, events against double's:\n");
+        for (int t = 0; t < TRACKS; ++t)
+            std::printf("  %-18s quiet/busy verdict differs %4zu times (%.2e), crossing differs %4zu times (%.2e)\n",
+                        names[t], verdict[t], static_cast<double>(verdict[t]) / total, crossing[t],
+                        static_cast<double>(crossing[t]) / total);
+        std::printf("3c. free-running %zu samples, events against double's:\n", n_samples);
         std::sort(ev_d.begin(), ev_d.end());
-        std::sort(ev_a.begin(), ev_a.end());
-        std::sort(ev_r.begin(), ev_r.end());
-        compare_events("float, absolute", ev_d, ev_a);
-        compare_events("float, re-based", ev_d, ev_r);
+        for (int t = 0; t < TRACKS; ++t) {
+            std::sort(ev[t].begin(), ev[t].end());
+            compare_events(names[t], ev_d, ev[t], n_pix);
+        }
     }
 }
 
