@@ -1,45 +1,62 @@
 // Issue 15 asks for the pixel state "in single precision where the physics allows it (log-domain
 // levels, filters) and double where it does not (time)". The engine kept double everywhere so
 // its events match an independent reference bit for bit. This study measures what single
-// precision would buy and what it would cost, so that choice can be made on numbers:
+// precision would buy and what it would change, so that choice can be made on numbers:
 //
 //   1. speed of the quiet pass: the engine's own detail::quiet_pass (double, the reference
 //      load's chain: source follower alone, noise and background on) on a real BlockSoA of one
-//      256-pixel block, warmed up by the engine's step_block_soa, against study variants of the
-//      same arithmetic on float arrays (levels relative to the block's base level), at AVX-512
-//      and AVX2 (the engine's dispatch; the study variants compiled with the same target
-//      attributes). ns per pixel-update, min over repetitions (the machine is shared).
-//   2. speed of the normals: the engine's Philox batch and ziggurat batch against a study
-//      float ziggurat (16 lanes at AVX-512) on the same words, and the engine's use of the
-//      words (one Philox call per pixel per two samples; the reference load uses one word of
-//      each two) against one call per four samples (every word used: a change of the word
-//      allocation, not of precision).
+//      256-pixel block, warmed up by 3 s of the engine's step_block_soa, against study variants
+//      of the same arithmetic on float arrays: levels re-based (relative to the block's level,
+//      a double kept outside), eq. 12's clocks in float or double, the refractory and hot-pixel
+//      times in double or as float offsets rounded so a verdict can only err towards busy.
+//      At each SIMD level the engine dispatches to (the study variants compiled with the same
+//      target attributes). ns per pixel-update, the least of 60 repetitions of 400 calls (the
+//      machine is shared; the least is the least disturbed), data in L1/L2 as the engine has it.
+//   2. speed of the normals (one a pixel-update in the reference load): the engine's Philox
+//      batch, its ziggurat batch, and its whole draw (draw_floor.cpp's loop), against a float
+//      ziggurat (16 lanes at AVX-512); and, because GCC 12 looks the ziggurat's tables up lane
+//      by lane, both precisions' look-ups written with AVX-512 gathers and with in-register
+//      permutes, so the share of precision is told apart from that of the look-up. Also what
+//      using every Philox word would save (one call per pixel per four samples instead of two:
+//      the reference load uses one word of each sample's two; a change of the words, not of
+//      precision).
 //   3. fidelity: the quiet pass's level arithmetic for 4096 pixels of the reference load
 //      (thresholds with 3 % mismatch, the 10 Hz source follower's exact update and noise at
-//      2e6 photons/s and 1 kHz, the leak, eq. 12's clocks), in double (the engine's), in float
-//      on absolute levels and in float on levels re-based to the block's level, same normals:
-//      level error after 10^4 samples (comparator off), how often the quiet/busy verdict of
-//      one sample differs (lockstep: each from the same double state), and the events of a
-//      study comparator run freely in each precision (background light, and a flickering one).
+//      2e6 photons/s and 1 kHz, the leak, eq. 12's clocks; states from init_state), in double
+//      (the engine's) and in float: absolute levels, re-based levels, re-based levels with the
+//      clocks in double; the same normals. 3a: level error after SAMPLES samples with the
+//      comparator off. 3b: how often one sample's quiet/busy verdict or crossing differs, each
+//      precision from the same double state (lockstep). 3c: each precision run freely with a
+//      study comparator, events compared (pixel, sample, polarity, microsecond timestamp), for
+//      the background light and for a light flickering by +-1 in ln I at 1 Hz.
 //
-// Study variants (study:: namespace) live only here: the engine's headers are included read-only
+// Study variants (namespace study) live only here: the engine's headers are included read-only
 // and nothing here is used by the engine. The study comparator of part 3 is simpler than the
-// engine's (an event where the sample's end level lies past a threshold, the reference then set
-// to the level; no bridge, no refractory period): the same rule for every precision, so what
-// differs between them is the arithmetic's precision alone.
+// engine's (an event where the sample's end level lies past a threshold, placed on the line
+// from d0 to d1, the reference then set to the level; a background event where a clock runs out,
+// timed as background_fire times it; no bridge, no refractory period): the same rule for every
+// precision, so what differs between them is the arithmetic's precision alone.
 //
 //   g++ -std=c++17 -O3 -DNDEBUG -Icpp/include bench/precision_study.cpp -o /tmp/precision_study
-//   /tmp/precision_study            # all three parts, ~1 min; or: /tmp/precision_study speed|fidelity
+//   /tmp/precision_study                       # both parts (~10 s)
+//   /tmp/precision_study speed                 # parts 1 and 2
+//   /tmp/precision_study fidelity [SAMPLES]    # part 3, 10000 samples (10 s at 1 kHz) by default
 //
 // No -march: like the engine, the vector code comes from target attributes and run-time dispatch.
 #include <evstwin/evstwin.hpp>
+
+#if !EVSTWIN_MULTIVERSION
+#error "precision_study compares SIMD levels: it needs the engine's multiversioning (x86-64, GCC or Clang, without EVSTWIN_NO_MULTIVERSION)"
+#endif
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 EVSTWIN_FP_STRICT_BEGIN  // the study variants obey the engine's rule: no contracted multiply-adds
@@ -137,10 +154,14 @@ struct EnginePass {
         c = b.model.constants(static_cast<double>(b.k) * DT, static_cast<double>(b.k + 1) * DT);
         b.model.noise_cache_for(common, BACKGROUND, c);
         for (std::size_t j = 0; j < BLOCK; ++j) {  // the sample's normals, as the engine draws them
-            const evstwin::Philox4x32Counter w =
-                evstwin::philox4x32({static_cast<std::uint32_t>(h.count(j) >> 1), 0u, b.ids[j], evstwin::PURPOSE_SAMPLE}, b.key);
-            evstwin::CounterStream more(b.key, b.ids[j], h.count(j), evstwin::PURPOSE_NORMAL);
-            g1[j] = evstwin::normal_ziggurat(w[0], [&more] { return more.word(); });
+            // sample_words(): one Philox call per two samples, words 0-1 for the even one, 2-3
+            // for the odd; sample_normals()'s first normal from the first.
+            const std::uint64_t n = h.count(j);
+            const evstwin::Philox4x32Counter w = evstwin::philox4x32(
+                {static_cast<std::uint32_t>(n >> 1), static_cast<std::uint32_t>(n >> 33), b.ids[j], evstwin::PURPOSE_SAMPLE},
+                b.key);
+            evstwin::CounterStream more(b.key, b.ids[j], n, evstwin::PURPOSE_NORMAL);
+            g1[j] = evstwin::normal_ziggurat(w[(n & 1u) ? 2 : 0], [&more] { return more.word(); });
             g2[j] = 0.0;
         }
         b.model.prepare_quiet_terms(h, BLOCK, common, b.model.has_background());
@@ -168,8 +189,9 @@ namespace study {
 /// Study variant: the quiet pass's arrays for one block in single precision. Levels (z, y, ref)
 /// are stored relative to the block's base level (a double kept outside the pass: here the
 /// common rate's log level when the block was loaded), so the float's 24 bits resolve the
-/// difference from the base, not the ~-31 of ln(I / 1 A) (whose float spacing is 1.9e-6, a
-/// tenth of the leak's 2e-5 a sample). ny is the noise part, small already. Clock and Time:
+/// difference from the base, not the -33 of ln(I / 1 A) at the reference load's background
+/// (whose float spacing, 3.8e-6, is a fifth of the 2.1e-5 the leak moves the reference a
+/// sample: part 3). ny is the noise part, small already. Clock and Time:
 /// float, or double to keep eq. 12's clocks and the times as the engine has them.
 template <class Clock, class Time>
 struct FloatBlock {
@@ -183,7 +205,7 @@ struct FloatBlock {
     /// The times the pass compares. As float: offsets from the run call's start, rounded so a
     /// float comparison can only err towards "busy" (refr_until rounded up, next_hot_t down;
     /// the pass's t0 down, t1 up), which sends a pixel to the exact per-pixel path, never
-    /// settles one wrongly: the verdicts stay exact, only a few more pixels may be busy.
+    /// settles one wrongly: the time tests stay exact, only a few more pixels may be busy.
     std::vector<Time> refr, hot;
     std::vector<std::uint32_t> busy;  ///< 32-bit verdicts: the lane width of the float levels
     double base = 0.0, t_call = 0.0;
@@ -274,7 +296,9 @@ void load(FloatBlock<Clock, Time>& f, const EnginePass& e, FloatPass<Clock, Time
 }
 
 /// Study variant of detail::quiet_pass_body<SfOnly, Noise = true, Background = true>: the same
-/// operations in the same order on float levels (Clock and Time as FloatBlock says).
+/// operations in the same order on float levels (Clock and Time as FloatBlock says). Its level
+/// tests are not made conservative (a float "quiet" need not be a double one near the bridge
+/// bound; a design would add margins, at no measurable cost): part 3 counts how often they differ.
 template <class Clock, class Time>
 EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const FloatPass<Clock, Time>& q, const float* __restrict rate) {
     const float* __restrict sz = q.now->z.data();
@@ -555,10 +579,10 @@ void speed() {
     EngineBlock block(3000);  // 3 s of the reference load's background: a block as it stands mid-run
     EnginePass e(block);
     // The engine's whole block kernel for context (normals, quiet pass, bridge stage, per-pixel
-    // path, events): the samples it runs are the ones after the snapshot above.
+    // path, events): a second copy of that block, run on for 60 x 200 samples past the snapshot.
     EngineBlock kernel_block(3000);
-    const double kernel_ns =
-        min_seconds_per_call([&] { kernel_block.step(); }, 200, 60) / BLOCK * 1e9;
+    const double kernel_ns = min_seconds_per_call([&] { kernel_block.step(); }, 200, 60) / BLOCK * 1e9;
+    double quiet_d = 0, quiet_all_f = 0, quiet_dbl_clocks = 0;  // at the best level
     // The study's float passes: <Clock, Time> = float or double each.
     study::FloatBlock<float, float> b_ff;
     study::FloatPass<float, float> q_ff{};
@@ -597,6 +621,11 @@ void speed() {
         std::printf("%-10s %14.3f", level_names[static_cast<int>(l)], d);
         for (double v : t) std::printf(" %12.3f (%4.2fx)", v, d / v);
         std::printf("\n");
+        if (l == evstwin::best_simd_level()) {
+            quiet_d = d;
+            quiet_all_f = t[0];
+            quiet_dbl_clocks = t[2];
+        }
     }
     evstwin::set_simd_level(evstwin::best_simd_level());
     // The verdicts on this snapshot (part 3 measures how often they would differ over a run).
@@ -629,7 +658,7 @@ void speed() {
                 "engine normals", "+ slow path");
     std::printf("%-10s %12s %12s %12s %14s %14s\n", "", "per pixel", "common path", "common path",
                 "(draw_floor)", "(of which)");
-    double philox_ns = 0, zd_ns = 0, zf_ns = 0, full_ns = 0, common_ns = 0;
+    double philox_ns = 0, zd_ns = 0, zf_ns = 0, full_ns = 0;
     for (SimdLevel l : levels) {
         if (!evstwin::simd_level_supported(l)) continue;
         evstwin::set_simd_level(l);
@@ -670,7 +699,7 @@ void speed() {
         std::printf("%-10s %12.3f %12.3f %12.3f %14.3f %14.3f\n", level_names[static_cast<int>(l)], ph, zd, zf, f,
                     f - f_common);
         if (l == evstwin::best_simd_level()) {
-            philox_ns = ph; zd_ns = zd; zf_ns = zf; full_ns = f; common_ns = f_common;
+            philox_ns = ph; zd_ns = zd; zf_ns = zf; full_ns = f;
         }
     }
     evstwin::set_simd_level(evstwin::best_simd_level());
@@ -681,9 +710,9 @@ void speed() {
                 full_ns, philox_ns / 2, zd_ns, full_ns - philox_ns / 2 - zd_ns);
     std::printf("  float ziggurat saves %.3f ns; every Philox word used (one call / 4 updates, any precision) saves %.3f ns\n",
                 zd_ns - zf_ns, philox_ns / 4);
-    keep(common_ns);
 
-    // The table look-ups written with AVX-512 intrinsics (study::ziggurat_gather_*, _permute_*).
+    // The table look-ups written with AVX-512 intrinsics (study::ziggurat_gather_*, _permute_*);
+    // without AVX-512 the study ends here (no summary).
     if (!evstwin::simd_level_supported(SimdLevel::AVX512)) return;
     std::vector<double> gd2(BLOCK);
     std::vector<float> gf2(BLOCK);
@@ -734,6 +763,19 @@ void speed() {
     std::printf("best double look-up saves %.3f ns on the engine's batch (bit for bit); float's best saves a further %.3f\n",
                 zd_ns - zd_best, zd_best - zf_best);
     evstwin::set_simd_level(evstwin::best_simd_level());
+
+    // What single precision itself buys a pixel-update at this level: the quiet pass, and the
+    // ziggurat measured against the best double look-up (the rest of the engine's gain there
+    // is the look-up's vectorisation, which double gets bit for bit).
+    std::printf("\n== summary at %s, ns per pixel-update ==\n", evstwin::simd_level_name(evstwin::simd_level()));
+    std::printf("single precision, upper bound (all float):         quiet pass %.3f + normals %.3f = %.3f\n",
+                quiet_d - quiet_all_f, zd_best - zf_best, quiet_d - quiet_all_f + zd_best - zf_best);
+    std::printf("single precision, eq. 12's clocks in double (3c):  quiet pass %.3f + normals %.3f = %.3f\n",
+                quiet_d - quiet_dbl_clocks, zd_best - zf_best, quiet_d - quiet_dbl_clocks + zd_best - zf_best);
+    std::printf("against the engine's ziggurat as it is (GCC's lane-by-lane look-up): add %.3f\n", zd_ns - zd_best);
+    std::printf("without precision: ziggurat look-up by gather or permutes (same bits) %.3f; every Philox word used "
+                "(other words, any precision) %.3f\n",
+                zd_ns - zd_best, philox_ns / 4);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -858,8 +900,8 @@ void compare_events(const char* name, const std::vector<StudyEvent>& ref, const 
                         100.0 * static_cast<double>(other_us[kind]) / static_cast<double>(matched[kind]));
 }
 
-void fidelity() {
-    const std::size_t n_pix = 4096, n_samples = 10000;
+void fidelity(std::size_t n_samples) {
+    const std::size_t n_pix = 4096;
     std::printf("\n== fidelity: %zu pixels of the reference load, %zu samples at 1 kHz, same normals ==\n", n_pix,
                 n_samples);
     const PixelModel model(reference_pixel());
@@ -1089,12 +1131,18 @@ EVSTWIN_FP_STRICT_END
 
 int main(int argc, char** argv) {
     const bool all = argc < 2;
-    if (!all && std::strcmp(argv[1], "speed") != 0 && std::strcmp(argv[1], "fidelity") != 0) {
-        std::fprintf(stderr, "usage: %s [speed|fidelity]\n", argv[0]);
+    const long samples = argc >= 3 ? std::atol(argv[2]) : 10000;
+    if (argc > 3 || (!all && std::strcmp(argv[1], "speed") != 0 && std::strcmp(argv[1], "fidelity") != 0) ||
+        (argc == 3 && std::strcmp(argv[1], "fidelity") != 0)) {
+        std::fprintf(stderr, "usage: %s [speed | fidelity [SAMPLES]]\n", argv[0]);
+        return 2;
+    }
+    if (samples < 1 || samples > 1000000) {
+        std::fprintf(stderr, "fidelity SAMPLES must be in [1, 1000000]; got %s\n", argv[2]);
         return 2;
     }
     std::printf("best SIMD level: %s\n", evstwin::simd_level_name(evstwin::best_simd_level()));
     if (all || std::strcmp(argv[1], "speed") == 0) speed();
-    if (all || std::strcmp(argv[1], "fidelity") == 0) fidelity();
+    if (all || std::strcmp(argv[1], "fidelity") == 0) fidelity(static_cast<std::size_t>(samples));
     return 0;
 }
