@@ -713,6 +713,29 @@ void speed() {
                 "bit for bit: %s; verdicts that differ from the engine's: %zu (float, all float), %zu (float, due times), "
                 "%zu (double, due times)\n",
                 n_quiet, BLOCK, same_levels ? "yes" : "NO", differ_f, differ_due, differ_ddue);
+    // Single precision keeps the engine's rule that every SIMD level gives the same bits (IEEE
+    // float operations in the same order, nothing contracted): the all-float pass at each level.
+    {
+        std::vector<float> first_y, first_ref;
+        std::vector<std::uint32_t> first_busy;
+        bool same_at_levels = true;
+        for (SimdLevel l : levels) {
+            if (!evstwin::simd_level_supported(l)) continue;
+            evstwin::set_simd_level(l);
+            study::quiet_pass(q_fff, block.rate.data());
+            if (first_y.empty()) {
+                first_y = b_fff.buf[1].y;
+                first_ref = b_fff.buf[1].ref;
+                first_busy = b_fff.busy;
+            } else {
+                same_at_levels &= std::memcmp(first_y.data(), b_fff.buf[1].y.data(), BLOCK * sizeof(float)) == 0 &&
+                                  std::memcmp(first_ref.data(), b_fff.buf[1].ref.data(), BLOCK * sizeof(float)) == 0 &&
+                                  first_busy == b_fff.busy;
+            }
+        }
+        evstwin::set_simd_level(evstwin::best_simd_level());
+        std::printf("the all-float pass gives the same bits at every SIMD level: %s\n", same_at_levels ? "yes" : "NO");
+    }
 
     // Part 2: the normals of the reference load (one a pixel-update: the source follower alone).
     std::printf("\n-- normals (reference load: one normal a pixel-update) --\n");
