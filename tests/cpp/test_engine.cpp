@@ -336,7 +336,7 @@ TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
     }
     CHECK(levels >= 1);
     // Every layer and sign, with magnitudes at the edges of its rectangle (0, k - 1, k, the
-    // largest): the batches read the tables right (the AVX-512 one by permutes over them) and
+    // largest): the batches read the tables right (the AVX2 and AVX-512 ones by gathers) and
     // give the scalar common path's bits (a zero's sign too) and the same slow flags.
     std::vector<std::uint32_t> words;
     for (std::uint32_t layer = 0; layer < 128; ++layer)
