@@ -558,11 +558,13 @@ class _Runner:
         return np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts])
 
     def _contribution_parts(self, x: np.ndarray, y: np.ndarray, f: np.ndarray,
-                            groups: Sequence[tuple[psf.PSFShape, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
+                            groups: Sequence[tuple[psf.PSFShape, np.ndarray]],
+                            stride: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
         """``_contributions`` as the renderer's chunks (each at most ``psf.render``'s chunk of
-        window pixels), in the order of their concatenation."""
+        window pixels), in the order of their concatenation. ``stride``: the flat index is
+        sample * stride + pixel (default width * height; any stride >= it)."""
         sc = self.scene
-        npix = sc.width * sc.height
+        npix = sc.width * sc.height if stride is None else stride
         parts: list[tuple[np.ndarray, np.ndarray]] = []
         for shape, cols in groups:
             n_t, n_s = x.shape[0], cols.size
@@ -623,13 +625,16 @@ class _Runner:
         # Marked on a flat mask (linear in the contributions, no sort).
         mask = self.hot_until > t_fine[0]
         parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        for idx, val in self._contribution_parts(x, y, f, self._fine_groups):
-            # divmod by hand: NumPy's floor division by a scalar is ~10x its divmod (40 ns an
-            # element here); the same integers. The pixels overwrite the chunk's own indices
-            # (no other reference to them): one window-sized array less to keep.
-            sample_of = idx // npix
+        # The windows' flat indices with a power-of-two stride between samples, so that a shift
+        # and a mask split them into (sample, pixel): NumPy's integer division by a scalar cost
+        # ~10 times a shift (and its divmod by hand a division, a multiply and a subtraction).
+        shift = (npix - 1).bit_length()
+        for idx, val in self._contribution_parts(x, y, f, self._fine_groups, stride=1 << shift):
+            # The pixels overwrite the chunk's own indices (no other reference to them): one
+            # window-sized array less to keep.
+            sample_of = idx >> shift
             pixel = idx
-            pixel -= sample_of * npix
+            pixel &= (1 << shift) - 1
             mask[pixel] = True
             self.hot_until[pixel] = t_fine[-1] + self.settle_s
             parts.append((sample_of, pixel, val))

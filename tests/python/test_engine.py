@@ -828,3 +828,31 @@ def test_rate_check_in_parts_names_the_first_bad_rate_and_moves_nothing(threads:
     again = Sensor(w, h, NOISY, seed=4, num_threads=threads)
     again.run(good, t)
     assert sensor.run_pixels(pixels, fine, fine_t).tobytes() == again.run_pixels(pixels, fine, fine_t).tobytes()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_run_pixels_bad_rate_beats_a_flood_in_another_block(threads: int) -> None:
+    # run_pixels checks each block's rates as the block starts, and the pixels' new states wait
+    # until every block has passed. A first block whose events pass max_events before a later
+    # block finds a bad rate: the bad rate is still the error, and no pixel has moved (the
+    # sensor is usable, and gives what a fresh one gives).
+    w, h = 32, 32
+    t0 = [0.0]
+    dark = np.full((1, h, w), 1e6)
+    pixels = np.arange(w * h)  # 4 blocks of 256
+    fine_t = [1e-3, 2e-3, 3e-3, 4e-3]
+    fine = np.full((4, pixels.size), 1e6)
+    fine[1::2, :256] = 1e10  # the first block flashes: thousands of events
+    flood_bad = fine.copy()
+    flood_bad[3, 1000] = np.nan
+    sensor = Sensor(w, h, IDEAL, seed=2, num_threads=threads)
+    sensor.run(dark, t0)
+    with pytest.raises(ValueError, match=r"max_events=10 "):
+        Sensor(w, h, IDEAL, seed=2, num_threads=threads).run_pixels(pixels, fine, fine_t, max_events=10)
+    with pytest.raises(ValueError, match=r"got photon_rate\[3, 1000\]=nan"):
+        sensor.run_pixels(pixels, flood_bad, fine_t, max_events=10)
+    fresh = Sensor(w, h, IDEAL, seed=2, num_threads=threads)
+    fresh.run(dark, t0)
+    expected = fresh.run_pixels(pixels, fine, fine_t)
+    assert len(expected) > 1000
+    assert sensor.run_pixels(pixels, fine, fine_t).tobytes() == expected.tobytes()

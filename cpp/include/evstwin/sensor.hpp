@@ -114,6 +114,9 @@ public:
     /// against 1.06 s at 45 Hz, 1.04-1.06 against 1.15-1.16 s at 50 Hz); an eighth loses at
     /// 20-30 Hz (0.45 / 0.84-0.85 s). Speed only: either kernel gives the same events.
     static constexpr std::size_t SOA_MAX_BUSY_QUARTERS = 1;
+    /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
+    /// Speed only.
+    static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
     /// Shortest sample interval accepted [s]: below it 1/dt and the crossing times lose meaning.
     static constexpr double MIN_DT_S = 1e-12;
     /// Largest photon rate accepted [photons/s on a pixel]; with no dark current, positive
@@ -420,28 +423,54 @@ public:
         }
         for (std::size_t j = 0; j < n_pixels; ++j)
             if (state_[pixels[j]].n > 0) check_dt(t_s[0] - state_[pixels[j]].t, 0);
-        // The rates are checked at the start of the call's parallel region (RateCheck), before
-        // any pixel moves.
-        RateCheck<Real> rate_check(*this, photon_rate, n_samples * n_pixels);
-
         std::vector<SampleConstants> consts(n_samples);
         for (std::size_t k = 1; k < n_samples; ++k) consts[k] = model_.constants(t_s[k - 1], t_s[k]);
         const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
         start_call(nblocks, n_samples);
+        // The rates are checked block by block, each block's columns just before it steps them
+        // (they are then in the cache for its steps: a separate pass over the whole array read it
+        // from memory once more, 7 % of mcreynolds' run_pixels calls), and the blocks' new
+        // states wait in pixel_states_ until every block has passed: a bad value anywhere leaves
+        // every pixel as it was, and the error names the first one in the array.
+        const std::size_t total = n_samples * n_pixels;
+        std::vector<std::size_t> block_bad(nblocks, total);
+        if (pixel_states_.size() < n_pixels) pixel_states_.resize(n_pixels);
+        NoCheck no_check{total};
         // The listed pixels need not be in increasing order: each sample's events are sorted
         // by (t, pixel), not only by t.
         CollectPlan plan;
         plan.storage = &storage;
         plan.t_s = t_s;
-        guarded_for_each_block(
-            nblocks, n_pixels * n_samples, rate_check,
-            [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
-                run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
-            },
-            [&] { return collect_prepare(plan, false); },
-            [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
-        const std::size_t bad = rate_check.first_bad();
-        if (bad < rate_check.total)
+        std::size_t bad = total;
+        try {
+            guarded_for_each_block(
+                nblocks, total, no_check,
+                [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                    const std::size_t lo = b * BLOCK, m = std::min(n_pixels, lo + BLOCK) - lo;
+                    for (std::size_t k = 0; k < n_samples; ++k) {
+                        const std::size_t i = first_bad_rate(photon_rate + k * n_pixels + lo, m);
+                        if (i < m) {
+                            block_bad[b] = k * n_pixels + lo + i;
+                            return;
+                        }
+                    }
+                    run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
+                },
+                [&]() -> std::size_t {
+                    bad = *std::min_element(block_bad.begin(), block_bad.end());
+                    if (bad < total) return 0;
+                    for (std::size_t j = 0; j < n_pixels; ++j) state_[pixels[j]] = pixel_states_[j];
+                    return collect_prepare(plan, false);
+                },
+                [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
+        } catch (...) {
+            // A block's error (max_events) before every block's rates were checked: a bad rate
+            // is still the error, and no pixel has moved (the states wait in pixel_states_).
+            bad = first_bad_rate(photon_rate, total);
+            if (bad >= total) throw;
+            stopped_ = false;
+        }
+        if (bad < total)
             throw_bad_rate("photon_rate[" + std::to_string(bad / n_pixels) + ", " + std::to_string(bad % n_pixels) + "]",
                            static_cast<double>(photon_rate[bad]));
         collect_finish();
@@ -484,6 +513,14 @@ private:
     /// without it (README, "Sixth round"); in the region it needs no second fork and join. first_bad(): the first bad index in the
     /// whole array (the parts' first, in order), `total` if none, whatever the threads.
     static constexpr std::size_t RATE_CHECK_PART = std::size_t{1} << 16;
+    /// for_each_block's input check where the caller checks its input itself, inside the blocks
+    /// (run_pixels_into): nothing to do before them.
+    struct NoCheck {
+        std::size_t total;
+        std::size_t parts() const { return 0; }
+        void check_part(std::size_t) {}
+        std::size_t first_bad() const { return total; }
+    };
     template <class Real>
     struct RateCheck {
         RateCheck(const Sensor& sensor_, const Real* rate_, std::size_t total_)
@@ -885,6 +922,18 @@ private:
                 eligible = true;
                 n_active = 0;
                 for (std::size_t i = lo; i < hi; ++i) {
+                    // The states come from memory here, once a call (20 MB for the DAVIS346
+                    // array), at a stride the hardware prefetcher follows only within a page:
+                    // every cache line of the record a few pixels ahead is asked for now, for
+                    // load() below. (Written out here: the same loop in a helper function in
+                    // this header left no prefetch instruction in a GCC 12 -O3 build.)
+#if defined(__GNUC__) || defined(__clang__)
+                    if (i + STATE_PREFETCH_AHEAD < hi) {
+                        const char* ahead = reinterpret_cast<const char*>(&state_[i + STATE_PREFETCH_AHEAD]);
+                        for (std::size_t line = 0; line < sizeof(PixelState); line += 64) __builtin_prefetch(ahead + line);
+                        __builtin_prefetch(ahead + sizeof(PixelState) - 1);  // where the record is not 64-byte aligned
+                    }
+#endif
                     const PixelState& s = state_[i];
                     const bool at_t0 = (s.t == c.t0) & (s.n > 0);
                     eligible &= at_t0 | (s.t >= c.t1);
@@ -956,14 +1005,14 @@ private:
         // The first interval starts at each pixel's own last sample; after it, every pixel
         // stands at the same time and the block kernel applies.
         const std::size_t m = hi - lo;
-        std::vector<PixelState> local(m);
+        PixelState* local = pixel_states_.data() + lo;  // run_pixels_into() puts them back
         for (std::size_t j = 0; j < m; ++j) local[j] = state_[pixels[lo + j]];
         const bool kernel = model_.has_block_kernel();
         // Usually every listed pixel stands at the same time (the previous base sample).
         bool same_start = kernel;
         for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
         if (same_start) {
-            model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, rate + lo,
+            model_.step_block(PixelModel::BlockView{local, pixels + lo, nullptr, m}, rate + lo,
                               model_.constants(local[0].t, t_s[0]), key_, poisson, scratch, emit, pixel);
         } else {
             for (std::size_t j = 0; j < m; ++j) {
@@ -977,20 +1026,20 @@ private:
         std::size_t k = 1;
         if (kernel && model_.has_soa_kernel() && n_samples > 1) {
             // Every pixel now stands at t_s[0]: the rest of the samples on the block's arrays.
-            scratch.soa.load(local.data(), m);
+            scratch.soa.load(local, m);
             for (; k < n_samples; ++k) {
                 emit.start_sample(k);
-                model_.step_block_soa(scratch.soa, local.data(), pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
+                model_.step_block_soa(scratch.soa, local, pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
                                       scratch, emit, pixel);
                 ends[k] = static_cast<std::uint32_t>(out.size());
             }
-            scratch.soa.store(local.data(), m, t_s[n_samples - 1]);
+            scratch.soa.store(local, m, t_s[n_samples - 1]);
         }
         for (; k < n_samples; ++k) {
             emit.start_sample(k);
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
-                model_.step_block(PixelModel::BlockView{local.data(), pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
+                model_.step_block(PixelModel::BlockView{local, pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
                                   scratch, emit, pixel);
             } else {
                 for (std::size_t j = 0; j < m; ++j) {
@@ -1000,7 +1049,6 @@ private:
             }
             ends[k] = static_cast<std::uint32_t>(out.size());
         }
-        for (std::size_t j = 0; j < m; ++j) state_[pixels[lo + j]] = local[j];
     }
 
     /// Count n more events of this call; throw once the call passes max_events_ (whichever
@@ -1247,6 +1295,9 @@ private:
     Philox4x32Key key_;
     int num_threads_ = 1;
     std::vector<PixelState> state_;
+    /// run_pixels_into()'s working copies of the listed pixels' states, in the list's order
+    /// (kept from call to call for its memory).
+    std::vector<PixelState> pixel_states_;
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
     std::vector<std::vector<RawEvent>> block_events_;
