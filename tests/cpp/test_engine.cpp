@@ -988,6 +988,46 @@ TEST(exp_neg_bracket_is_within_1e_8_of_exp) {
     CHECK(detail::exp_neg_bracket(0.0) == 1.0);
 }
 
+TEST(below_exp_neg_decides_as_the_library_exp) {
+    // init_state's leak-phase acceptance, u < exp(-e), decided on bounds where it can be (above
+    // e = 24 against uniform_open's least value, on [0, 24] against exp_neg_bracket), against
+    // the library's exp: random exponents over [0, 60] and far beyond with random uniforms;
+    // uniforms placed within a relative 1e-12 to 1e-6 of exp(-e) (where only the exp can
+    // decide); exponents next to 24; uniform_open's least and greatest values; uniforms below
+    // 2^-33 (not uniform_open's, still decided as the exp); negative, infinite and NaN exponents
+    // and a NaN uniform.
+    XorshiftUniform next{0x2545F4914F6CDD1Dull};
+    const auto exact = [](double u, double e) { return u < std::exp(-e); };
+    const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+    int wrong = 0, near_ties = 0, cases = 0;
+    const auto check = [&](double u, double e) {
+        wrong += detail::below_exp_neg(u, e) != exact(u, e);
+        ++cases;
+    };
+    for (int i = 0; i < 400000; ++i) {
+        const double e = i % 8 == 7 ? std::exp(20.0 * next()) : 60.0 * next();
+        double u = uniform_open(static_cast<std::uint32_t>(next() * 4294967296.0));
+        if (i % 4 == 1) {
+            u = std::exp(-e) * (1.0 + (next() - 0.5) * std::pow(10.0, -6.0 - 6.0 * next()));
+            near_ties += e <= 24.0;
+        }
+        check(u, e);
+    }
+    const double u_min = uniform_open(0u), u_max = uniform_open(0xFFFFFFFFu);
+    CHECK(u_min == 0x1p-33);
+    for (double e = 23.9; e < 24.1; e = std::nextafter(e + 1e-4, inf)) {
+        for (const double u : {u_min, std::nextafter(u_min, 1.0), u_max, std::exp(-e), std::nextafter(std::exp(-e), 0.0),
+                               std::nextafter(std::exp(-e), 1.0), 1e-12, 0.0, -1.0})
+            check(u, e);
+        for (const double d : {0.0, -1.0, 1.0}) check(u_min, std::nextafter(24.0, 24.0 + d));
+    }
+    for (const double e : {0.0, -0.0, -1e-300, -0.5, -40.0, 40.0, 1e300, inf, -inf, nan})
+        for (const double u : {u_min, 0.5, u_max, 1.0, 1e-20, 0.0, nan}) check(u, e);
+    CHECK(wrong == 0);
+    CHECK(near_ties > 30000);
+    CHECK(cases > 400000);
+}
+
 TEST(floor_positive_and_select_give_the_library_floor_and_the_chosen_bits) {
     // floor_positive (the comparator's merged-levels count) against std::floor, bit for bit: on
     // integers and their neighbours, halves, a random spread of magnitudes, and where it hands
