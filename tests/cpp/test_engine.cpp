@@ -791,6 +791,36 @@ TEST(build_without_openmp_or_one_thread_matches_two_threads) {
     CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
 }
 
+TEST(samples_with_thousands_of_events_come_out_as_the_comparison_sort_orders_them) {
+    // The event-heavy load's samples (thousands of events each, so the counting sort stages
+    // them by coarse spans of time first) against run_pixels over every pixel in order, whose
+    // events are sorted by (microsecond, pixel) with std::stable_sort: the same bytes, on one
+    // thread and on two, and time then pixel order within every interval.
+    PixelParams p;  // all noise on
+    p.threshold_sigma = 0.03;
+    p.cutoff_hz = 200.0;
+    const int w = 128, h = 64, n = 12;
+    std::vector<float> rate(static_cast<std::size_t>(n) * w * h, 2e6f);
+    std::vector<double> t(n);
+    for (int k = 0; k < n; ++k) t[k] = (k + 1) * 1e-3;
+    std::vector<std::uint32_t> all(static_cast<std::size_t>(w) * h);
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::uint32_t>(i);
+    Sensor a(w, h, p, 5, 1), b(w, h, p, 5, 2), c(w, h, p, 5, 1);
+    const auto ea = a.run(rate.data(), t.data(), n);
+    const auto eb = b.run(rate.data(), t.data(), n);
+    const auto ec = c.run_pixels(all.data(), all.size(), rate.data(), t.data(), n);
+    CHECK(ea.size() > 2 * 2048 * (n - 1));  // samples far above STAGED_MIN_EVENTS (2048)
+    CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
+    CHECK(ea.size() == ec.size() && std::memcmp(ea.data(), ec.data(), ea.size() * sizeof(Event)) == 0);
+    int out_of_order = 0;
+    for (std::size_t e = 1; e < ea.size(); ++e) {
+        const std::int64_t pix0 = std::int64_t{ea[e - 1].y} * w + ea[e - 1].x, pix1 = std::int64_t{ea[e].y} * w + ea[e].x;
+        const bool at_sample_time = ea[e].t % 1000 == 0;
+        out_of_order += ea[e].t < ea[e - 1].t || (ea[e].t == ea[e - 1].t && pix1 < pix0 && !at_sample_time);
+    }
+    CHECK(out_of_order == 0);
+}
+
 TEST(leak_events_keep_their_times_far_from_zero_after_sample_intervals_of_hours) {
     // The working records keep an event's microsecond modulo 2^32 and take the rest from its
     // sample's end; an event more than 2^31 us before that end makes its block keep full
