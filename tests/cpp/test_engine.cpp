@@ -795,7 +795,9 @@ TEST(samples_with_thousands_of_events_come_out_as_the_comparison_sort_orders_the
     // The event-heavy load's samples (thousands of events each, so the counting sort stages
     // them by coarse spans of time first) against run_pixels over every pixel in order, whose
     // events are sorted by (microsecond, pixel) with std::stable_sort: the same bytes, on one
-    // thread and on two, and time then pixel order within every interval.
+    // thread and on two, and time then pixel order within every interval. And against a run
+    // with a probe, which takes the per-pixel path (advance) for every pixel, without the
+    // block kernel's buffered emit (BufferedEmit: dozens of events a pass, each with its pixel).
     PixelParams p;  // all noise on
     p.threshold_sigma = 0.03;
     p.cutoff_hz = 200.0;
@@ -805,10 +807,14 @@ TEST(samples_with_thousands_of_events_come_out_as_the_comparison_sort_orders_the
     for (int k = 0; k < n; ++k) t[k] = (k + 1) * 1e-3;
     std::vector<std::uint32_t> all(static_cast<std::size_t>(w) * h);
     for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::uint32_t>(i);
-    Sensor a(w, h, p, 5, 1), b(w, h, p, 5, 2), c(w, h, p, 5, 1);
+    Sensor a(w, h, p, 5, 1), b(w, h, p, 5, 2), c(w, h, p, 5, 1), d(w, h, p, 5, 1);
     const auto ea = a.run(rate.data(), t.data(), n);
     const auto eb = b.run(rate.data(), t.data(), n);
     const auto ec = c.run_pixels(all.data(), all.size(), rate.data(), t.data(), n);
+    const std::vector<std::uint32_t> probe = {77};
+    std::vector<TraceSample> trace;
+    const auto ed = d.run(rate.data(), t.data(), n, &probe, &trace);
+    CHECK(ea.size() == ed.size() && std::memcmp(ea.data(), ed.data(), ea.size() * sizeof(Event)) == 0);
     CHECK(ea.size() > 2 * 2048 * (n - 1));  // samples far above STAGED_MIN_EVENTS (2048)
     CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
     CHECK(ea.size() == ec.size() && std::memcmp(ea.data(), ec.data(), ea.size() * sizeof(Event)) == 0);

@@ -1790,16 +1790,50 @@ struct PixelModel {
             pre = scratch.bridge_pre.data();
             bridge_decisions(bridge, n_busy, c, key, scratch, pre);
         }
+        BufferedEmit<std::remove_reference_t<Emit>> buffered{emit, pixel};
         for (std::size_t b = 0; b < n_busy; ++b) {
             PixelState& s = st[busy_at[b]];
             pixel = v.ids[busy_at[b]];
             continuous_finish(s, x[b], z[b], y[b], nz[b], ny[b], cur[b], leak[b], bvar[b], noise_d[b], c, key, pixel,
-                              emit, nullptr, pre ? pre + b : nullptr);
-            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
+                              buffered, nullptr, pre ? pre + b : nullptr);
+            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, buffered);
             s.t = c.t1;
             ++s.n;
         }
+        buffered.flush();
     }
+
+    /// The comparator's emit(t, polarity, label) for step_block_continuous' busy pixels: the
+    /// events kept in a short buffer, with the pixel they belong to, and handed to `emit` in
+    /// the same order when it fills and at the end of the pass (with `pixel` set to each one's,
+    /// as emit reads it). The comparator's loop then makes no call an event, so its doubles
+    /// are not saved and restored around one.
+    template <class Emit>
+    struct BufferedEmit {
+        static constexpr std::size_t N = 64;
+        Emit& emit;
+        std::uint32_t& pixel;
+        std::size_t n = 0;
+        double t[N];
+        std::uint32_t px[N];
+        std::uint8_t pol[N], label[N];
+        EVSTWIN_ALWAYS_INLINE void operator()(double t_event, Polarity p, std::uint8_t l) {
+            t[n] = t_event;
+            px[n] = pixel;
+            pol[n] = static_cast<std::uint8_t>(p);
+            label[n] = l;
+            if (++n == N) flush();
+        }
+        EVSTWIN_NOINLINE void flush() {
+            const std::uint32_t now = pixel;
+            for (std::size_t i = 0; i < n; ++i) {
+                pixel = px[i];
+                emit(t[i], static_cast<Polarity>(pol[i]), label[i]);
+            }
+            pixel = now;
+            n = 0;
+        }
+    };
 
     /// bridge_decisions' inputs, filled by bridge_prepare() for each busy pixel in the pass that
     /// finds it busy (its state is at hand there): the draws' counters and arguments (ARGS
