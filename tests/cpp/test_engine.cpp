@@ -791,6 +791,42 @@ TEST(build_without_openmp_or_one_thread_matches_two_threads) {
     CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
 }
 
+TEST(samples_with_thousands_of_events_come_out_as_the_comparison_sort_orders_them) {
+    // The event-heavy load's samples (thousands of events each, so the counting sort stages
+    // them by coarse spans of time first) against run_pixels over every pixel in order, whose
+    // events are sorted by (microsecond, pixel) with std::stable_sort: the same bytes, on one
+    // thread and on two, and time then pixel order within every interval. And against a run
+    // with a probe, which takes the per-pixel path (advance) for every pixel, without the
+    // block kernel's buffered emit (BufferedEmit: dozens of events a pass, each with its pixel).
+    PixelParams p;  // all noise on
+    p.threshold_sigma = 0.03;
+    p.cutoff_hz = 200.0;
+    const int w = 128, h = 64, n = 12;
+    std::vector<float> rate(static_cast<std::size_t>(n) * w * h, 2e6f);
+    std::vector<double> t(n);
+    for (int k = 0; k < n; ++k) t[k] = (k + 1) * 1e-3;
+    std::vector<std::uint32_t> all(static_cast<std::size_t>(w) * h);
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::uint32_t>(i);
+    Sensor a(w, h, p, 5, 1), b(w, h, p, 5, 2), c(w, h, p, 5, 1), d(w, h, p, 5, 1);
+    const auto ea = a.run(rate.data(), t.data(), n);
+    const auto eb = b.run(rate.data(), t.data(), n);
+    const auto ec = c.run_pixels(all.data(), all.size(), rate.data(), t.data(), n);
+    const std::vector<std::uint32_t> probe = {77};
+    std::vector<TraceSample> trace;
+    const auto ed = d.run(rate.data(), t.data(), n, &probe, &trace);
+    CHECK(ea.size() == ed.size() && std::memcmp(ea.data(), ed.data(), ea.size() * sizeof(Event)) == 0);
+    CHECK(ea.size() > 2 * 2048 * (n - 1));  // samples far above STAGED_MIN_EVENTS (2048)
+    CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
+    CHECK(ea.size() == ec.size() && std::memcmp(ea.data(), ec.data(), ea.size() * sizeof(Event)) == 0);
+    int out_of_order = 0;
+    for (std::size_t e = 1; e < ea.size(); ++e) {
+        const std::int64_t pix0 = std::int64_t{ea[e - 1].y} * w + ea[e - 1].x, pix1 = std::int64_t{ea[e].y} * w + ea[e].x;
+        const bool at_sample_time = ea[e].t % 1000 == 0;
+        out_of_order += ea[e].t < ea[e - 1].t || (ea[e].t == ea[e - 1].t && pix1 < pix0 && !at_sample_time);
+    }
+    CHECK(out_of_order == 0);
+}
+
 TEST(leak_events_keep_their_times_far_from_zero_after_sample_intervals_of_hours) {
     // The working records keep an event's microsecond modulo 2^32 and take the rest from its
     // sample's end; an event more than 2^31 us before that end makes its block keep full
@@ -986,6 +1022,46 @@ TEST(exp_neg_bracket_is_within_1e_8_of_exp) {
     }
     CHECK(worst < 1e-8);
     CHECK(detail::exp_neg_bracket(0.0) == 1.0);
+}
+
+TEST(below_exp_neg_decides_as_the_library_exp) {
+    // init_state's leak-phase acceptance, u < exp(-e), decided on bounds where it can be (above
+    // e = 24 against uniform_open's least value, on [0, 24] against exp_neg_bracket), against
+    // the library's exp: random exponents over [0, 60] and far beyond with random uniforms;
+    // uniforms placed within a relative 1e-12 to 1e-6 of exp(-e) (where only the exp can
+    // decide); exponents next to 24; uniform_open's least and greatest values; uniforms below
+    // 2^-33 (not uniform_open's, still decided as the exp); negative, infinite and NaN exponents
+    // and a NaN uniform.
+    XorshiftUniform next{0x2545F4914F6CDD1Dull};
+    const auto exact = [](double u, double e) { return u < std::exp(-e); };
+    const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+    int wrong = 0, near_ties = 0, cases = 0;
+    const auto check = [&](double u, double e) {
+        wrong += detail::below_exp_neg(u, e) != exact(u, e);
+        ++cases;
+    };
+    for (int i = 0; i < 400000; ++i) {
+        const double e = i % 8 == 7 ? std::exp(20.0 * next()) : 60.0 * next();
+        double u = uniform_open(static_cast<std::uint32_t>(next() * 4294967296.0));
+        if (i % 4 == 1) {
+            u = std::exp(-e) * (1.0 + (next() - 0.5) * std::pow(10.0, -6.0 - 6.0 * next()));
+            near_ties += e <= 24.0;
+        }
+        check(u, e);
+    }
+    const double u_min = uniform_open(0u), u_max = uniform_open(0xFFFFFFFFu);
+    CHECK(u_min == 0x1p-33);
+    for (double e = 23.9; e < 24.1; e = std::nextafter(e + 1e-4, inf)) {
+        for (const double u : {u_min, std::nextafter(u_min, 1.0), u_max, std::exp(-e), std::nextafter(std::exp(-e), 0.0),
+                               std::nextafter(std::exp(-e), 1.0), 1e-12, 0.0, -1.0})
+            check(u, e);
+        for (const double d : {0.0, -1.0, 1.0}) check(u_min, std::nextafter(24.0, 24.0 + d));
+    }
+    for (const double e : {0.0, -0.0, -1e-300, -0.5, -40.0, 40.0, 1e300, inf, -inf, nan})
+        for (const double u : {u_min, 0.5, u_max, 1.0, 1e-20, 0.0, nan}) check(u, e);
+    CHECK(wrong == 0);
+    CHECK(near_ties > 30000);
+    CHECK(cases > 400000);
 }
 
 TEST(floor_positive_and_select_give_the_library_floor_and_the_chosen_bits) {

@@ -235,34 +235,55 @@ inline void noise_stationary(double a, double b, double D, double& szz, double& 
 /// - below x = 1.5 the asymptotic forms fail; h is held at c / T(1.5) = 0.2167 c (T the
 ///   exact mean first-passage time from the mean): there the crossing comes within a few
 ///   1 / c, far shorter than a leak cycle, either way.
-/// Used only to start a pixel at its steady-state leak phase (PixelModel::init).
-inline double leak_noise_hazard_integral(double l1, double l0, double sd, double a, double b) {
-    if (!(l0 > l1) || !(sd > 0.0)) return 0.0;
-    constexpr double INV_SQRT2 = 0.70710678118654752440, INV_SQRT_2PI = 0.39894228040143267794;
-    constexpr double X_HELD = 1.5, H_HELD = 0.2167;  // c / T(1.5) in units of c
-    const bool two = a > 0.0 && b > 0.0;
-    const double c = two ? std::min(a, b) : (a > 0.0 ? a : b);
-    const double k = two ? std::sqrt(a * b) * INV_SQRT_2PI : std::numeric_limits<double>::infinity();
-    const auto phi = [](double x) { return INV_SQRT_2PI * std::exp(-0.5 * x * x); };
-    const auto Phi = [](double x) { return 0.5 * std::erfc(-x * INV_SQRT2); };
+/// Used only to start a pixel at its steady-state leak phase (PixelModel::init_state).
+///
+/// LeakNoiseHazard(sd, a, b)(l1, l0) is the integral; the object keeps what depends on the
+/// noise alone (the rates c and k, the held rate, the crossover), worked out once for
+/// init_state's rejection loop, which asks for up to 64 pairs of levels a pixel: the same
+/// expressions on the same values as when they were worked out per call, so the same bits.
+/// Where both levels lie in the held part (l0 <= 1.5 sd: most of an event-heavy pixel's
+/// attempts) no libm call is left.
+class LeakNoiseHazard {
+public:
+    LeakNoiseHazard(double sd, double a, double b) : sd_(sd) {
+        const bool two = a > 0.0 && b > 0.0;
+        c_ = two ? std::min(a, b) : (a > 0.0 ? a : b);
+        k_ = two ? std::sqrt(a * b) * INV_SQRT_2PI : std::numeric_limits<double>::infinity();
+        held_ = std::min(k_ * phi(X_HELD), H_HELD * c_);
+        cross_ = std::max(k_ / c_, X_HELD);
+    }
+    double operator()(double l1, double l0) const {
+        const double sd = sd_, c = c_, k = k_;
+        if (!(l0 > l1) || !(sd > 0.0)) return 0.0;
+        const double x0 = l0 / sd, x1 = l1 / sd;
+        double integral = 0.0;  // int h dx
+        if (x1 < X_HELD) integral += (std::min(x0, X_HELD) - x1) * held_;
+        const double lo = std::max(x1, X_HELD), hi = x0, cross = cross_;
+        if (hi > lo) {
+            const double esc_hi = std::min(hi, cross);  // escape-rate part, [lo, min(hi, k / c)]
+            if (esc_hi > lo) integral += c * (escape(esc_hi) - escape(lo));
+            const double rice_lo = std::max(lo, cross);  // Rice part, [max(lo, k / c), hi]
+            if (hi > rice_lo) integral += k * (Phi(hi) - Phi(rice_lo));
+        }
+        return sd * integral;
+    }
+
+private:
+    static constexpr double INV_SQRT2 = 0.70710678118654752440, INV_SQRT_2PI = 0.39894228040143267794;
+    static constexpr double X_HELD = 1.5, H_HELD = 0.2167;  // c / T(1.5) in units of c
+    static double phi(double x) { return INV_SQRT_2PI * std::exp(-0.5 * x * x); }
+    static double Phi(double x) { return 0.5 * std::erfc(-x * INV_SQRT2); }
     // Antiderivative of x phi(x) x^2 / (x^2 + 1): -phi(x) (1 - R(w) / (x^2 + 1)), w = (x^2 + 1) / 2,
     // R(w) = w e^w E1(w) by Abramowitz & Stegun 5.1.56 (w >= 1, error < 5e-5).
-    const auto escape = [&](double x) {
+    static double escape(double x) {
         const double w = 0.5 * (x * x + 1.0);
         const double r = (w * w + 2.334733 * w + 0.250621) / (w * w + 3.330657 * w + 1.681534);
         return -phi(x) * (1.0 - r / (x * x + 1.0));
-    };
-    const double x0 = l0 / sd, x1 = l1 / sd;
-    double integral = 0.0;  // int h dx
-    if (x1 < X_HELD) integral += (std::min(x0, X_HELD) - x1) * std::min(k * phi(X_HELD), H_HELD * c);
-    const double lo = std::max(x1, X_HELD), hi = x0, cross = std::max(k / c, X_HELD);
-    if (hi > lo) {
-        const double esc_hi = std::min(hi, cross);  // escape-rate part, [lo, min(hi, k / c)]
-        if (esc_hi > lo) integral += c * (escape(esc_hi) - escape(lo));
-        const double rice_lo = std::max(lo, cross);  // Rice part, [max(lo, k / c), hi]
-        if (hi > rice_lo) integral += k * (Phi(hi) - Phi(rice_lo));
     }
-    return sd * integral;
+    double sd_, c_, k_, held_, cross_;
+};
+inline double leak_noise_hazard_integral(double l1, double l0, double sd, double a, double b) {
+    return LeakNoiseHazard(sd, a, b)(l1, l0);
 }
 
 /// Probability that a Brownian bridge whose distance to a level is u0 > 0 and u1 > 0 at the

@@ -168,6 +168,21 @@ inline double floor_positive(double x) {
     return (x > 0.0) & (x < 4503599627370496.0) ? static_cast<double>(static_cast<std::int64_t>(x)) : std::floor(x);
 }
 
+/// u < std::exp(-e), the same answer for every u and e, with the exp only where bounds leave it
+/// open: above e = 24, exp(-e) < 3.8e-11 lies below uniform_open()'s least value 2^-33, so a
+/// uniform is never below it; on [0, 24], exp_neg_bracket (within a relative 1e-8) decides
+/// where u lies farther than a relative 1e-6 from it. init_state's leak-phase acceptance: an
+/// event-heavy pixel's noise rejects almost every attempt with e > 40.
+inline bool below_exp_neg(double u, double e) {
+    if ((e > 24.0) & (u >= 0x1p-33)) return false;
+    if ((e >= 0.0) & (e <= 24.0)) {
+        const double q = exp_neg_bracket(e);
+        if (u < q * (1.0 - 1e-6)) return true;
+        if (u > q * (1.0 + 1e-6)) return false;
+    }
+    return u < std::exp(-e);
+}
+
 /// Whether a uniform u in (0, 1) fires a Brownian bridge that crosses the ON level with
 /// probability bridge_crossing_probability(on0, on1, mid) = p_on and the OFF one with p_off
 /// (u < p_on + p_off), and at which (on: u < p_on): the decisions compare_bridged() takes,
@@ -1102,6 +1117,7 @@ struct PixelModel {
             const double rho = (s.bg_on_hz + s.bg_off_hz) * background_factor(ELEMENTARY_CHARGE_C * mean_e);
             const double lambda = rho / (leak0_hz * theta);
             const double sd = std::sqrt(noise_var_y);
+            const LeakNoiseHazard hazard(sd, pole_a, pole_b);
             CounterStream more(key, pixel, 0, PURPOSE_INIT + 1u);
             // The truncated exponential's normaliser, once: the loop's attempts are mostly
             // rejected where the noise is strong, and libm calls are not hoisted for us.
@@ -1114,8 +1130,9 @@ struct PixelModel {
                 const double d = (leak_off ? -d0 : d0) + s.ny - n_then;
                 if (sd > 0.0) {
                     const double level0 = leak_off ? theta - n_then : theta + n_then;
-                    const double reach = leak_noise_hazard_integral(level0 - d0, level0, sd, pole_a, pole_b);
-                    if (!(more.uniform() < std::exp(-reach / (leak0_hz * theta)))) continue;
+                    const double reach = hazard(level0 - d0, level0);
+                    // u < exp(-reach / (f_leak theta)) (-r / x is -(r / x)), mostly without the exp.
+                    if (!detail::below_exp_neg(more.uniform(), reach / (leak0_hz * theta))) continue;
                 }
                 if (d < s.theta_on && d > -s.theta_off) {
                     s.ref = s.y - d;
@@ -1773,16 +1790,50 @@ struct PixelModel {
             pre = scratch.bridge_pre.data();
             bridge_decisions(bridge, n_busy, c, key, scratch, pre);
         }
+        BufferedEmit<std::remove_reference_t<Emit>> buffered{emit, pixel};
         for (std::size_t b = 0; b < n_busy; ++b) {
             PixelState& s = st[busy_at[b]];
             pixel = v.ids[busy_at[b]];
             continuous_finish(s, x[b], z[b], y[b], nz[b], ny[b], cur[b], leak[b], bvar[b], noise_d[b], c, key, pixel,
-                              emit, nullptr, pre ? pre + b : nullptr);
-            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, emit);
+                              buffered, nullptr, pre ? pre + b : nullptr);
+            if (s.next_hot_t <= c.t1) hot_events(s, c.t1, key, pixel, buffered);
             s.t = c.t1;
             ++s.n;
         }
+        buffered.flush();
     }
+
+    /// The comparator's emit(t, polarity, label) for step_block_continuous' busy pixels: the
+    /// events kept in a short buffer, with the pixel they belong to, and handed to `emit` in
+    /// the same order when it fills and at the end of the pass (with `pixel` set to each one's,
+    /// as emit reads it). The comparator's loop then makes no call an event, so its doubles
+    /// are not saved and restored around one.
+    template <class Emit>
+    struct BufferedEmit {
+        static constexpr std::size_t N = 64;
+        Emit& emit;
+        std::uint32_t& pixel;
+        std::size_t n = 0;
+        double t[N];
+        std::uint32_t px[N];
+        std::uint8_t pol[N], label[N];
+        EVSTWIN_ALWAYS_INLINE void operator()(double t_event, Polarity p, std::uint8_t l) {
+            t[n] = t_event;
+            px[n] = pixel;
+            pol[n] = static_cast<std::uint8_t>(p);
+            label[n] = l;
+            if (++n == N) flush();
+        }
+        EVSTWIN_NOINLINE void flush() {
+            const std::uint32_t now = pixel;
+            for (std::size_t i = 0; i < n; ++i) {
+                pixel = px[i];
+                emit(t[i], static_cast<Polarity>(pol[i]), label[i]);
+            }
+            pixel = now;
+            n = 0;
+        }
+    };
 
     /// bridge_decisions' inputs, filled by bridge_prepare() for each busy pixel in the pass that
     /// finds it busy (its state is at hand there): the draws' counters and arguments (ARGS
