@@ -14,9 +14,10 @@
 //      machine is shared; the least is the least disturbed), data in L1/L2 as the engine has it.
 //   2. speed of the normals (one a pixel-update in the reference load): the engine's Philox
 //      batch, its ziggurat batch, and its whole draw (draw_floor.cpp's loop), against a float
-//      ziggurat (16 lanes at AVX-512); and, because GCC 12 looks the ziggurat's tables up lane
-//      by lane, both precisions' look-ups written with AVX-512 gathers and with in-register
-//      permutes, so the share of precision is told apart from that of the look-up. Also what
+//      ziggurat (16 lanes at AVX-512); and, because GCC 12 looks the float ziggurat's tables
+//      up lane by lane (as it did the engine's double ones, which simd.hpp now gathers: this
+//      study found it), both precisions' look-ups written with AVX-512 gathers and with
+//      in-register permutes, so the share of precision is told apart from that of the look-up. Also what
 //      using every Philox word would save (one call per pixel per four samples instead of two:
 //      the reference load uses one word of each sample's two; a change of the words, not of
 //      precision).
@@ -455,8 +456,8 @@ void ziggurat_batch(const std::uint32_t* w, std::size_t n, float* g, std::uint8_
 }
 
 // GCC 12 does not use gather instructions for the loops above (its generic tuning turns them
-// off): both the engine's batch and the float one above look the tables up lane by lane
-// (extracts and inserts), which is most of their cost. So the precision's share is measured
+// off): the float batch above looks the tables up lane by lane (extracts and inserts), which
+// is most of its cost, as the engine's double batch did until simd.hpp wrote its gathers out. So the precision's share is measured
 // against table look-ups written with AVX-512 intrinsics too, in both precisions: a gather,
 // and in-register permutes of the 128-entry tables (no memory access per lane). The double
 // ones give the engine's normals bit for bit (checked in speed()): the sign by an XOR, as
@@ -829,7 +830,7 @@ void speed() {
     const int calls = 400, reps = 60;
     std::printf("\n-- ziggurat common path at avx512 with the table look-ups written by hand, ns per normal --\n");
     std::printf("%-34s %10s %26s\n", "", "ns", "same as the engine's batch");
-    std::printf("%-34s %10.3f %26s\n", "double, engine (GCC: lane by lane)", zd_ns, "-");
+    std::printf("%-34s %10.3f %26s\n", "double, engine (simd.hpp)", zd_ns, "-");
     study::ziggurat_gather_d(r0.data(), BLOCK, gd2.data(), slow2.data());
     bool ok = same_d();
     double t = min_seconds_per_call([&] { study::ziggurat_gather_d(r0.data(), BLOCK, gd2.data(), slow2.data()); keep(gd2[0]); },
@@ -877,7 +878,7 @@ void speed() {
     std::printf("clocks as due times, in double (any precision):                 quiet pass %.3f\n", quiet_d - quiet_ddue);
     std::printf("single precision on top of due times:                           quiet pass %.3f + normals %.3f = %.3f\n",
                 quiet_ddue - quiet_due, zd_best - zf_best, quiet_ddue - quiet_due + zd_best - zf_best);
-    std::printf("against the engine's ziggurat as it is (GCC's lane-by-lane look-up): add %.3f\n", zd_ns - zd_best);
+    std::printf("against the engine's ziggurat batch as it is (simd.hpp): add %.3f\n", zd_ns - zd_best);
     std::printf("without precision: ziggurat look-up by gather or permutes (same bits) %.3f; every Philox word used "
                 "(other words, any precision) %.3f\n",
                 zd_ns - zd_best, philox_ns / 4);
