@@ -241,6 +241,7 @@ void register_sensor(py::module_& m) {
         .def_readonly_static("DEFAULT_MAX_EVENTS", &Sensor::DEFAULT_MAX_EVENTS)
         .def_readonly_static("MAX_THREADS", &Sensor::MAX_THREADS)
         .def_readonly_static("MAX_PIXELS", &Sensor::MAX_PIXELS)
+        .def_readonly_static("STATE_BYTES_PER_PIXEL", &Sensor::STATE_BYTES_PER_PIXEL)
         .def_property("num_threads", &Sensor::num_threads,
                       [](Sensor& s, std::optional<int> n) { s.set_num_threads(threads_arg(n)); });
 }

@@ -76,6 +76,7 @@ class Sensor:
     DEFAULT_MAX_EVENTS: int
     MAX_THREADS: int
     MAX_PIXELS: int
+    STATE_BYTES_PER_PIXEL: int
     def __init__(
         self, width: int, height: int, params: PixelParams, seed: int = 0, num_threads: int | None = None
     ) -> None: ...

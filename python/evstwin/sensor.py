@@ -30,10 +30,14 @@ MAX_THREADS: int = int(_core.Sensor.MAX_THREADS)
 which the OpenMP runtime exits or crashes."""
 
 MAX_PIXELS: int = int(_core.Sensor.MAX_PIXELS)
-"""Most pixels of one sensor (2**26, 8192 x 8192; 5.9 GB of pixel state), refused up front."""
+"""Most pixels of one sensor (2**26, 8192 x 8192, each keeping ``STATE_BYTES_PER_PIXEL`` bytes of
+state), refused up front."""
+
+STATE_BYTES_PER_PIXEL: int = int(_core.Sensor.STATE_BYTES_PER_PIXEL)
+"""Bytes of engine state each pixel keeps between calls."""
 
 DEFAULT_MAX_EVENTS: int = int(_core.Sensor.DEFAULT_MAX_EVENTS)
-"""Events one ``run`` call may produce by default (1e8, about 5 GB while collected)."""
+"""Events one ``run`` call may produce by default (1e8, about 3 GB while collected)."""
 
 MAX_MAX_EVENTS = 2**32 - 1
 """Largest ``max_events`` (the engine sorts one call's events with 32-bit indices)."""
@@ -94,7 +98,7 @@ class Sensor:
         if width * height > MAX_PIXELS:
             raise ValueError(
                 f"width * height must be at most {MAX_PIXELS} pixels (8192 x 8192); got width={width}, "
-                f"height={height}: {width * height} pixels, {width * height * 88 / 1e9:.3g} GB of pixel state"
+                f"height={height}: {width * height} pixels, {width * height * STATE_BYTES_PER_PIXEL / 1e9:.3g} GB of pixel state"
             )
         seed = _as_int("seed", seed)
         if not 0 <= seed < 2**64:

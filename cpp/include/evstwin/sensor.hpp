@@ -137,9 +137,11 @@ public:
     static constexpr std::size_t DEFAULT_MAX_EVENTS = 100'000'000;
     static constexpr std::size_t EVENT_COUNT_STEP = 4096;
     /// Most pixels of one sensor: 2^26 (8192 x 8192, 70 times the largest event sensor made),
-    /// whose state alone is 5.9 GB; a larger request is refused before anything is allocated
-    /// rather than failing (or swapping) minutes into the allocation.
+    /// whose state alone is 2^26 * STATE_BYTES_PER_PIXEL (15 GB); a larger request is refused
+    /// before anything is allocated rather than failing (or swapping) minutes into the allocation.
     static constexpr std::uint64_t MAX_PIXELS = std::uint64_t{1} << 26;
+    /// Bytes of state a pixel keeps between calls (the Python layer's size messages read it).
+    static constexpr std::size_t STATE_BYTES_PER_PIXEL = sizeof(PixelState);
     static_assert(MAX_PIXELS <= (std::uint64_t{1} << detail::PixelDivider::INDEX_BITS),
                   "collect_sample()'s PixelDivider needs pixel indices below 2^26");
     /// Fewest pixel-updates (pixels x samples) in one call worth a parallel region: below it
@@ -159,7 +161,7 @@ public:
             throw std::invalid_argument("width * height must be at most " + std::to_string(MAX_PIXELS) +
                                         " pixels (8192 x 8192); got width=" + std::to_string(width) + ", height=" +
                                         std::to_string(height) + ": " + std::to_string(n) + " pixels, " +
-                                        std::to_string((n * sizeof(PixelState) + 500'000'000) / 1'000'000'000) +
+                                        std::to_string((n * STATE_BYTES_PER_PIXEL + 500'000'000) / 1'000'000'000) +
                                         " GB of pixel state");
         set_num_threads(num_threads);
         state_.resize(static_cast<std::size_t>(n));
