@@ -157,7 +157,7 @@ class Sensor:
         """Most events one ``run``/``run_probe``/``run_pixels`` call may produce (default
         ``DEFAULT_MAX_EVENTS``, 1e8: about 3 GB while collected, so a flood of events stops with
         a ValueError long before memory runs out). Counted while the events are produced; a
-        call that passes it leaves the pixels half advanced, and the sensor refuses further
+        call that passes it may leave the pixels half advanced, and the sensor refuses further
         calls (RuntimeError) until ``reset()``. Raise it, up to 2**32 - 1, if memory allows;
         or give ``max_events=`` to one call."""
         return int(self._core.max_events)

@@ -129,7 +129,8 @@ public:
     static constexpr int MAX_THREADS = 1024;
     /// Default cap on the events of one run / run_pixels call: 1e8 events are about 3 GB at the
     /// peak (8-byte working records with their vectors' growth slack, the 13-byte output and
-    /// its labels),
+    /// its labels; up to 0.8 GB more where one sample holds most of them: the counting sort's
+    /// staging, 8 bytes an event of the sample being sorted, per thread),
     /// far above any real chunk (a long simulation is cut into short calls) and below a
     /// machine's memory. Exceeding it throws std::length_error while the events are produced:
     /// they are counted every EVENT_COUNT_STEP events of a block, so a call stops within
@@ -486,7 +487,7 @@ private:
     void check_usable() const {
         if (stopped_)
             throw std::logic_error("the previous run call stopped part-way (an error inside it, e.g. max_events), "
-                                   "leaving the pixels half advanced: reset() the sensor before running it again");
+                                   "which may have left the pixels half advanced: reset() the sensor before running it again");
     }
 
     /// for_each_block, marking the sensor stopped when a block throws (the pixels of the
