@@ -181,8 +181,8 @@ public:
     int num_threads() const { return num_threads_; }
     std::size_t max_events() const { return max_events_; }
     /// Events one call may produce before it throws std::length_error (>= 1). After that
-    /// error the pixels are partly advanced, so run() and run_pixels() refuse to go on
-    /// (std::logic_error) until reset().
+    /// error run()'s pixels are partly advanced (run_pixels() leaves its own as they were), so
+    /// run() and run_pixels() refuse to go on (std::logic_error) until reset().
     void set_max_events(std::size_t n) {
         // The sort indexes a call's events with 32 bits.
         if (n < 1 || n > 0xFFFFFFFFull)
@@ -490,8 +490,8 @@ private:
                                    "which may have left the pixels half advanced: reset() the sensor before running it again");
     }
 
-    /// for_each_block, marking the sensor stopped when a block throws (the pixels of the
-    /// other blocks have advanced). A block does not start once the call is over max_events.
+    /// for_each_block, marking the sensor stopped when a block throws (in run(), the pixels
+    /// of the other blocks have advanced). A block does not start once the call is over max_events.
     template <class Check, class Fn, class Prepare, class Part>
     void guarded_for_each_block(std::size_t nblocks, std::size_t updates, Check& check, Fn&& fn, Prepare&& prepare,
                                 Part&& part) {
@@ -1354,7 +1354,8 @@ private:
     int num_threads_ = 1;
     std::vector<PixelState> state_;
     /// run_pixels_into()'s working copies of the listed pixels' states, in the list's order
-    /// (kept from call to call for its memory).
+    /// (kept from call to call for its memory: as large as the longest list so far, at most
+    /// state_'s size).
     std::vector<PixelState> pixel_states_;
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
