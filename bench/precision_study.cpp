@@ -16,9 +16,9 @@
 //      batch, its ziggurat batch, and its whole draw (draw_floor.cpp's loop), against a float
 //      ziggurat (16 lanes at AVX-512); and, because GCC 12 looks the float ziggurat's tables
 //      up lane by lane (as it did the engine's double ones, which simd.hpp now gathers: this
-//      study found it), both precisions' look-ups written with AVX-512 gathers and with
-//      in-register permutes, so the share of precision is told apart from that of the look-up. Also what
-//      using every Philox word would save (one call per pixel per four samples instead of two:
+//      study found it), the float look-up written with an AVX-512 gather and both precisions'
+//      with in-register permutes, so the share of precision is told apart from that of the
+//      look-up. Also what using every Philox word would save (one call per pixel per four samples instead of two:
 //      the reference load uses one word of each sample's two; a change of the words, not of
 //      precision).
 //   3. fidelity: the quiet pass's level arithmetic for 4096 pixels of the reference load
@@ -456,12 +456,13 @@ void ziggurat_batch(const std::uint32_t* w, std::size_t n, float* g, std::uint8_
 }
 
 // GCC 12 does not use gather instructions for the loops above (its generic tuning turns them
-// off): the float batch above looks the tables up lane by lane (extracts and inserts), which
-// is most of its cost, as the engine's double batch did until simd.hpp wrote its gathers out. So the precision's share is measured
-// against table look-ups written with AVX-512 intrinsics too, in both precisions: a gather,
-// and in-register permutes of the 128-entry tables (no memory access per lane). The double
-// ones give the engine's normals bit for bit (checked in speed()): the sign by an XOR, as
-// x * (1 - 2 bit) flips it exactly. The last n % 16 words go to the plain loops.
+// off): the float batch above looks the tables up lane by lane (extracts and inserts), which is
+// most of its cost, as the engine's double batch did until simd.hpp wrote its gathers out. So
+// the precision's share is measured against look-ups written with AVX-512 intrinsics: the
+// engine's double gather, a float gather, and in-register permutes of the 128-entry tables in
+// both precisions (no memory access per lane). The double permutes give the engine's normals
+// bit for bit (checked in speed()): the sign by an XOR, as x * (1 - 2 bit) flips it exactly.
+// The last n % 16 words go to the plain loops.
 
 // GCC 12's AVX-512 intrinsics leave an undefined vector that -Wmaybe-uninitialized reports (GCC
 // bug 105593, as simd.hpp notes): silenced for these functions only.
@@ -471,30 +472,6 @@ void ziggurat_batch(const std::uint32_t* w, std::size_t n, float* g, std::uint8_
 #endif
 /// A lane mask's flags as bytes 0 / 1 (the engine's slow flags).
 #define STUDY_STORE_FLAGS16(P, M) _mm_storeu_si128(reinterpret_cast<__m128i*>(P), _mm_maskz_mov_epi8(M, _mm_set1_epi8(1)))
-
-EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_gather_d(const std::uint32_t* w, std::size_t n,
-                                                                      double* g, std::uint8_t* slow) {
-    const double* tw = evstwin::ZIGGURAT.w;
-    const int* tk = reinterpret_cast<const int*>(evstwin::ZIGGURAT.k);
-    const __m512i m127 = _mm512_set1_epi32(127), one = _mm512_set1_epi32(1);
-    std::size_t i = 0;
-    for (; i + 16 <= n; i += 16) {
-        const __m512i wi = _mm512_loadu_si512(w + i);
-        const __m512i layer = _mm512_and_si512(wi, m127), j = _mm512_srli_epi32(wi, 8);
-        const __m512i sign = _mm512_and_si512(_mm512_srli_epi32(wi, 7), one);
-        const __mmask16 s = _mm512_cmpge_epu32_mask(j, _mm512_i32gather_epi32(layer, tk, 4));
-        STUDY_STORE_FLAGS16(slow + i, s);
-        for (int h = 0; h < 2; ++h) {
-            const __m256i lh = h ? _mm512_extracti64x4_epi64(layer, 1) : _mm512_castsi512_si256(layer);
-            const __m256i jh = h ? _mm512_extracti64x4_epi64(j, 1) : _mm512_castsi512_si256(j);
-            const __m256i sh = h ? _mm512_extracti64x4_epi64(sign, 1) : _mm512_castsi512_si256(sign);
-            const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(jh), _mm512_i32gather_pd(lh, tw, 8));
-            const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(sh), 63);
-            _mm512_storeu_pd(g + i + 8 * h, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
-        }
-    }
-    evstwin::detail::ziggurat_batch_avx512(w + i, n - i, g + i, slow + i);
-}
 
 EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_gather_f(const std::uint32_t* w, std::size_t n,
                                                                       float* g, std::uint8_t* slow) {
@@ -830,17 +807,13 @@ void speed() {
     const int calls = 400, reps = 60;
     std::printf("\n-- ziggurat common path at avx512 with the table look-ups written by hand, ns per normal --\n");
     std::printf("%-34s %10s %26s\n", "", "ns", "same as the engine's batch");
-    std::printf("%-34s %10.3f %26s\n", "double, engine (simd.hpp)", zd_ns, "-");
-    study::ziggurat_gather_d(r0.data(), BLOCK, gd2.data(), slow2.data());
-    bool ok = same_d();
-    double t = min_seconds_per_call([&] { study::ziggurat_gather_d(r0.data(), BLOCK, gd2.data(), slow2.data()); keep(gd2[0]); },
-                                    calls, reps) / BLOCK * 1e9;
-    std::printf("%-34s %10.3f %26s\n", "double, gather", t, ok ? "yes, bit for bit" : "NO");
-    const double zd_gather = t;
+    // The engine's double batch is itself written with gathers (simd.hpp, since this study).
+    std::printf("%-34s %10.3f %26s\n", "double, engine (simd.hpp: gathers)", zd_ns, "-");
+    const double zd_gather = zd_ns;
     std::fill(gd2.begin(), gd2.end(), 0.0);
     study::ziggurat_permute_d(r0.data(), BLOCK, gd2.data(), slow2.data());
-    ok = same_d();
-    t = min_seconds_per_call([&] { study::ziggurat_permute_d(r0.data(), BLOCK, gd2.data(), slow2.data()); keep(gd2[0]); },
+    bool ok = same_d();
+    double t = min_seconds_per_call([&] { study::ziggurat_permute_d(r0.data(), BLOCK, gd2.data(), slow2.data()); keep(gd2[0]); },
                              calls, reps) / BLOCK * 1e9;
     std::printf("%-34s %10.3f %26s\n", "double, permutes (no memory)", t, ok ? "yes, bit for bit" : "NO");
     const double zd_best = std::min(zd_gather, t);
