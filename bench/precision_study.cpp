@@ -851,9 +851,9 @@ void speed() {
     std::printf("clocks as due times, in double (any precision):                 quiet pass %.3f\n", quiet_d - quiet_ddue);
     std::printf("single precision on top of due times:                           quiet pass %.3f + normals %.3f = %.3f\n",
                 quiet_ddue - quiet_due, zd_best - zf_best, quiet_ddue - quiet_due + zd_best - zf_best);
-    std::printf("against the engine's ziggurat batch as it is (simd.hpp): add %.3f\n", zd_ns - zd_best);
-    std::printf("without precision: ziggurat look-up by gather or permutes (same bits) %.3f; every Philox word used "
-                "(other words, any precision) %.3f\n",
+    // The engine's batch gathers; permutes can only beat it where gathers are slow (microcode).
+    std::printf("without precision: ziggurat look-up by permutes instead of the engine's gathers (same bits) %.3f; "
+                "every Philox word used (other words, any precision) %.3f\n",
                 zd_ns - zd_best, philox_ns / 4);
 }
 

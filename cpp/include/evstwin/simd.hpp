@@ -264,10 +264,11 @@ EVSTWIN_TARGET_AVX512 inline void philox_batch_avx512(const std::uint32_t* c0, c
     philox_batch_tail(i, c0, c1, c2, c3, key, n, r0, r1, r2, r3);
 }
 // The ziggurat's batches are written with gathers: from the plain loop GCC 12 looked the
-// tables up lane by lane (an extract and an insert a lane), most of the batch's time
-// (bench/precision_study.cpp, part 2: the AVX-512 batch 1.24 -> 0.33 ns a normal). The same
-// operations as ziggurat_batch_body: the 24-bit magnitude converted exactly, one
-// multiplication by the layer's width, the sign set by an XOR of the sign bit (x * (1 - 2 s)
+// tables up lane by lane (an extract and an insert a lane), most of the batch's time (found by
+// bench/precision_study.cpp; bench/draw_floor.cpp at AVX-512, before and after: 3.2-3.3 ->
+// 2.2-2.3 ns a pixel-update, README's ninth round). The same operations as
+// ziggurat_batch_body: the 24-bit magnitude converted exactly, one multiplication by the
+// layer's width, the sign set by an XOR of the sign bit (x * (1 - 2 s)
 // only flips it, zeros included), the slow flag from j >= k (both below 2^31, so a signed
 // comparison is the unsigned one). So the same normals and flags, bit for bit. (Processors
 // whose microcode slows gathers, the Gather Data Sampling mitigation, may gain less or lose;
