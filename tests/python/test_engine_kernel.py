@@ -78,15 +78,15 @@ def same(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> 
 
 
 def run_calls(params: PixelParams, kind: str, per_pixel: bool, threads: int, chunks: list[int],
-              sparse: bool, every: int = 7, ahead: int = 0) -> tuple[np.ndarray, np.ndarray]:
+              sparse: bool, every: int = 7, ahead: int = 0, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Events and labels of a run cut into `chunks`, through the kernel or the per-pixel path,
-    with (sparse) a finer sampling of every `every`-th pixel between the chunks (run_pixels):
-    to 1.5 base intervals past the chunk's end, or (ahead > 0) exactly to the base sample
-    `ahead` samples into the next chunk."""
+    with (sparse) a finer sampling of every `every`-th pixel from pixel `first` on between the
+    chunks (run_pixels): to 1.5 base intervals past the chunk's end, or (ahead > 0) exactly to
+    the base sample `ahead` samples into the next chunk."""
     dtype = np.float32 if kind == "spot32" else np.float64
     t, rate = scene(kind if kind in ("dark", "gradient", "bright") else "spot", 160, 3, dtype)
     sensor = Sensor(W, H, params, seed=5, num_threads=threads)
-    sub = np.arange(0, W * H, every, dtype=np.uint32)
+    sub = np.arange(first, W * H, every, dtype=np.uint32)
     events, labels = [], []
     edges = [0, *np.cumsum(chunks)]
     for a, b in zip(edges[:-1], edges[1:]):
@@ -144,6 +144,60 @@ def test_block_kernel_with_pixels_held_past_samples(name: str, every: int) -> No
         got = run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=True, every=every,
                         ahead=3)
         assert same(got, ref), f"{name}, every {every}th pixel held, {threads} threads"
+
+
+@pytest.mark.parametrize("name", ["default", "pole", "hot", "sampled"])
+@pytest.mark.parametrize("ahead", [0, 3])
+def test_block_kernel_where_run_pixels_moved_one_block_of_two(name: str, ahead: int) -> None:
+    """run() starts a block's first sample without reading its states where its last call left
+    every pixel at that call's end and nothing moved them since (Sensor::block_synced_). Here
+    run_pixels moves pixels of the second block only (every other one from pixel 256 on), so
+    between calls the first block stays as run() left it and the second does not, over calls
+    of 50, 4, 5 and 101 samples: the per-pixel path's events and labels, with 1 and 2 threads."""
+    params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
+    chunks = [50, 4, 5, 101]
+    ref = run_calls(params, "spot", per_pixel=True, threads=1, chunks=chunks, sparse=True, every=2, ahead=ahead,
+                    first=256)
+    assert len(ref[0]) > 0
+    for threads in (1, 2):
+        got = run_calls(params, "spot", per_pixel=False, threads=threads, chunks=chunks, sparse=True, every=2,
+                        ahead=ahead, first=256)
+        assert same(got, ref), f"{name}, {threads} threads"
+
+
+@pytest.mark.parametrize("name", ["default", "pole", "sampled"])
+def test_block_kernel_where_pixels_stand_past_a_whole_call(name: str) -> None:
+    """Pixels that run_pixels took past the end of the next run() call: that call holds them
+    throughout, so its block does not end with every pixel at the call's end, and the call
+    after it must find them where they stand (at the base sample they were taken to) rather
+    than at its start (Sensor::block_synced_ stays clear). The per-pixel path's events and
+    labels, 1 and 2 threads."""
+    params = PixelParams(**CONFIGS[name])  # type: ignore[arg-type]
+    t, rate = scene("spot", 160, 3)
+    sub = np.arange(300, W * H, 3, dtype=np.uint32)  # the second block's pixels only
+
+    def calls(per_pixel: bool, threads: int) -> tuple[np.ndarray, np.ndarray]:
+        sensor = Sensor(W, H, params, seed=5, num_threads=threads)
+        events, labels = [], []
+
+        def run(a: int, b: int) -> None:
+            events.append(sensor.run_probe(rate[a:b], t[a:b], [(0, 0)])[0] if per_pixel else sensor.run(rate[a:b], t[a:b]))
+            labels.append(sensor.last_labels())
+
+        run(0, 50)
+        # Fine samples from t[49] to exactly t[56]: past the next call's end (t[52]).
+        tt = np.concatenate([np.linspace(t[49], t[56], 15, endpoint=False)[1:], [t[56]]])
+        rr = np.ascontiguousarray(rate[50].reshape(-1)[sub] * (1 + 0.5 * np.sin(np.arange(len(tt))))[:, None])
+        events.append(sensor.run_pixels(sub, rr, tt))
+        labels.append(sensor.last_labels())
+        for a, b in [(50, 53), (53, 60), (60, 160)]:
+            run(a, b)
+        return np.concatenate(events), np.concatenate(labels)
+
+    ref = calls(True, 1)
+    assert len(ref[0]) > 0
+    for threads in (1, 2):
+        assert same(calls(False, threads), ref), f"{name}, {threads} threads"
 
 
 @pytest.mark.parametrize("name", ["default", "pole", "background_strong", "hot", "fast", "sampled", "leak_light_off",

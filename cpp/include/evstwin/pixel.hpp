@@ -434,6 +434,8 @@ struct TraceSample {
 /// unconditionally (a conditional store, "keep the old value unless quiet", is what stops a
 /// compiler vectorising it) and the per-pixel path still starts from the old state.
 struct BlockSoA {
+    /// How many pixels ahead load() asks for their states' cache lines. Speed only.
+    static constexpr std::size_t PREFETCH_AHEAD = 8;
     struct Levels {
         std::vector<double> x, z, y, nz, ny, ref, clock_on, clock_off;
     };
@@ -516,24 +518,90 @@ struct BlockSoA {
         s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
         s.spare_sample = spare_sample[j];
     }
-    void load(const PixelState* st, std::size_t m) {
+    /// Every pixel's fields from its state: take() for each, and the constant ones. Written out
+    /// with the arrays' addresses in restrict locals (take() reloads them for every field of
+    /// every pixel, since its stores might alias the vectors' pointers): a short run() call
+    /// loads and stores every block once, and this loop was ~70 instructions a pixel.
+    void load(const PixelState* __restrict st, std::size_t m) {
         resize(m);
         terms_leak_hz = terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
         n_step = 0;
         sf_only = false;  // x and nz as loaded, until a step of the source follower alone
+        Levels& l = now();
+        double* __restrict x = l.x.data();
+        double* __restrict z = l.z.data();
+        double* __restrict y = l.y.data();
+        double* __restrict nz = l.nz.data();
+        double* __restrict ny = l.ny.data();
+        double* __restrict ref = l.ref.data();
+        double* __restrict con = l.clock_on.data();
+        double* __restrict coff = l.clock_off.data();
+        std::uint64_t* __restrict nb = n_base.data();
+        double* __restrict ru = refr_until.data();
+        double* __restrict nh = next_hot_t.data();
+        std::uint32_t* __restrict slo = spare_lo.data();
+        std::uint32_t* __restrict shi = spare_hi.data();
+        std::uint64_t* __restrict ss = spare_sample.data();
+        double* __restrict ton = theta_on.data();
+        double* __restrict toff = theta_off.data();
+        double* __restrict ls = leak_spread.data();
+        double* __restrict bon = bg_on_hz.data();
+        double* __restrict boff = bg_off_hz.data();
         for (std::size_t j = 0; j < m; ++j) {
-            take(st[j], j, now());
-            theta_on[j] = st[j].theta_on; theta_off[j] = st[j].theta_off; leak_spread[j] = st[j].leak_spread;
-            bg_on_hz[j] = st[j].bg_on_hz; bg_off_hz[j] = st[j].bg_off_hz;
+#if defined(__GNUC__) || defined(__clang__)
+            // run() loads a block's states straight from memory when it knows they all stand at
+            // the sample's start (Sensor::block_synced_), at a stride the hardware prefetcher
+            // follows only within a page: the fields' lines a few pixels ahead are asked for now.
+            if (j + PREFETCH_AHEAD < m) {
+                const char* ahead = reinterpret_cast<const char*>(st + j + PREFETCH_AHEAD);
+                for (std::size_t line = 0; line < sizeof(PixelState); line += 64) __builtin_prefetch(ahead + line);
+                __builtin_prefetch(ahead + sizeof(PixelState) - 1);  // where the record is not 64-byte aligned
+            }
+#endif
+            const PixelState& s = st[j];
+            // take(s, j, now()) with n_step = 0
+            x[j] = s.x; z[j] = s.z; y[j] = s.y; nz[j] = s.nz; ny[j] = s.ny;
+            ref[j] = s.ref; con[j] = s.bg_clock_on; coff[j] = s.bg_clock_off;
+            nb[j] = s.n;
+            ru[j] = s.refr_until; nh[j] = s.next_hot_t;
+            slo[j] = static_cast<std::uint32_t>(s.spare_words);
+            shi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
+            ss[j] = s.spare_sample;
+            ton[j] = s.theta_on; toff[j] = s.theta_off; ls[j] = s.leak_spread;
+            bon[j] = s.bg_on_hz; boff[j] = s.bg_off_hz;
         }
     }
     /// Back into the states, which all stand at t_s now; but for the pixels flagged in held
     /// (nullptr: none), whose states are left as they are (step_block_soa's held pixels).
-    void store(PixelState* st, std::size_t m, double t_s, const std::uint8_t* held = nullptr) const {
+    /// give() for each, written out as load() is.
+    void store(PixelState* __restrict st, std::size_t m, double t_s, const std::uint8_t* held = nullptr) const {
+        const Levels& l = now();
+        // With the source follower alone, x is z and nz is 0 (sf_only; give()).
+        const double* __restrict x = sf_only ? l.z.data() : l.x.data();
+        const double* __restrict z = l.z.data();
+        const double* __restrict y = l.y.data();
+        const double* __restrict nz = l.nz.data();
+        const double* __restrict ny = l.ny.data();
+        const double* __restrict ref = l.ref.data();
+        const double* __restrict con = l.clock_on.data();
+        const double* __restrict coff = l.clock_off.data();
+        const std::uint64_t* __restrict nb = n_base.data();
+        const double* __restrict ru = refr_until.data();
+        const double* __restrict nh = next_hot_t.data();
+        const std::uint32_t* __restrict slo = spare_lo.data();
+        const std::uint32_t* __restrict shi = spare_hi.data();
+        const std::uint64_t* __restrict ss = spare_sample.data();
+        const std::uint64_t step = n_step;
         for (std::size_t j = 0; j < m; ++j) {
             if (held && held[j]) continue;
-            give(st[j], j, now());
-            st[j].t = t_s;
+            PixelState& s = st[j];
+            s.x = x[j]; s.z = z[j]; s.y = y[j];
+            s.nz = sf_only ? 0.0 : nz[j]; s.ny = ny[j];
+            s.ref = ref[j]; s.bg_clock_on = con[j]; s.bg_clock_off = coff[j]; s.n = nb[j] + step;
+            s.refr_until = ru[j]; s.next_hot_t = nh[j];
+            s.spare_words = static_cast<std::uint64_t>(slo[j]) | (static_cast<std::uint64_t>(shi[j]) << 32);
+            s.spare_sample = ss[j];
+            s.t = t_s;
         }
     }
 };

@@ -206,6 +206,7 @@ public:
             model_.init_pixel(state_[i], key_, static_cast<std::uint32_t>(i), hot_map_.empty() ? -1.0 : hot_map_[i],
                               hot_chain_map_.empty() ? std::uint16_t{0} : hot_chain_map_[i]);
         }
+        block_synced_.assign((state_.size() + BLOCK - 1) / BLOCK, 0);
         samples_ = 0;
         last_t_ = -std::numeric_limits<double>::infinity();
     }
@@ -463,7 +464,10 @@ public:
                 [&]() -> std::size_t {
                     bad = *std::min_element(block_bad.begin(), block_bad.end());
                     if (bad < total) return 0;
-                    for (std::size_t j = 0; j < n_pixels; ++j) state_[pixels[j]] = pixel_states_[j];
+                    for (std::size_t j = 0; j < n_pixels; ++j) {
+                        state_[pixels[j]] = pixel_states_[j];
+                        block_synced_[pixels[j] / BLOCK] = 0;  // this block's pixels now stand apart
+                    }
                     return collect_prepare(plan, false);
                 },
                 [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
@@ -868,7 +872,10 @@ private:
         const bool soa_kernel = kernel && model_.has_soa_kernel();
         std::uint32_t ids[BLOCK], active[BLOCK];
         for (std::size_t i = lo; i < hi; ++i) ids[i - lo] = static_cast<std::uint32_t>(i);
-        bool synced = false;  // after a kernel step that skipped nobody, all stand at the next t0
+        // After a kernel step that skipped nobody, all stand at the next t0. So they do at the
+        // first sample where the block's last call ended that way and nothing moved them since
+        // (block_synced_): then its states are not read here only to find that out.
+        bool synced = kernel && block_synced_[b] != 0;
         // Whether scratch.soa holds this block's state (standing at soa_t), to be stored back
         // before any other path touches it and at the end.
         bool in_soa = false;
@@ -988,6 +995,7 @@ private:
             ends[k] = static_cast<std::uint32_t>(out.size());
         }
         leave_soa();
+        block_synced_[b] = synced;
     }
 
     /// The sparse counterpart of run_block: entries [lo, hi) of a pixel list, each with its
@@ -1359,6 +1367,13 @@ private:
     std::vector<PixelState> pixel_states_;
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
+    /// Per block: nonzero when every pixel of it stands at last_t_ after at least one sample
+    /// (its last run() call ended with a kernel step that skipped nobody) and nothing has moved
+    /// one since (run_pixels() clears its pixels' blocks; reset() all). run() then starts the
+    /// block's first sample without reading its states to check that (20 MB for the DAVIS346
+    /// array). A call that throws part-way leaves the flags of the blocks it ran set, but
+    /// also stops the sensor until reset().
+    std::vector<std::uint8_t> block_synced_;
     std::vector<std::vector<RawEvent>> block_events_;
     std::vector<std::vector<std::int64_t>> block_full_t_;  ///< each block's full event times, if kept (RawEvent)
     std::vector<std::vector<std::uint32_t>> block_sample_ends_;  ///< each block's event count after each sample
