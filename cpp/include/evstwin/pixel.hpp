@@ -2457,6 +2457,7 @@ struct PixelModel {
     /// depend on the rate alone; what the second stage needs goes to `stage`.
     EVSTWIN_ALWAYS_INLINE void fill_noise_begin(NoiseCache& cache, NoiseIntervalStage& stage, double photon_rate,
                                                 const SampleConstants& c) const {
+        const double b = sf_rate();  // once: the stores below could alias p's doubles
         const double mean_e = mean_electron_rate(photon_rate);
         cache.photon_rate = photon_rate;
         cache.dt = c.dt;
@@ -2467,12 +2468,12 @@ struct PixelModel {
         const double u = cache.a * c.dt;
         cache.pole_decay = std::exp(-u);
         cache.pole_ramp = one_minus_exp_over(u);
-        if (cache.sf.T != c.dt || cache.sf.b != sf_rate()) cache.sf = sf_terms(sf_rate(), c.dt);
+        if (cache.sf.T != c.dt || cache.sf.b != b) cache.sf = sf_terms(b, c.dt);
         cache.k = NoiseCoeffs{};
         stage.two_poles = false;
         if (cache.D > 0.0) {
             const PoleTerms pole{cache.a, c.dt, cache.pole_decay, cache.pole_ramp};
-            noise_interval_begin(cache.k, stage, cache.a, sf_rate(), cache.D, c.dt, &cache.sf, &pole);
+            noise_interval_begin(cache.k, stage, cache.a, b, cache.D, c.dt, &cache.sf, &pole);
         }
         cache.bg_factor = background_factor(cache.current_a);
         cache.leak_hz = leak_rate_hz(photon_rate);
@@ -2510,7 +2511,7 @@ struct PixelModel {
                            const SampleConstants& c, const SfTerms& sf) const {
         for (std::size_t i = 0; i < m; ++i) {
             NoiseCache& k = caches[i];
-            if (k.sf.T != c.dt || k.sf.b != sf_rate()) k.sf = sf;
+            if (k.sf.T != sf.T || k.sf.b != sf.b) k.sf = sf;
             fill_noise_begin(k, stages[i], rates[i], c);
         }
         for (std::size_t i = 0; i < m; ++i) fill_noise_end(caches[i], stages[i]);
