@@ -1,6 +1,7 @@
 // C++ tests of the pixel engine: analytic cases, determinism, bad input.
 #include <evstwin/evstwin.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <initializer_list>
@@ -181,6 +182,124 @@ TEST(noise_coeffs_with_kept_pole_terms_are_the_same_bits) {
                     ++checked;
                 }
     CHECK(checked == 5 * 2 * 5 * 2);
+}
+
+/// int_0^T f(s) ds of a sum of decaying exponentials whose fastest rate is k_max, by Simpson's
+/// rule in long double on panels that double in width from 1 / (20 k_max): independent of the
+/// closed forms of noise.hpp.
+template <class F>
+static long double integrate_decays(F f, long double k_max, long double T) {
+    long double sum = 0.0L, lo = 0.0L, width = 0.05L / k_max;
+    while (lo < T) {
+        const long double hi = std::min(T, lo + width);
+        const int m = 512;  // even
+        const long double h = (hi - lo) / m;
+        long double panel = f(lo) + f(hi);
+        for (int i = 1; i < m; ++i) panel += (i % 2 ? 4.0L : 2.0L) * f(lo + i * h);
+        sum += panel * h / 3.0L;
+        lo = hi;
+        width *= 2.0L;
+    }
+    return sum;
+}
+
+TEST(noise_caches_filled_together_are_fill_noise_cache_bit_for_bit) {
+    // step_block_soa makes the numbers of its pixels at rates of their own together
+    // (PixelModel::fill_noise_caches: each stage over all the rates; then fill_noise_finish,
+    // the lazy choice, one by one); each must be what fill_noise_cache() gives, field by field,
+    // whatever the caches held before (another batch's rates, another interval's source
+    // follower terms), lazy or eager, at any credit. Over two poles (eager and lazy bridge, and
+    // a pole at the source follower's rate, which separated_pole_rate moves off it), the pole
+    // alone, the source follower alone, and no noise. Both forms run the same stages, so the
+    // two-pole coefficients are also checked against the transition and the covariance
+    // integrated numerically (Q = D a^2 int_0^T v v^T, v(s) = Phi(s) e_z): a wrong stage fails.
+    const auto bits = [](double x, double y) { return std::memcmp(&x, &y, sizeof x) == 0; };
+    const auto same = [&](const NoiseCache& x, const NoiseCache& y) {
+        return bits(x.photon_rate, y.photon_rate) && bits(x.dt, y.dt) && bits(x.current_a, y.current_a) &&
+               bits(x.x, y.x) && bits(x.a, y.a) && bits(x.D, y.D) && bits(x.pole_decay, y.pole_decay) &&
+               bits(x.pole_ramp, y.pole_ramp) && std::memcmp(&x.k, &y.k, sizeof(NoiseCoeffs)) == 0 &&
+               std::memcmp(&x.sf, &y.sf, sizeof(SfTerms)) == 0 && bits(x.bridge_bound, y.bridge_bound) &&
+               x.bridge_ready == y.bridge_ready && x.lazy_credit == y.lazy_credit && bits(x.bg_factor, y.bg_factor) &&
+               bits(x.leak_hz, y.leak_hz);
+    };
+    // |x - want| within rel of scale (the size of the terms the closed form adds up).
+    const auto near = [](double x, long double want, long double scale, long double rel) {
+        return std::fabs(static_cast<long double>(x) - want) <= rel * scale;
+    };
+    std::vector<PixelParams> configs(5);
+    configs[0].pr_pole = true;  // mcreynolds' chain
+    configs[1].pr_pole = true;
+    configs[1].cutoff_hz = 0.5 * configs[1].pr_cutoff_ref_hz;
+    configs[2].pr_pole = true;
+    configs[2].cutoff_hz.reset();  // the pole alone
+    configs[4].photon_shot_noise = false;
+    configs[4].dark_model = DarkModel::None;  // no noise: D = 0
+    int checked = 0, eager = 0, lazy = 0, moved = 0, integrated = 0;
+    for (const PixelParams& params : configs) {
+        const PixelModel model(params);
+        const double b = model.sf_rate();
+        std::vector<double> rates;
+        for (int e = 0; e <= 44; ++e) rates.push_back(std::pow(10.0, 0.25 * e));  // 1 to 1e11 photons/s
+        rates.push_back(0.0);
+        rates.push_back(rates[7]);  // a rate twice
+        if (params.pr_pole && params.cutoff_hz) {
+            // The rate whose pole is the source follower's (a = b): moved off it.
+            const double current = params.pr_ref_current_a * (*params.cutoff_hz / params.pr_cutoff_ref_hz);
+            rates.push_back((current / ELEMENTARY_CHARGE_C - model.dark_mean_e_per_s) / model.e_per_photon);
+        }
+        const std::size_t n = rates.size();
+        std::vector<NoiseCache> fills(n);
+        std::vector<NoiseIntervalStage> stages(n);
+        for (double dt : {1e-5, 3.1e-4, 4e-3, 0.05})  // each batch's caches hold the last interval's
+            for (bool reversed : {false, true}) {     // and the last batch's rates, in another order
+                std::vector<double> batch(rates);
+                if (reversed) batch.assign(rates.rbegin(), rates.rend());
+                const SampleConstants c = model.constants(1.0, 1.0 + dt);
+                model.fill_noise_caches(fills.data(), stages.data(), batch.data(), n, c, sf_terms(b, c.dt));
+                for (std::size_t i = 0; i < n; ++i) {
+                    for (int credit : {-6, -1, 0, 6})
+                        for (bool lazy_bridge : {true, false}) {
+                            NoiseCache got = fills[i], ref;
+                            got.lazy_credit = ref.lazy_credit = credit;
+                            model.fill_noise_finish(got, c, lazy_bridge);
+                            model.fill_noise_cache(ref, batch[i], c, lazy_bridge);
+                            CHECK(same(got, ref));
+                            CHECK(got.lazy_credit == (lazy_bridge ? std::min(credit + 1, 6) : credit));
+                            eager += ref.bridge_ready && ref.k.bridge_var > 0.0 && ref.a > 0.0 && model.has_filter;
+                            lazy += !ref.bridge_ready;
+                            // What the per-pixel path does with a lazy one: the same bits once completed.
+                            model.complete_noise_cache(got, c);
+                            model.complete_noise_cache(ref, c);
+                            CHECK(same(got, ref));
+                            ++checked;
+                        }
+                    const NoiseCache& k = fills[i];
+                    if (!(k.D > 0.0 && k.a > 0.0 && b > 0.0)) continue;
+                    // The two poles against the numbers integrated here.
+                    const long double A = detail::separated_pole_rate(k.a, b), B = b, T = c.dt, D = k.D;
+                    moved += A != k.a;
+                    const auto vz = [&](long double s) { return std::exp(-A * s); };
+                    const auto vy = [&](long double s) { return B * (std::exp(-A * s) - std::exp(-B * s)) / (B - A); };
+                    const long double g = D * A * A, fastest = 2.0L * std::max(A, B);
+                    const long double qzz = g * integrate_decays([&](long double s) { return vz(s) * vz(s); }, fastest, T);
+                    const long double qzy = g * integrate_decays([&](long double s) { return vz(s) * vy(s); }, fastest, T);
+                    const long double qyy = g * integrate_decays([&](long double s) { return vy(s) * vy(s); }, fastest, T);
+                    // The scale of the closed form's cancelling terms, g c^2 (h2a + 2 hab + h2b) <= 4 g c^2 T.
+                    const long double cc = B / std::fabs(B - A), scale = g * cc * cc * 4.0L * T + qzz;
+                    CHECK(near(k.k.phi_zz, vz(T), 1.0L, 1e-12L));
+                    CHECK(near(k.k.phi_yy, std::exp(-B * T), 1.0L, 1e-12L));
+                    CHECK(near(k.k.phi_yz, vy(T), 1.0L, 1e-9L));
+                    CHECK(near(k.k.l_zz * k.k.l_zz, qzz, qzz, 1e-9L));
+                    CHECK(near(k.k.l_zz * k.k.l_yz, qzy, scale, 1e-9L));
+                    CHECK(near(k.k.q_yy, qyy, scale, 1e-9L));
+                    CHECK(near(k.k.l_yz * k.k.l_yz + k.k.l_yy * k.k.l_yy, qyy, scale, 1e-9L));
+                    ++integrated;
+                }
+            }
+    }
+    CHECK(checked == 4 * 2 * 4 * 2 * (2 * 48 + 3 * 47));
+    CHECK(integrated > 4 * 2 * 2 * 40);
+    CHECK(eager > 0 && lazy > 0 && moved > 0);  // every branch of the stages was taken
 }
 
 TEST(bridge_var_is_below_twice_q_yy_wherever_bridge_var_bounded_says_so) {

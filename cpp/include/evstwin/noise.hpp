@@ -87,21 +87,37 @@ struct PoleTerms {
     double exp_aT = 0, ome_aT = 0;  ///< exp(-a T), one_minus_exp_over(a T)
 };
 
+/// ou2_covariance()'s integrals over T: int_0^T e^{-2as}, e^{-(a+b)s} and e^{-2bs} ds, its
+/// libm calls (ou2_covariance_of() makes Q of them). ome_2bT, ome_2aT as in ou2_covariance().
+struct Ou2Integrals {
+    double h2a = 0, hab = 0, h2b = 0;
+};
+inline Ou2Integrals ou2_integrals(double a, double b, double T,
+                                  double ome_2bT = std::numeric_limits<double>::quiet_NaN(),
+                                  double ome_2aT = std::numeric_limits<double>::quiet_NaN()) {
+    Ou2Integrals h;
+    h.h2a = T * (ome_2aT == ome_2aT ? ome_2aT : one_minus_exp_over(2 * a * T));  // int e^{-2as}
+    h.hab = T * one_minus_exp_over((a + b) * T);    // int e^{-(a+b)s}
+    h.h2b = T * (ome_2bT == ome_2bT ? ome_2bT : one_minus_exp_over(2 * b * T));  // int e^{-2bs}
+    return h;
+}
+/// The innovation covariance (zz, zy, yy) of the two-pole system from its integrals h over T.
+inline void ou2_covariance_of(const Ou2Integrals& h, double a, double b, double D, double& qzz, double& qzy,
+                              double& qyy) {
+    // v(s) = Phi(s) e_z = (e^{-as}, b (e^{-as} - e^{-bs}) / (b - a)); Q = D a^2 int_0^T v v^T.
+    const double c = b / (b - a);
+    const double g = D * a * a;
+    qzz = g * h.h2a;
+    qzy = g * c * (h.h2a - h.hab);
+    qyy = g * c * c * (h.h2a - 2 * h.hab + h.h2b);
+}
 /// The innovation covariance of the two-pole system over T: (zz, zy, yy). a, b > 0.
 /// ome_2bT: one_minus_exp_over(2 b T) if the caller has it (SfTerms), else NaN; ome_2aT the same
 /// for one_minus_exp_over(2 a T).
 inline void ou2_covariance(double a, double b, double D, double T, double& qzz, double& qzy, double& qyy,
                            double ome_2bT = std::numeric_limits<double>::quiet_NaN(),
                            double ome_2aT = std::numeric_limits<double>::quiet_NaN()) {
-    // v(s) = Phi(s) e_z = (e^{-as}, b (e^{-as} - e^{-bs}) / (b - a)); Q = D a^2 int_0^T v v^T.
-    const double h2a = T * (ome_2aT == ome_2aT ? ome_2aT : one_minus_exp_over(2 * a * T));  // int e^{-2as}
-    const double hab = T * one_minus_exp_over((a + b) * T);    // int e^{-(a+b)s}
-    const double h2b = T * (ome_2bT == ome_2bT ? ome_2bT : one_minus_exp_over(2 * b * T));  // int e^{-2bs}
-    const double c = b / (b - a);
-    const double g = D * a * a;
-    qzz = g * h2a;
-    qzy = g * c * (h2a - hab);
-    qyy = g * c * c * (h2a - 2 * hab + h2b);
+    ou2_covariance_of(ou2_integrals(a, b, T, ome_2bT, ome_2aT), a, b, D, qzz, qzy, qyy);
 }
 
 /// How much of n_z reaches n_y over T: b (e^{-aT} - e^{-bT}) / (b - a), exp_aT = e^{-aT}.
@@ -132,6 +148,54 @@ inline bool bridge_var_bounded(double a, double b, double T) {
     return a > 0.0 && b > 0.0 && std::min(a, b) * T >= 1e-6 && std::fabs(b - a) >= 1e-3 * (a + b);
 }
 
+/// noise_coeffs_interval() in two stages, for a caller that makes the coefficients of many
+/// rates at once (PixelModel::fill_noise_caches): noise_interval_begin(), the libm calls (and
+/// the whole of the one low-pass), then noise_interval_end(), the two-pole covariance's
+/// arithmetic and its Cholesky factor, a chain of two square roots and three divisions that
+/// waits on the calls. Over many rates, the first stage of all and then the second of all let
+/// successive rates' chains overlap. What the first stage leaves to the second:
+struct NoiseIntervalStage {
+    Ou2Integrals h;          ///< ou2_covariance()'s integrals over T
+    double a = 0;            ///< the pole's rate as the closed form takes it (separated_pole_rate)
+    bool two_poles = false;  ///< false: nothing left to do
+};
+inline void noise_interval_begin(NoiseCoeffs& k, NoiseIntervalStage& stage, double a, double b, double D, double T,
+                                 const SfTerms* sf = nullptr, const PoleTerms* pole = nullptr) {
+    k = NoiseCoeffs{};
+    const bool kept = sf != nullptr && sf->b == b && sf->T == T;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    stage.two_poles = a > 0 && b > 0;
+    if (stage.two_poles) {
+        a = detail::separated_pole_rate(a, b);
+        const bool pole_kept = pole != nullptr && pole->a == a && pole->T == T;
+        k.phi_zz = pole_kept ? pole->exp_aT : std::exp(-a * T);
+        k.phi_yy = kept ? sf->exp_bT : std::exp(-b * T);
+        k.phi_yz = cross_gain(a, b, T, k.phi_zz);
+        stage.h = ou2_integrals(a, b, T, kept ? sf->ome_2bT : nan);
+        stage.a = a;
+    } else {
+        const double r = a > 0 ? a : b;  // one low-pass: a 1-D OU process of rate r
+        const bool sf_only = kept && !(a > 0);  // r is b: its terms are kept
+        k.phi_yy = sf_only ? sf->exp_bT : std::exp(-r * T);
+        k.l_yy = std::sqrt(D * r * r * T * (sf_only ? sf->ome_2bT : one_minus_exp_over(2 * r * T)));
+        const double qh = D * r * r * 0.5 * T * (sf_only ? sf->ome_bT : one_minus_exp_over(r * T));
+        const double ph = sf_only ? sf->exp_half_bT : std::exp(-0.5 * r * T);
+        k.bridge_var = qh / (1.0 + ph * ph);
+    }
+}
+/// noise_coeffs_interval()'s second stage (noise_interval_begin()'s k and stage; b, D as there).
+inline void noise_interval_end(NoiseCoeffs& k, const NoiseIntervalStage& stage, double b, double D) {
+    if (!stage.two_poles) return;
+    double qzz, qzy, qyy;
+    ou2_covariance_of(stage.h, stage.a, b, D, qzz, qzy, qyy);
+    if (qzz > 0) {
+        k.l_zz = std::sqrt(qzz);
+        k.l_yz = qzy / k.l_zz;
+        k.l_yy = std::sqrt(std::max(0.0, qyy - k.l_yz * k.l_yz));
+    }
+    k.q_yy = qyy;
+}
+
 /// Exact coefficients of the noise over an interval T, all but the two-pole system's
 /// bridge_var (noise_coeffs_bridge() adds it; noise_coeffs() does both).
 ///   pole_rate_per_s: a = 2 pi f_pr (0 = no photoreceptor pole)
@@ -142,31 +206,9 @@ inline bool bridge_var_bounded(double a, double b, double T) {
 inline NoiseCoeffs noise_coeffs_interval(double a, double b, double D, double T, const SfTerms* sf = nullptr,
                                          const PoleTerms* pole = nullptr) {
     NoiseCoeffs k;
-    const bool kept = sf != nullptr && sf->b == b && sf->T == T;
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    if (a > 0 && b > 0) {
-        a = detail::separated_pole_rate(a, b);
-        const bool pole_kept = pole != nullptr && pole->a == a && pole->T == T;
-        k.phi_zz = pole_kept ? pole->exp_aT : std::exp(-a * T);
-        k.phi_yy = kept ? sf->exp_bT : std::exp(-b * T);
-        k.phi_yz = cross_gain(a, b, T, k.phi_zz);
-        double qzz, qzy, qyy;
-        ou2_covariance(a, b, D, T, qzz, qzy, qyy, kept ? sf->ome_2bT : nan);
-        if (qzz > 0) {
-            k.l_zz = std::sqrt(qzz);
-            k.l_yz = qzy / k.l_zz;
-            k.l_yy = std::sqrt(std::max(0.0, qyy - k.l_yz * k.l_yz));
-        }
-        k.q_yy = qyy;
-    } else {
-        const double r = a > 0 ? a : b;  // one low-pass: a 1-D OU process of rate r
-        const bool sf_only = kept && !(a > 0);  // r is b: its terms are kept
-        k.phi_yy = sf_only ? sf->exp_bT : std::exp(-r * T);
-        k.l_yy = std::sqrt(D * r * r * T * (sf_only ? sf->ome_2bT : one_minus_exp_over(2 * r * T)));
-        const double qh = D * r * r * 0.5 * T * (sf_only ? sf->ome_bT : one_minus_exp_over(r * T));
-        const double ph = sf_only ? sf->exp_half_bT : std::exp(-0.5 * r * T);
-        k.bridge_var = qh / (1.0 + ph * ph);
-    }
+    NoiseIntervalStage stage;
+    noise_interval_begin(k, stage, a, b, D, T, sf, pole);
+    noise_interval_end(k, stage, b, D);
     return k;
 }
 

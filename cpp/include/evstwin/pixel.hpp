@@ -1471,6 +1471,11 @@ struct PixelModel {
         double pr_dt = -1.0;
         NoiseCache noise;  ///< the continuous model's per-rate numbers (advance())
         NoiseCache noise_other;  ///< step_block_soa's: the numbers of the pixels off the block's common rate
+        // step_block_soa's fills for those pixels, made together (fill_noise_caches): their
+        // rates, numbers and stages; grown to the most a call has needed.
+        std::vector<double> fill_rates;
+        std::vector<NoiseCache> fills;
+        std::vector<NoiseIntervalStage> fill_stages;
         BlockSoA soa;  ///< step_block_soa's working copy of a block's state
         void resize(std::size_t n) {
             if (x.size() < n) {
@@ -2100,9 +2105,40 @@ struct PixelModel {
         std::uint32_t* flagged = scratch.busy_at.data();
         const std::size_t n_flagged = list_flagged(busy, n, flagged);
         if (q.bridge_stage) bridge_stage(h, ids, flagged, n_flagged, common, c, key, scratch);
+        // The busy pixels at rates of their own: the numbers of each rate that the loop below
+        // meets (one fill_noise_cache() each, as it did, but for a pixel at the rate of the one
+        // before it, which takes the same numbers: the first such at noise_other's, the rate
+        // the last call ended on). Their fills' first two stages are made here, over all of them
+        // (fill_noise_caches), the last (the lazy choice, NoiseCache::lazy_credit) in the loop,
+        // in order, as one fill after another: the same numbers and choices.
+        NoiseCache& other = scratch.noise_other;
+        std::size_t n_fills = 0;
+        {
+            double last = other.photon_rate;
+            bool last_holds = other.dt == c.dt;
+            for (std::size_t f = 0; f < n_flagged; ++f) {
+                const std::size_t j = flagged[f];
+                const double r = static_cast<double>(rate[j]);
+                if (!busy[j] || r == common.photon_rate || (last_holds && r == last)) continue;
+                if (n_fills == scratch.fill_rates.size()) scratch.fill_rates.resize(2 * n_fills + 16);
+                scratch.fill_rates[n_fills++] = r;
+                last = r;
+                last_holds = true;
+            }
+        }
+        if (n_fills > 0) {
+            if (scratch.fills.size() < n_fills) {
+                scratch.fills.resize(scratch.fill_rates.size());
+                scratch.fill_stages.resize(scratch.fill_rates.size());
+            }
+            if (other.sf.T != c.dt || other.sf.b != sf_rate()) other.sf = sf_terms(sf_rate(), c.dt);
+            fill_noise_caches(scratch.fills.data(), scratch.fill_stages.data(), scratch.fill_rates.data(), n_fills, c,
+                              other.sf);
+        }
+        NoiseCache* own = &other;  // the numbers of the last pixel at a rate of its own
+        std::size_t n_filled = 0;
         // The busy pixels, from their state at c.t0 (now), as step_continuous() does; their new
         // state goes to next, beside the quiet ones'.
-        NoiseCache& other = scratch.noise_other;
         std::size_t n_busy = 0;
         for (std::size_t f = 0; f < n_flagged; ++f) {
             const std::size_t j = flagged[f];
@@ -2112,9 +2148,14 @@ struct PixelModel {
             h.give(s, j, now);
             const double r = static_cast<double>(rate[j]);
             const bool own_rate = r != common.photon_rate;  // common is complete, for c.dt
-            NoiseCache& cache = own_rate ? other : common;
             // Another rate's numbers without the bridge's until a pixel needs them (NoiseCache::bridge_ready).
-            if (own_rate && (r != other.photon_rate || other.dt != c.dt)) fill_noise_cache(other, r, c, true);
+            if (own_rate && (r != own->photon_rate || own->dt != c.dt)) {
+                NoiseCache& next_own = scratch.fills[n_filled++];
+                next_own.lazy_credit = own->lazy_credit;
+                fill_noise_finish(next_own, c, true);
+                own = &next_own;
+            }
+            NoiseCache& cache = own_rate ? *own : common;
             double zj, yj, nzj, nyj;
             continuous_levels<sf_only>(s, cache, c, g1s[j], g2s[j], zj, yj, nzj, nyj);
             const bool clock_ran_out = background && background_spend(s, cache.bg_factor, c);
@@ -2137,6 +2178,7 @@ struct PixelModel {
             ++s.n;
             h.take(s, j, next);
         }
+        if (own != &other) other = *own;  // for the next call, whose first pixels may share its rate
         h.flip();
         return n_busy;
     }
@@ -2470,7 +2512,20 @@ struct PixelModel {
     /// for later where bridge_var_bounded() allows (bridge_ready false, bridge_bound from
     /// q_yy): for the callers that test quiet_in_interval() and call complete_noise_cache()
     /// before anything else reads the bridge. Every value computed is the same as eagerly.
+    /// Its three stages (fill_noise_begin, fill_noise_end, fill_noise_finish) are also made
+    /// over many rates at once (fill_noise_caches).
     void fill_noise_cache(NoiseCache& cache, double photon_rate, const SampleConstants& c, bool lazy_bridge = false) const {
+        NoiseIntervalStage stage;
+        fill_noise_begin(cache, stage, photon_rate, c);
+        fill_noise_end(cache, stage);
+        fill_noise_finish(cache, c, lazy_bridge);
+    }
+    /// fill_noise_cache()'s first stage: the rate's current, its libm calls (the log, the
+    /// pole's exp, the expm1 of the noise's terms: noise_interval_begin) and the fields that
+    /// depend on the rate alone; what the second stage needs goes to `stage`.
+    EVSTWIN_ALWAYS_INLINE void fill_noise_begin(NoiseCache& cache, NoiseIntervalStage& stage, double photon_rate,
+                                                const SampleConstants& c) const {
+        const double b = sf_rate();  // once: the stores below could alias p's doubles
         const double mean_e = mean_electron_rate(photon_rate);
         cache.photon_rate = photon_rate;
         cache.dt = c.dt;
@@ -2481,22 +2536,53 @@ struct PixelModel {
         const double u = cache.a * c.dt;
         cache.pole_decay = std::exp(-u);
         cache.pole_ramp = one_minus_exp_over(u);
-        if (cache.sf.T != c.dt || cache.sf.b != sf_rate()) cache.sf = sf_terms(sf_rate(), c.dt);
-        const double b = sf_rate();
-        if (lazy_bridge) cache.lazy_credit = std::min(cache.lazy_credit + 1, 6);  // the last fill needed no completion, or was eager
+        if (cache.sf.T != c.dt || cache.sf.b != b) cache.sf = sf_terms(b, c.dt);
         cache.k = NoiseCoeffs{};
-        cache.bridge_ready = true;
+        stage.two_poles = false;
         if (cache.D > 0.0) {
             const PoleTerms pole{cache.a, c.dt, cache.pole_decay, cache.pole_ramp};
-            cache.k = noise_coeffs_interval(cache.a, b, cache.D, c.dt, &cache.sf, &pole);
+            noise_interval_begin(cache.k, stage, cache.a, b, cache.D, c.dt, &cache.sf, &pole);
+        }
+        cache.bg_factor = background_factor(cache.current_a);
+        cache.leak_hz = leak_rate_hz(photon_rate);
+    }
+    /// fill_noise_cache()'s second stage: the two-pole covariance and its Cholesky factor
+    /// (noise_interval_end), from the first's `stage`.
+    EVSTWIN_ALWAYS_INLINE void fill_noise_end(NoiseCache& cache, const NoiseIntervalStage& stage) const {
+        noise_interval_end(cache.k, stage, sf_rate(), cache.D);
+    }
+    /// fill_noise_cache()'s last stage: whether the bridge's terms are left for later (the
+    /// lazy fills' credit, NoiseCache::lazy_credit), those terms if not, and the quiet test's bound.
+    EVSTWIN_ALWAYS_INLINE void fill_noise_finish(NoiseCache& cache, const SampleConstants& c, bool lazy_bridge) const {
+        const double b = sf_rate();
+        if (lazy_bridge) cache.lazy_credit = std::min(cache.lazy_credit + 1, 6);  // the last fill needed no completion, or was eager
+        cache.bridge_ready = true;
+        if (cache.D > 0.0) {
             // Twice q_yy bounds bridge_var (bridge_var_bounded): the bound's quiet test is safe.
             cache.bridge_ready = !(lazy_bridge && cache.lazy_credit >= 0 && bridge_var_bounded(cache.a, b, c.dt) &&
                                    cache.k.q_yy > 0.0);
-            if (cache.bridge_ready) noise_coeffs_bridge(cache.k, cache.a, b, cache.D, c.dt, &cache.sf, &pole);
+            if (cache.bridge_ready) {
+                const PoleTerms pole{cache.a, c.dt, cache.pole_decay, cache.pole_ramp};
+                noise_coeffs_bridge(cache.k, cache.a, b, cache.D, c.dt, &cache.sf, &pole);
+            }
         }
         cache.bridge_bound = bridge_bound_for(cache.bridge_ready ? cache.k.bridge_var : 2.0 * cache.k.q_yy, c);
-        cache.bg_factor = background_factor(cache.current_a);
-        cache.leak_hz = leak_rate_hz(photon_rate);
+    }
+    /// fill_noise_cache()'s first two stages for m rates into caches[0, m) (stages: room for
+    /// m): the first stage of all, then the second of all, so that one rate's chain of
+    /// divisions and square roots overlaps the next rates' libm calls (one fill after another,
+    /// each chain waited on its calls, and the next calls on the chain: a fill is longer than
+    /// the processor's window). fill_noise_finish() then completes each, in the caller's
+    /// order: the same numbers as fill_noise_cache(). sf: sf_terms(sf_rate(), c.dt), given to
+    /// the caches that hold another interval's.
+    void fill_noise_caches(NoiseCache* caches, NoiseIntervalStage* stages, const double* rates, std::size_t m,
+                           const SampleConstants& c, const SfTerms& sf) const {
+        for (std::size_t i = 0; i < m; ++i) {
+            NoiseCache& k = caches[i];
+            if (k.sf.T != sf.T || k.sf.b != sf.b) k.sf = sf;
+            fill_noise_begin(k, stages[i], rates[i], c);
+        }
+        for (std::size_t i = 0; i < m; ++i) fill_noise_end(caches[i], stages[i]);
     }
     /// What fill_noise_cache(..., lazy_bridge = true) left: bridge_var and its exact bound.
     void complete_noise_cache(NoiseCache& cache, const SampleConstants& c) const {
