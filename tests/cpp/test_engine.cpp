@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <initializer_list>
 #include <limits>
@@ -77,6 +78,60 @@ TEST(ziggurat_is_a_standard_normal_tails_included) {
     for (double v : x) far += std::fabs(v) > 4.0;
     const double p4 = std::erfc(4.0 / std::sqrt(2.0));
     CHECK_NEAR(double(far), n * p4, 5.0 * std::sqrt(n * p4) + 1.0);
+}
+
+TEST(block_arrays_are_laid_out_apart_and_keep_their_elements) {
+    // BlockSoA's arrays: one allocation, each 64-byte aligned, none overlapping another, and
+    // a block's equal arrays at different 64-byte offsets of a 4 KB page (the point of the
+    // layout: no two of them alias in the CPU's 4 KB store-load check).
+    BlockSoA soa;
+    soa.resize(100);
+    for (std::size_t j = 0; j < 100; ++j) {
+        CHECK(soa.now().x[j] == 0.0 && soa.busy[j] == 0u && soa.spare_lo[j] == 0u);  // value-initialised
+        soa.now().x[j] = 1.5 * static_cast<double>(j);
+        soa.theta_on[j] = -static_cast<double>(j);
+        soa.spare_lo[j] = static_cast<std::uint32_t>(7 * j);
+    }
+    soa.resize(50);  // no smaller layout: the same arrays
+    CHECK(soa.busy.size() == 100);
+    soa.resize(256);
+    CHECK(soa.busy.size() == 256 && soa.now().x.size() == 256 && soa.spare_lo.size() == 256);
+    bool kept = true;
+    for (std::size_t j = 0; j < 100; ++j)
+        kept &= soa.now().x[j] == 1.5 * static_cast<double>(j) && soa.theta_on[j] == -static_cast<double>(j) &&
+                soa.spare_lo[j] == static_cast<std::uint32_t>(7 * j);
+    for (std::size_t j = 100; j < 256; ++j) kept &= soa.now().x[j] == 0.0 && soa.spare_lo[j] == 0u;
+    CHECK(kept);
+    struct Span {
+        std::uintptr_t begin, end;
+    };
+    std::vector<Span> spans;
+    std::vector<std::uintptr_t> doubles_at;  // the 2 KB arrays' page offsets
+    const auto add = [&](const void* p, std::size_t bytes, bool is_double) {
+        const auto a = reinterpret_cast<std::uintptr_t>(p);
+        CHECK(a % 64 == 0);
+        spans.push_back({a, a + bytes});
+        if (is_double) doubles_at.push_back(a % 4096 / 64);
+    };
+    for (const BlockSoA::Levels& l : soa.buf)
+        for (const auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off})
+            add(v->data(), 256 * sizeof(double), true);
+    for (const auto* v : {&soa.refr_until, &soa.next_hot_t, &soa.theta_on, &soa.theta_off, &soa.leak_spread,
+                          &soa.bg_on_hz, &soa.bg_off_hz, &soa.leak_g, &soa.bg_on_rate, &soa.bg_off_rate})
+        add(v->data(), 256 * sizeof(double), true);
+    add(soa.spare_lo.data(), 256 * 4, false);
+    add(soa.spare_hi.data(), 256 * 4, false);
+    add(soa.spare_sample.data(), 256 * 8, false);
+    add(soa.n_base.data(), 256 * 8, false);
+    add(soa.busy.data(), 256 * 8, false);
+    bool apart = true;
+    for (std::size_t i = 0; i < spans.size(); ++i)
+        for (std::size_t k = i + 1; k < spans.size(); ++k)
+            apart &= spans[i].end <= spans[k].begin || spans[k].end <= spans[i].begin;
+    CHECK(apart);
+    std::vector<std::uintptr_t> sorted = doubles_at;
+    std::sort(sorted.begin(), sorted.end());
+    CHECK(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end());  // 28 different page offsets
 }
 
 TEST(noise_coefficients_compose_and_reach_the_stationary_law) {

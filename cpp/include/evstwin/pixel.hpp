@@ -17,10 +17,13 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <memory>
+#include <new>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "config.hpp"
@@ -421,6 +424,77 @@ struct TraceSample {
     double reference;    ///< the comparator reference at the end of the interval
 };
 
+namespace detail {
+/// One array of a block's pixels inside a BlockArena: what the kernels use of a std::vector
+/// (data(), operator[], size()), with the storage owned by the arena.
+template <class T>
+class BlockArray {
+public:
+    T* data() { return p_; }
+    const T* data() const { return p_; }
+    T& operator[](std::size_t i) { return p_[i]; }
+    const T& operator[](std::size_t i) const { return p_[i]; }
+    std::size_t size() const { return n_; }
+
+private:
+    friend class BlockArena;
+    T* p_ = nullptr;
+    std::size_t n_ = 0;
+};
+
+/// The per-pixel arrays of a block (BlockSoA, PixelModel::BlockScratch) in one allocation,
+/// each starting one cache line after the previous one ends. Why: a block's arrays are all
+/// 2 KB long (256 doubles), and as separate heap blocks (glibc puts them 2,064 bytes apart)
+/// every other one started within 32 bytes of the same offset in a 4 KB page, so the quiet
+/// pass's stores to one array and loads from another looked alike to the CPU's 4 KB store-load
+/// aliasing check and the loads waited (the same events; up to ~12 % of the quiet pass's
+/// time, and it came and went with where the heap placed them). Laid out here, n equal
+/// arrays start at n different 64-byte offsets of a page (2,112 = 33 lines apart; 33 is
+/// odd, so up to 64 of them).
+class BlockArena {
+public:
+    BlockArena() = default;
+    BlockArena(const BlockArena&) = delete;
+    BlockArena& operator=(const BlockArena&) = delete;
+    BlockArena(BlockArena&&) = default;  // the arrays' storage does not move with it
+    BlockArena& operator=(BlockArena&&) = default;
+
+    /// Lay out again every array that `each` names (each(put) calls put(array, size) for
+    /// every one, in the same order each time): their elements kept up to the smaller size,
+    /// new ones value-initialised (as std::vector::resize would).
+    template <class Each>
+    void lay_out(Each&& each) {
+        std::size_t bytes = 0;
+        each([&bytes](auto& a, std::size_t n) {
+            using T = std::remove_reference_t<decltype(a[0])>;
+            bytes = start_of(bytes) + n * sizeof(T);
+        });
+        std::unique_ptr<unsigned char[]> mem(new unsigned char[bytes + LINE]);
+        unsigned char* base = mem.get() + (LINE - reinterpret_cast<std::uintptr_t>(mem.get()) % LINE) % LINE;
+        std::size_t at = 0;
+        each([&at, base](auto& a, std::size_t n) {
+            using T = std::remove_reference_t<decltype(a[0])>;
+            static_assert(std::is_trivially_copyable_v<T>, "BlockArena holds plain numbers");
+            at = start_of(at);
+            T* p = reinterpret_cast<T*>(base + at);
+            const std::size_t kept = std::min(a.n_, n);
+            if (kept) std::memcpy(static_cast<void*>(p), a.p_, kept * sizeof(T));
+            for (std::size_t i = kept; i < n; ++i) new (p + i) T{};
+            a.p_ = p;
+            a.n_ = n;
+            at += n * sizeof(T);
+        });
+        mem_ = std::move(mem);  // the old storage goes only now: its elements were copied above
+    }
+
+private:
+    static constexpr std::size_t LINE = 64;
+    /// Where the next array starts after one that ends at `end`: the next line, and one more.
+    static std::size_t start_of(std::size_t end) { return (end + LINE - 1) / LINE * LINE + LINE; }
+    std::unique_ptr<unsigned char[]> mem_;
+};
+}  // namespace detail
+
 /// The fields of a block's pixel states that the continuous block kernel's common path reads
 /// or writes, as a structure of arrays: a working copy of the block for the samples of one
 /// run call (loaded before the first, stored after the last), so that path is one loop over
@@ -437,23 +511,23 @@ struct BlockSoA {
     /// How many pixels ahead load() asks for their states' cache lines. Speed only.
     static constexpr std::size_t PREFETCH_AHEAD = 8;
     struct Levels {
-        std::vector<double> x, z, y, nz, ny, ref, clock_on, clock_off;
+        detail::BlockArray<double> x, z, y, nz, ny, ref, clock_on, clock_off;
     };
     Levels buf[2];
     int cur = 0;
     /// The sample counters (PixelState::n): pixel j's is n_base[j] + n_step (count()). Every
     /// pixel in the arrays advances one sample a step (flip() counts them), so no pass loads or
     /// stores a counter that only grows by one; take() and give() translate.
-    std::vector<std::uint64_t> n_base;
+    detail::BlockArray<std::uint64_t> n_base;
     std::uint64_t n_step = 0;
-    std::vector<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
-    std::vector<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
+    detail::BlockArray<double> refr_until, next_hot_t;  ///< changed only by the per-pixel path
+    detail::BlockArray<double> theta_on, theta_off, leak_spread, bg_on_hz, bg_off_hz;  ///< constant in a run
     /// The quiet pass's per-pixel terms that hold while the block's common rate does (made by
     /// PixelModel::prepare_quiet_terms, with the operations the pass made them with): the leak's
     /// part of the slope, PixelModel::leak_slope(leak_spread, theta_on, theta_off, leak_hz), and
     /// the background clocks' rates bg_on_hz * bg_factor, bg_off_hz * bg_factor. One stream
     /// each in place of two or three, and their multiplies out of every sample's pass.
-    std::vector<double> leak_g, bg_on_rate, bg_off_rate;
+    detail::BlockArray<double> leak_g, bg_on_rate, bg_off_rate;
     /// The leak_hz and bg_factor those terms are for (NaN: none; load() forgets them).
     double terms_leak_hz = std::numeric_limits<double>::quiet_NaN();
     double terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
@@ -465,12 +539,13 @@ struct BlockSoA {
     /// PixelState::spare_words as its two 32-bit halves (the Philox batch writes its third and
     /// fourth words straight into them, and the next odd sample reads them in place), and
     /// spare_sample: changed in place by the word batch.
-    std::vector<std::uint32_t> spare_lo, spare_hi;
-    std::vector<std::uint64_t> spare_sample;
+    detail::BlockArray<std::uint32_t> spare_lo, spare_hi;
+    detail::BlockArray<std::uint64_t> spare_sample;
     /// The quiet pass's verdict per pixel (0 quiet, 1 bridge, 2 per-pixel path), 64-bit like
     /// the levels: a byte array would make the vectoriser take 64 pixels an iteration (one
     /// byte vector), eight zmm registers per level, and spill them to the stack.
-    std::vector<std::uint64_t> busy;
+    detail::BlockArray<std::uint64_t> busy;
+    detail::BlockArena arena;  ///< where the arrays above live
 
     Levels& now() { return buf[cur]; }
     const Levels& now() const { return buf[cur]; }
@@ -484,17 +559,19 @@ struct BlockSoA {
 
     void resize(std::size_t m) {
         if (busy.size() >= m) return;
-        for (Levels& l : buf) {
-            for (auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off}) v->resize(m);
-        }
-        for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz, &leak_g,
-                        &bg_on_rate, &bg_off_rate})
-            v->resize(m);
-        spare_lo.resize(m);
-        spare_hi.resize(m);
-        spare_sample.resize(m);
-        n_base.resize(m);
-        busy.resize(m);
+        arena.lay_out([this, m](auto&& put) {
+            for (Levels& l : buf) {
+                for (auto* v : {&l.x, &l.z, &l.y, &l.nz, &l.ny, &l.ref, &l.clock_on, &l.clock_off}) put(*v, m);
+            }
+            for (auto* v : {&refr_until, &next_hot_t, &theta_on, &theta_off, &leak_spread, &bg_on_hz, &bg_off_hz,
+                            &leak_g, &bg_on_rate, &bg_off_rate})
+                put(*v, m);
+            put(spare_lo, m);
+            put(spare_hi, m);
+            put(spare_sample, m);
+            put(n_base, m);
+            put(busy, m);
+        });
     }
     /// Pixel j's fields from its state, its changing levels into `into`: now() for a state at
     /// the coming step's start, next() for one at its end (the per-pixel path's; its counter
@@ -1448,21 +1525,21 @@ struct PixelModel {
     static constexpr std::size_t PHILOX_BATCH_PAD = 16;
     /// Scratch space of the block kernel (one per thread).
     struct BlockScratch {
-        std::vector<double> u_noise, x, current, y;
-        std::vector<std::uint8_t> busy;
-        std::vector<std::uint32_t> count_word;
-        std::vector<double> z, count;
+        detail::BlockArray<double> u_noise, x, current, y;
+        detail::BlockArray<std::uint8_t> busy;
+        detail::BlockArray<std::uint32_t> count_word;
+        detail::BlockArray<double> z, count;
         // The continuous model's: the sample's second word, the noise, the bridge's variance.
-        std::vector<std::uint32_t> word1, busy_at;
-        std::vector<double> nz, ny, bridge_var, noise_d;
-        std::vector<double> leak;  ///< the busy pixels' leak rates (continuous), or slopes (sampled)
+        detail::BlockArray<std::uint32_t> word1, busy_at;
+        detail::BlockArray<double> nz, ny, bridge_var, noise_d;
+        detail::BlockArray<double> leak;  ///< the busy pixels' leak rates (continuous), or slopes (sampled)
         // block_sample_words' Philox batch: counters, the pixels that need a call, the words;
         // and the ziggurat batch's flags of the normals left to the slow path.
-        std::vector<std::uint32_t> ctr0, ctr1, ctr2, need_at, r0, r1, r2, r3;
-        std::vector<std::uint8_t> slow1, slow2;
-        std::vector<BridgePre> bridge_pre;  ///< step_block_continuous' bridge decisions of the busy pixels
+        detail::BlockArray<std::uint32_t> ctr0, ctr1, ctr2, need_at, r0, r1, r2, r3;
+        detail::BlockArray<std::uint8_t> slow1, slow2;
+        detail::BlockArray<BridgePre> bridge_pre;  ///< step_block_continuous' bridge decisions of the busy pixels
         std::vector<double> bridge_args;    ///< bridge_decisions' numbers, ARGS a pixel
-        std::vector<std::uint32_t> fired;   ///< bridge_decisions' pixels whose draw fires
+        detail::BlockArray<std::uint32_t> fired;   ///< bridge_decisions' pixels whose draw fires
         double cached_rate = -1.0, cached_x = 0.0;
         // The photoreceptor pole's decay and ramp depend on the current only through the
         // electron count of the interval: kept per count for the current dt.
@@ -1477,22 +1554,17 @@ struct PixelModel {
         std::vector<NoiseCache> fills;
         std::vector<NoiseIntervalStage> fill_stages;
         BlockSoA soa;  ///< step_block_soa's working copy of a block's state
+        detail::BlockArena arena;  ///< where the per-pixel arrays above live (not pr_*, bridge_args)
         void resize(std::size_t n) {
-            if (x.size() < n) {
-                u_noise.resize(n); x.resize(n); current.resize(n); y.resize(n); busy.resize(n); count_word.resize(n);
-                z.resize(n); count.resize(n);
-                word1.resize(n); busy_at.resize(n); nz.resize(n); ny.resize(n); bridge_var.resize(n);
-                noise_d.resize(n);
-                leak.resize(n);
-                // Room for a short batch's padding (pad_batch).
-                ctr0.resize(n + PHILOX_BATCH_PAD); ctr1.resize(n + PHILOX_BATCH_PAD); ctr2.resize(n + PHILOX_BATCH_PAD);
-                need_at.resize(n);
-                r0.resize(n + PHILOX_BATCH_PAD); r1.resize(n + PHILOX_BATCH_PAD); r2.resize(n + PHILOX_BATCH_PAD);
-                r3.resize(n + PHILOX_BATCH_PAD);
-                slow1.resize(n); slow2.resize(n);
-                bridge_pre.resize(n);
-                fired.resize(n);
-            }
+            if (x.size() >= n) return;
+            const std::size_t padded = n + PHILOX_BATCH_PAD;  // room for a short batch's padding (pad_batch)
+            arena.lay_out([this, n, padded](auto&& put) {
+                for (auto* v : {&u_noise, &x, &current, &y, &z, &count, &nz, &ny, &bridge_var, &noise_d, &leak}) put(*v, n);
+                for (auto* v : {&count_word, &word1, &busy_at, &need_at, &fired}) put(*v, n);
+                for (auto* v : {&ctr0, &ctr1, &ctr2, &r0, &r1, &r2, &r3}) put(*v, padded);
+                for (auto* v : {&busy, &slow1, &slow2}) put(*v, n);
+                put(bridge_pre, n);
+            });
         }
     };
 
