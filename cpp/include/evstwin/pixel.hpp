@@ -1554,7 +1554,7 @@ struct PixelModel {
         std::vector<NoiseCache> fills;
         std::vector<NoiseIntervalStage> fill_stages;
         BlockSoA soa;  ///< step_block_soa's working copy of a block's state
-        detail::BlockArena arena;  ///< where the per-pixel arrays above live (not pr_*, bridge_args)
+        detail::BlockArena arena;  ///< where the BlockArray members above live
         void resize(std::size_t n) {
             if (x.size() >= n) return;
             const std::size_t padded = n + PHILOX_BATCH_PAD;  // room for a short batch's padding (pad_batch)
