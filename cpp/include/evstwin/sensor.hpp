@@ -933,11 +933,12 @@ private:
                 eligible = true;
                 n_active = 0;
                 for (std::size_t i = lo; i < hi; ++i) {
-                    // The states come from memory here, once a call (20 MB for the DAVIS346
-                    // array), at a stride the hardware prefetcher follows only within a page:
-                    // every cache line of the record a few pixels ahead is asked for now, for
-                    // load() below. (Written out here: the same loop in a helper function in
-                    // this header left no prefetch instruction in a GCC 12 -O3 build.)
+                    // The states come from memory here, at the call's first sample of a block
+                    // whose pixels may stand apart (block_synced_ clear: run_pixels moved some),
+                    // at a stride the hardware prefetcher follows only within a page: every
+                    // cache line of the record a few pixels ahead is asked for now, for load()
+                    // below. (Written out here: the same loop in a helper function in this
+                    // header left no prefetch instruction in a GCC 12 -O3 build.)
 #if defined(__GNUC__) || defined(__clang__)
                     if (i + STATE_PREFETCH_AHEAD < hi) {
                         const char* ahead = reinterpret_cast<const char*>(&state_[i + STATE_PREFETCH_AHEAD]);
