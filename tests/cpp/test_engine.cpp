@@ -797,6 +797,10 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
     // the source follower alone (BlockSoA::sf_only: z is x there, and nz 0, on every path);
     // and the terms the pass takes ready-made
     // (BlockSoA::leak_g, bg_on_rate, bg_off_rate) reach the clocks and references.
+    // Twice: own rates all different at a steady 1 ms; and own rates from a set of three, the
+    // same for runs of pixels and of samples, with every fifth interval 0.5 ms, so a pixel's
+    // rate is often the previous own-rate pixel's, or the rate the last sample ended on under
+    // a new dt (step_block_soa's fills listed ahead of its loop: which numbers each reuses).
     struct Ev {
         double t;
         std::uint32_t pixel;
@@ -822,7 +826,8 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
     };
     // Three chains: the source follower alone, behind the pole, and neither (noiseless: the
     // ideal pixel, which takes the source follower's arrays with its decay and ramp at 0).
-    for (int chain : {0, 1, 2}) {
+    for (int chain : {0, 1, 2})
+    for (bool repeats : {false, true}) {
         const bool pole = chain == 1;
         PixelParams p;
         p.threshold_sigma = 0.03;
@@ -841,11 +846,15 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
         std::vector<PixelState> per_pixel(n), block;
         std::vector<std::uint32_t> ids(n);
         std::vector<float> rate(n);
+        const float own_set[3] = {3e6f, 1.5e6f, 5e6f};
         const auto rates_at = [&](int k) {
             for (std::size_t j = 0; j < n; ++j)
-                rate[j] = j % 4 == 3 ? static_cast<float>(2e6 * (1.0 + 0.5 * std::sin(0.05 * k + static_cast<double>(j))))
-                                     : 2e6f;
+                rate[j] = j % 4 != 3 ? 2e6f
+                          : repeats  ? own_set[(static_cast<std::size_t>(k / 7) + j / 64) % 3]
+                                     : static_cast<float>(2e6 * (1.0 + 0.5 * std::sin(0.05 * k + static_cast<double>(j))));
         };
+        std::vector<double> t_at(samples, 0.0);  // the samples' end times
+        for (int k = 1; k < samples; ++k) t_at[k] = t_at[k - 1] + (repeats && k % 5 == 0 ? 0.5e-3 : 1e-3);
         std::vector<Ev> want, got;
         std::uint32_t pixel = 0;
         auto emit_want = [&](double t, Polarity pol, std::uint8_t) { want.push_back({t, pixel, static_cast<int>(pol)}); };
@@ -867,14 +876,14 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
         std::size_t n_busy = 0;
         for (int k = 1; k < samples; ++k) {
             rates_at(k);
-            const SampleConstants c = model.constants((k - 1) / 1000.0, k / 1000.0);
+            const SampleConstants c = model.constants(t_at[k - 1], t_at[k]);
             for (std::size_t j = 0; j < n; ++j) {
                 pixel = ids[j];
                 model.advance(per_pixel[j], rate[j], c, key, ids[j], poisson, cache, emit_want);
             }
             n_busy += model.step_block_soa(h, block.data(), ids.data(), n, rate.data(), c, key, scratch, emit_got, pixel);
         }
-        h.store(block.data(), n, (samples - 1) / 1000.0);
+        h.store(block.data(), n, t_at[samples - 1]);
         CHECK(n_busy > 0 && !want.empty());  // the per-pixel path and the comparator were reached
         CHECK(got == want);
         std::size_t differ = 0;
@@ -885,8 +894,9 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
         }
         CHECK(differ == 0);
         CHECK(off_invariant == 0);
-        std::printf("  %s: %zu events, %zu per-pixel steps, %zu states differ\n",
-                    chain == 0 ? "source follower" : chain == 1 ? "pole" : "no filter", want.size(), n_busy, differ);
+        std::printf("  %s%s: %zu events, %zu per-pixel steps, %zu states differ\n",
+                    chain == 0 ? "source follower" : chain == 1 ? "pole" : "no filter",
+                    repeats ? ", repeated own rates" : "", want.size(), n_busy, differ);
     }
 }
 
