@@ -1547,7 +1547,7 @@ struct PixelModel {
         std::vector<std::uint8_t> pr_known;
         double pr_dt = -1.0;
         NoiseCache noise;  ///< the continuous model's per-rate numbers (advance())
-        NoiseCache noise_other;  ///< step_block_soa's: the numbers of the pixels off the block's common rate
+        NoiseCache noise_other;  ///< step_block_soa's: the last own-rate pixel's numbers, carried to the next sample and call
         // step_block_soa's fills for those pixels, made together (fill_noise_caches): their
         // rates, numbers and stages; grown to the most a call has needed.
         std::vector<double> fill_rates;
@@ -2178,9 +2178,10 @@ struct PixelModel {
         const std::size_t n_flagged = list_flagged(busy, n, flagged);
         if (q.bridge_stage) bridge_stage(h, ids, flagged, n_flagged, common, c, key, scratch);
         // The busy pixels at rates of their own: the numbers of each rate that the loop below
-        // meets (one fill_noise_cache() each, as it did, but for a pixel at the rate of the one
-        // before it, which takes the same numbers: the first such at noise_other's, the rate
-        // the last call ended on). Their fills' first two stages are made here, over all of them
+        // meets (one fill_noise_cache() each, as it did, but for a pixel at the rate of the
+        // previous busy pixel at a rate of its own, which takes the same numbers; the first
+        // such takes noise_other's, the rate the last sample ended on, only if their dt is
+        // c.dt). Their fills' first two stages are made here, over all of them
         // (fill_noise_caches), the last (the lazy choice, NoiseCache::lazy_credit) in the loop,
         // in order, as one fill after another: the same numbers and choices.
         NoiseCache& other = scratch.noise_other;
@@ -2584,8 +2585,8 @@ struct PixelModel {
     /// for later where bridge_var_bounded() allows (bridge_ready false, bridge_bound from
     /// q_yy): for the callers that test quiet_in_interval() and call complete_noise_cache()
     /// before anything else reads the bridge. Every value computed is the same as eagerly.
-    /// Its three stages (fill_noise_begin, fill_noise_end, fill_noise_finish) are also made
-    /// over many rates at once (fill_noise_caches).
+    /// Its three stages: fill_noise_begin, fill_noise_end (both also made over many rates at
+    /// once: fill_noise_caches) and fill_noise_finish (per pixel, in order: the lazy choice).
     void fill_noise_cache(NoiseCache& cache, double photon_rate, const SampleConstants& c, bool lazy_bridge = false) const {
         NoiseIntervalStage stage;
         fill_noise_begin(cache, stage, photon_rate, c);
@@ -2642,9 +2643,9 @@ struct PixelModel {
     }
     /// fill_noise_cache()'s first two stages for m rates into caches[0, m) (stages: room for
     /// m): the first stage of all, then the second of all, so that one rate's chain of
-    /// divisions and square roots overlaps the next rates' libm calls (one fill after another,
-    /// each chain waited on its calls, and the next calls on the chain: a fill is longer than
-    /// the processor's window). fill_noise_finish() then completes each, in the caller's
+    /// divisions and square roots overlaps the next rates' libm calls. (Fill after fill, each
+    /// chain waited for its own libm calls and the next fill's calls for the chain: one fill
+    /// is longer than the processor's out-of-order window.) fill_noise_finish() then completes each, in the caller's
     /// order: the same numbers as fill_noise_cache(). sf: sf_terms(sf_rate(), c.dt), given to
     /// the caches that hold another interval's.
     void fill_noise_caches(NoiseCache* caches, NoiseIntervalStage* stages, const double* rates, std::size_t m,
