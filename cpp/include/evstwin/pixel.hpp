@@ -577,48 +577,20 @@ struct BlockSoA {
     /// the coming step's start, next() for one at its end (the per-pixel path's; its counter
     /// one ahead of count()).
     EVSTWIN_ALWAYS_INLINE void take(const PixelState& s, std::size_t j, Levels& into) {
-        into.x[j] = s.x; into.z[j] = s.z; into.y[j] = s.y; into.nz[j] = s.nz; into.ny[j] = s.ny;
-        into.ref[j] = s.ref; into.clock_on[j] = s.bg_clock_on; into.clock_off[j] = s.bg_clock_off;
-        n_base[j] = s.n - n_step - static_cast<std::uint64_t>(&into != &now());
-        refr_until[j] = s.refr_until; next_hot_t[j] = s.next_hot_t;
-        spare_lo[j] = static_cast<std::uint32_t>(s.spare_words);
-        spare_hi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
-        spare_sample[j] = s.spare_sample;
+        take_at(fields(into), s, j, s.n - n_step - static_cast<std::uint64_t>(&into != &now()));
     }
     /// Pixel j's fields back into its state, its changing levels from `from` (the constant
     /// ones are not written).
     EVSTWIN_ALWAYS_INLINE void give(PixelState& s, std::size_t j, const Levels& from) const {
-        s.x = sf_only ? from.z[j] : from.x[j]; s.z = from.z[j]; s.y = from.y[j];
-        s.nz = sf_only ? 0.0 : from.nz[j]; s.ny = from.ny[j];
-        s.ref = from.ref[j]; s.bg_clock_on = from.clock_on[j]; s.bg_clock_off = from.clock_off[j]; s.n = count(j);
-        s.refr_until = refr_until[j]; s.next_hot_t = next_hot_t[j];
-        s.spare_words = static_cast<std::uint64_t>(spare_lo[j]) | (static_cast<std::uint64_t>(spare_hi[j]) << 32);
-        s.spare_sample = spare_sample[j];
+        give_at(fields(from), sf_only, s, j, n_step);  // (fields() takes x from z with sf_only)
     }
-    /// Every pixel's fields from its state: take() for each, and the constant ones. Written out
-    /// with the arrays' addresses in restrict locals (take() reloads them for every field of
-    /// every pixel, since its stores might alias the vectors' pointers): a short run() call
-    /// loads and stores every block once, and this loop was ~70 instructions a pixel.
+    /// Every pixel's fields from its state: take() for each, and the constant ones.
     void load(const PixelState* __restrict st, std::size_t m) {
         resize(m);
         terms_leak_hz = terms_bg_factor = std::numeric_limits<double>::quiet_NaN();
         n_step = 0;
         sf_only = false;  // x and nz as loaded, until a step of the source follower alone
-        Levels& l = now();
-        double* __restrict x = l.x.data();
-        double* __restrict z = l.z.data();
-        double* __restrict y = l.y.data();
-        double* __restrict nz = l.nz.data();
-        double* __restrict ny = l.ny.data();
-        double* __restrict ref = l.ref.data();
-        double* __restrict con = l.clock_on.data();
-        double* __restrict coff = l.clock_off.data();
-        std::uint64_t* __restrict nb = n_base.data();
-        double* __restrict ru = refr_until.data();
-        double* __restrict nh = next_hot_t.data();
-        std::uint32_t* __restrict slo = spare_lo.data();
-        std::uint32_t* __restrict shi = spare_hi.data();
-        std::uint64_t* __restrict ss = spare_sample.data();
+        const Fields f = fields(now());
         double* __restrict ton = theta_on.data();
         double* __restrict toff = theta_off.data();
         double* __restrict ls = leak_spread.data();
@@ -636,50 +608,69 @@ struct BlockSoA {
             }
 #endif
             const PixelState& s = st[j];
-            // take(s, j, now()) with n_step = 0
-            x[j] = s.x; z[j] = s.z; y[j] = s.y; nz[j] = s.nz; ny[j] = s.ny;
-            ref[j] = s.ref; con[j] = s.bg_clock_on; coff[j] = s.bg_clock_off;
-            nb[j] = s.n;
-            ru[j] = s.refr_until; nh[j] = s.next_hot_t;
-            slo[j] = static_cast<std::uint32_t>(s.spare_words);
-            shi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
-            ss[j] = s.spare_sample;
+            take_at(f, s, j, s.n);  // take(s, j, now()) with n_step = 0
             ton[j] = s.theta_on; toff[j] = s.theta_off; ls[j] = s.leak_spread;
             bon[j] = s.bg_on_hz; boff[j] = s.bg_off_hz;
         }
     }
     /// Back into the states, which all stand at t_s now; but for the pixels flagged in held
     /// (nullptr: none), whose states are left as they are (step_block_soa's held pixels).
-    /// give() for each, written out as load() is.
     void store(PixelState* __restrict st, std::size_t m, double t_s, const std::uint8_t* held = nullptr) const {
-        const Levels& l = now();
-        // With the source follower alone, x is z and nz is 0 (sf_only; give()).
-        const double* __restrict x = sf_only ? l.z.data() : l.x.data();
-        const double* __restrict z = l.z.data();
-        const double* __restrict y = l.y.data();
-        const double* __restrict nz = l.nz.data();
-        const double* __restrict ny = l.ny.data();
-        const double* __restrict ref = l.ref.data();
-        const double* __restrict con = l.clock_on.data();
-        const double* __restrict coff = l.clock_off.data();
-        const std::uint64_t* __restrict nb = n_base.data();
-        const double* __restrict ru = refr_until.data();
-        const double* __restrict nh = next_hot_t.data();
-        const std::uint32_t* __restrict slo = spare_lo.data();
-        const std::uint32_t* __restrict shi = spare_hi.data();
-        const std::uint64_t* __restrict ss = spare_sample.data();
+        const ConstFields f = fields(now());
+        const bool sf = sf_only;
         const std::uint64_t step = n_step;
         for (std::size_t j = 0; j < m; ++j) {
             if (held && held[j]) continue;
-            PixelState& s = st[j];
-            s.x = x[j]; s.z = z[j]; s.y = y[j];
-            s.nz = sf_only ? 0.0 : nz[j]; s.ny = ny[j];
-            s.ref = ref[j]; s.bg_clock_on = con[j]; s.bg_clock_off = coff[j]; s.n = nb[j] + step;
-            s.refr_until = ru[j]; s.next_hot_t = nh[j];
-            s.spare_words = static_cast<std::uint64_t>(slo[j]) | (static_cast<std::uint64_t>(shi[j]) << 32);
-            s.spare_sample = ss[j];
-            s.t = t_s;
+            give_at(f, sf, st[j], j, step);
+            st[j].t = t_s;
         }
+    }
+
+private:
+    /// The arrays take() and give() touch, at one Levels, by address: fetched once for a whole
+    /// block in load() and store(). (Through the vectors, every store might alias their
+    /// pointers and the compiler reloads them for every field of every pixel: ~70 instructions
+    /// a pixel in load() where this takes ~46.)
+    template <class Real, class Word, class Count>
+    struct FieldsOf {
+        Real *x, *z, *y, *nz, *ny, *ref, *clock_on, *clock_off, *refr_until, *next_hot_t;
+        Count *n_base, *spare_sample;
+        Word *spare_lo, *spare_hi;
+    };
+    using Fields = FieldsOf<double, std::uint32_t, std::uint64_t>;
+    using ConstFields = FieldsOf<const double, const std::uint32_t, const std::uint64_t>;
+    Fields fields(Levels& l) {
+        return {l.x.data(),          l.z.data(),          l.y.data(),        l.nz.data(),
+                l.ny.data(),         l.ref.data(),        l.clock_on.data(), l.clock_off.data(),
+                refr_until.data(),   next_hot_t.data(),   n_base.data(),     spare_sample.data(),
+                spare_lo.data(),     spare_hi.data()};
+    }
+    /// With the source follower alone, x is read from z (sf_only; give()).
+    ConstFields fields(const Levels& l) const {
+        return {sf_only ? l.z.data() : l.x.data(), l.z.data(),          l.y.data(),        l.nz.data(),
+                l.ny.data(),         l.ref.data(),        l.clock_on.data(), l.clock_off.data(),
+                refr_until.data(),   next_hot_t.data(),   n_base.data(),     spare_sample.data(),
+                spare_lo.data(),     spare_hi.data()};
+    }
+    /// take() and give() of one pixel, where n_base is its counter less the step's, and
+    /// sf_only as BlockSoA's: nz is 0 with the source follower alone (and fields() points x at z).
+    static EVSTWIN_ALWAYS_INLINE void take_at(const Fields& f, const PixelState& s, std::size_t j, std::uint64_t n_base) {
+        f.x[j] = s.x; f.z[j] = s.z; f.y[j] = s.y; f.nz[j] = s.nz; f.ny[j] = s.ny;
+        f.ref[j] = s.ref; f.clock_on[j] = s.bg_clock_on; f.clock_off[j] = s.bg_clock_off;
+        f.n_base[j] = n_base;
+        f.refr_until[j] = s.refr_until; f.next_hot_t[j] = s.next_hot_t;
+        f.spare_lo[j] = static_cast<std::uint32_t>(s.spare_words);
+        f.spare_hi[j] = static_cast<std::uint32_t>(s.spare_words >> 32);
+        f.spare_sample[j] = s.spare_sample;
+    }
+    static EVSTWIN_ALWAYS_INLINE void give_at(const ConstFields& f, bool sf_only, PixelState& s, std::size_t j,
+                                              std::uint64_t step) {
+        s.x = f.x[j]; s.z = f.z[j]; s.y = f.y[j];
+        s.nz = sf_only ? 0.0 : f.nz[j]; s.ny = f.ny[j];
+        s.ref = f.ref[j]; s.bg_clock_on = f.clock_on[j]; s.bg_clock_off = f.clock_off[j]; s.n = f.n_base[j] + step;
+        s.refr_until = f.refr_until[j]; s.next_hot_t = f.next_hot_t[j];
+        s.spare_words = static_cast<std::uint64_t>(f.spare_lo[j]) | (static_cast<std::uint64_t>(f.spare_hi[j]) << 32);
+        s.spare_sample = f.spare_sample[j];
     }
 };
 
