@@ -899,6 +899,16 @@ private:
         for (std::size_t k = 0; k < n_samples; ++k) {
             const SampleConstants& c = consts[k];
             const Real* row = rate + k * sample_stride;
+            // The next sample's rates for this block: one row of a (samples, pixels) array, a
+            // whole frame (360 KB at DAVIS346) after this one, so the hardware prefetcher, which
+            // stays within a page, never asks for it and its first touch waited on memory.
+#if defined(__GNUC__) || defined(__clang__)
+            if (sample_stride != 0 && k + 1 < n_samples) {
+                const char* next = reinterpret_cast<const char*>(row + sample_stride + lo);
+                for (std::size_t line = 0; line < (hi - lo) * sizeof(Real); line += 64) __builtin_prefetch(next + line, 0, 2);
+                __builtin_prefetch(next + (hi - lo) * sizeof(Real) - 1, 0, 2);  // a row not 64-byte aligned
+            }
+#endif
             emit.start_sample(k);
             std::size_t n_active = hi - lo;
             bool eligible = kernel && synced;
