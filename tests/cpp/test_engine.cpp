@@ -695,6 +695,80 @@ TEST(ziggurat_slow_path_decides_its_wedges_as_the_library_exp_does) {
     CHECK(differ == 0);
 }
 
+TEST(batched_normals_are_sample_normals_bit_for_bit_at_every_simd_level) {
+    // PixelModel::batch_sample_normals (the block kernels' normals: a batch for the common
+    // path, the slow ones alone in their stream finished without branches where their first
+    // wedge test decides, either accepted or rejected with the stream's next word common, the
+    // rest by normal_ziggurat_slow) against sample_normals, pixel by pixel, with one and with
+    // two normals a pixel. 256 pixels x 300 samples: ~1,800 slow normals with two, each kind
+    // that the batch finishes its own way counted, so the comparison reaches them all.
+    const Philox4x32Key key{21u, 22u};
+    const std::size_t n = 256;
+    PixelModel::BlockScratch scratch;
+    scratch.resize(n);
+    std::vector<std::uint32_t> w0(n), w1(n), ids(n);
+    std::vector<double> g1(n), g2(n);
+    for (std::size_t j = 0; j < n; ++j) ids[j] = static_cast<std::uint32_t>(7919u * j + 3u);
+    const ZigguratTables& z = ZIGGURAT;
+    const SimdLevel before = simd_level();
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) continue;
+        set_simd_level(l);
+        for (bool second : {false, true}) {
+            std::size_t differ = 0, accepted = 0, retried = 0, rest = 0, both = 0;
+            for (std::uint64_t sample = 1; sample <= 300; ++sample) {
+                for (std::size_t j = 0; j < n; ++j) {
+                    const Philox4x32Counter w = philox4x32(
+                        {static_cast<std::uint32_t>(sample), 0u, ids[j], PURPOSE_SAMPLE}, key);
+                    w0[j] = w[0];
+                    w1[j] = w[1];
+                    g2[j] = -7.0;  // left as it was without a second normal
+                }
+                PixelModel::batch_sample_normals(
+                    n, [sample](std::size_t) { return sample; }, [&ids](std::size_t j) { return ids[j]; }, key, scratch,
+                    w0.data(), w1.data(), g1.data(), g2.data(), second);
+                for (std::size_t j = 0; j < n; ++j) {
+                    double want1 = 0.0, want2 = 0.0;
+                    PixelModel::sample_normals(w0[j], w1[j], key, ids[j], sample, want1, want2);
+                    // One normal: the first takes the further words first in either, so it is
+                    // the same; g2 is untouched.
+                    if (!second) want2 = -7.0;
+                    differ += std::memcmp(&g1[j], &want1, sizeof want1) != 0;
+                    differ += std::memcmp(&g2[j], &want2, sizeof want2) != 0;
+                    // Which way the batch went for a slow normal (the test's own reckoning).
+                    const bool slow_a = (w0[j] >> 8) >= z.k[w0[j] & 127u];
+                    const bool slow_b = second && (w1[j] >> 8) >= z.k[w1[j] & 127u];
+                    if (!slow_a && !slow_b) continue;
+                    if (slow_a && slow_b) {
+                        ++both;
+                        continue;
+                    }
+                    const std::uint32_t ws = slow_a ? w0[j] : w1[j], layer = ws & 127u;
+                    CounterStream stream(key, ids[j], sample, PURPOSE_NORMAL);
+                    const std::uint32_t r0 = stream.word(), r1 = stream.word();
+                    const double x = static_cast<double>(ws >> 8) * z.w[layer];
+                    const double lhs = layer ? z.f[layer] + uniform_open(r0) * (z.f[layer - 1] - z.f[layer]) : 0.0;
+                    const double q = std::exp(-0.5 * x * x);
+                    if (layer && lhs < q * (1.0 - 1e-6)) {
+                        ++accepted;
+                    } else if (layer && lhs > q * (1.0 + 1e-6) && (r1 >> 8) < z.k[r1 & 127u]) {
+                        ++retried;
+                    } else {
+                        ++rest;
+                    }
+                }
+            }
+            std::printf("  %s, %s: %zu accepted, %zu retried, %zu by the slow path, %zu pixels with two slow\n",
+                        l == SimdLevel::Baseline ? "baseline" : l == SimdLevel::AVX2 ? "AVX2" : "AVX-512",
+                        second ? "two normals" : "one normal", accepted, retried, rest, both);
+            CHECK(differ == 0);
+            CHECK(accepted > 100 && retried > 100 && rest > 5);
+            CHECK(!second || both > 0);
+        }
+    }
+    set_simd_level(before);
+}
+
 TEST(quiet_pass_gives_the_same_bits_at_every_simd_level) {
     // The block kernel's vectorised pass on random levels (around both thresholds, so every
     // class occurs), every chain and switch, against the baseline build's scalar loop: the

@@ -1725,28 +1725,47 @@ struct PixelModel {
         }
         std::uint32_t *r0 = scratch.r0.data(), *r1 = scratch.r1.data(), *r2 = scratch.r2.data(), *r3 = scratch.r3.data();
         philox4x32_batch(c0, c1, c2, PURPOSE_NORMAL, key, pad_batch(scratch, m), r0, r1, r2, r3);
-        // A first normal alone in its stream (its second is not slow) that falls in a wedge and
-        // whose first test accepts clearly (lhs below q (1 - 1e-6), with the stream's first
-        // word: r0) is finished here, as normal_ziggurat_slow would finish it, in a loop
-        // without branches: that accept-or-reject branch, taken about as often as not, was
-        // most of the slow path's time (mispredicted). The others (rejected or undecided
-        // first tests, the tail, two slow normals sharing a stream) are kept, in order, for
-        // the loop below.
+        // A slow normal alone in its stream (the pixel's other normal is not slow) that falls
+        // in a wedge is finished here, as normal_ziggurat_slow would finish it, in a loop
+        // without branches, where its first wedge test decides clearly (lhs against
+        // q (1 -+ 1e-6), with the stream's first word, r0): accepted, it is that word's x;
+        // rejected, the stream's second word (r1) starts over, and where that word's common
+        // test accepts it, it is the second word's x. That accept-or-reject branch, taken
+        // about as often as not, was most of the slow path's time (mispredicted). Either
+        // normal: the first (flag 1) and the second (flag 2) each take the stream from its
+        // first word when alone, and q_first is the bracket of that one's word. The others
+        // (undecided first tests, a second word that is slow too, the tail, two slow normals
+        // sharing a stream) are kept, in order, for the loop below.
         std::size_t d = 0;
         for (std::size_t q = 0; q < m; ++q) {
             const std::size_t j = at[q];
-            const std::uint32_t w = w0[j], layer = w & 127u, wedge = layer != 0 ? layer : 1u;
+            const std::uint8_t flags = slow1[j];
+            const bool first = flags & 1u;
+            const std::uint32_t w = first ? w0[j] : w1[j], layer = w & 127u, wedge = layer != 0 ? layer : 1u;
             const double x = static_cast<double>(w >> 8) * z.w[layer];
             const double lhs = z.f[wedge] + uniform_open(r0[q]) * (z.f[wedge - 1] - z.f[wedge]);
-            const bool done = (slow1[j] == 1u) & (layer != 0) & (lhs < q_first[q] * (1.0 - 1e-6));
-            const double g = (1.0 - 2.0 * static_cast<double>((w >> 7) & 1u)) * x;  // sign * x, sign = +-1
-            // g1[j] = done ? g : g1[j] by bit masks: a select here became a mispredicted branch.
-            std::uint64_t g_bits, old_bits;
-            std::memcpy(&g_bits, &g, sizeof g_bits);
-            std::memcpy(&old_bits, &g1[j], sizeof old_bits);
-            const std::uint64_t take = 0u - static_cast<std::uint64_t>(done);
-            const std::uint64_t bits = (g_bits & take) | (old_bits & ~take);
-            std::memcpy(&g1[j], &bits, sizeof bits);
+            const bool wedge_alone = (flags != 3u) & (layer != 0);
+            const bool accepted = wedge_alone & (lhs < q_first[q] * (1.0 - 1e-6));
+            const std::uint32_t w_next = r1[q], layer_next = w_next & 127u;
+            const bool next_common = (w_next >> 8) < z.k[layer_next];
+            const bool retried = wedge_alone & (lhs > q_first[q] * (1.0 + 1e-6)) & next_common;
+            const double x_next = static_cast<double>(w_next >> 8) * z.w[layer_next];
+            // sign * x, sign = +-1 from bit 7, of the accepted word
+            const double g_first = (1.0 - 2.0 * static_cast<double>((w >> 7) & 1u)) * x;
+            const double g_next = (1.0 - 2.0 * static_cast<double>((w_next >> 7) & 1u)) * x_next;
+            // *out = accepted ? g_first : retried ? g_next : *out by bit masks: a select here
+            // became a mispredicted branch.
+            double* out = first ? g1 + j : g2 + j;
+            std::uint64_t first_bits, next_bits, old_bits;
+            std::memcpy(&first_bits, &g_first, sizeof first_bits);
+            std::memcpy(&next_bits, &g_next, sizeof next_bits);
+            std::memcpy(&old_bits, out, sizeof old_bits);
+            const std::uint64_t take_first = 0u - static_cast<std::uint64_t>(accepted);
+            const std::uint64_t take_next = 0u - static_cast<std::uint64_t>(retried);
+            const std::uint64_t bits =
+                (first_bits & take_first) | (next_bits & take_next) | (old_bits & ~(take_first | take_next));
+            std::memcpy(out, &bits, sizeof bits);
+            const bool done = accepted | retried;
             at[d] = static_cast<std::uint32_t>(j);
             r0[d] = r0[q]; r1[d] = r1[q]; r2[d] = r2[q]; r3[d] = r3[q];
             q_first[d] = q_first[q];
