@@ -644,8 +644,10 @@ private:
         RawEvent() = default;
         /// For emplace_back: the fields stored straight into the list. push_back of a braced
         /// record built it on the stack and copied it with one wider load, which the processor
-        /// cannot forward from the small stores (a stall on every event).
-        RawEvent(std::uint32_t t_lo_, std::uint32_t code_) : t_lo(t_lo_), code(code_) {}
+        /// cannot forward from the small stores (a stall on every event). Forced inline: in the
+        /// kernels that emit (large functions past GCC's inlining budget) GCC 12 called it, two
+        /// stores behind a call on every event (68 call sites in engine_driver at -O3).
+        EVSTWIN_ALWAYS_INLINE RawEvent(std::uint32_t t_lo_, std::uint32_t code_) : t_lo(t_lo_), code(code_) {}
         std::uint32_t pixel() const { return code >> 4; }
         std::uint8_t label() const { return static_cast<std::uint8_t>((code >> 1) & 7u); }
         std::uint8_t p() const { return static_cast<std::uint8_t>(code & 1u); }
