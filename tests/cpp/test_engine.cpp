@@ -765,6 +765,62 @@ TEST(batched_normals_are_sample_normals_bit_for_bit_at_every_simd_level) {
             CHECK(accepted > 100 && retried > 100 && rest > 5);
             CHECK(!second || both > 0);
         }
+        // Words made to fall in the undecided band: for each pixel, a wedge layer and the
+        // magnitude whose bracketed exp(-x^2/2) lies within a relative 1e-6 of the first wedge
+        // test's lhs (from the stream's first word), searched by bisection; of the two
+        // magnitudes around the crossing, one where lhs lies between the bracket and the
+        // library's exp where there is one (the bracket then decides the other way: only the
+        // exact test, the one the batch must leave to normal_ziggurat_slow, gets it right; the
+        // bracket lies below the exp, its Taylor remainder being positive, so lhs falls between
+        // them only from below). Random words reach the band rarely. With two normals, half the pixels carry the word
+        // as their first normal, half as their second (the other one common).
+        for (bool second : {false, true}) {
+            std::size_t differ = 0, banded = 0, bracket_above = 0, bracket_below = 0;
+            for (std::uint64_t sample = 1; sample <= 40; ++sample) {
+                for (std::size_t j = 0; j < n; ++j) {
+                    const std::uint32_t common = 5u;  // magnitude 0 in layer 5: the common path
+                    w0[j] = w1[j] = common;
+                    const std::uint32_t layer = 1u + static_cast<std::uint32_t>((37u * j + 11u * sample) % 127u);
+                    CounterStream stream(key, ids[j], sample, PURPOSE_NORMAL);
+                    const double lhs = z.f[layer] + uniform_open(stream.word()) * (z.f[layer - 1] - z.f[layer]);
+                    const auto x_of = [&](std::uint32_t m) { return static_cast<double>(m) * z.w[layer]; };
+                    const auto bracket = [&](std::uint32_t m) { return detail::exp_neg_bracket(0.5 * x_of(m) * x_of(m)); };
+                    const auto exact = [&](std::uint32_t m) { return std::exp(-0.5 * x_of(m) * x_of(m)); };
+                    std::uint32_t lo = z.k[layer], hi = (1u << 24) - 1u;  // the bracket falls with the magnitude
+                    if (!(bracket(lo) >= lhs && bracket(hi) <= lhs)) continue;
+                    while (hi - lo > 1) {
+                        const std::uint32_t mid = lo + (hi - lo) / 2;
+                        (bracket(mid) >= lhs ? lo : hi) = mid;
+                    }
+                    const auto splits = [&](std::uint32_t m) { return (lhs < bracket(m)) != (lhs < exact(m)); };
+                    const std::uint32_t m = splits(lo)   ? lo
+                                            : splits(hi) ? hi
+                                            : std::fabs(bracket(lo) - lhs) < std::fabs(bracket(hi) - lhs) ? lo
+                                                                                                          : hi;
+                    if (std::fabs(bracket(m) - lhs) > 0.9e-6 * bracket(m)) continue;
+                    bracket_above += splits(m) && lhs < bracket(m);
+                    bracket_below += splits(m) && lhs >= bracket(m);
+                    const std::uint32_t w = (m << 8) | (static_cast<std::uint32_t>(j & 1u) << 7) | layer;
+                    (second && (j & 2u) ? w1[j] : w0[j]) = w;
+                    ++banded;
+                }
+                PixelModel::batch_sample_normals(
+                    n, [sample](std::size_t) { return sample; }, [&ids](std::size_t j) { return ids[j]; }, key, scratch,
+                    w0.data(), w1.data(), g1.data(), g2.data(), second);
+                for (std::size_t j = 0; j < n; ++j) {
+                    double want1 = 0.0, want2 = 0.0;
+                    PixelModel::sample_normals(w0[j], w1[j], key, ids[j], sample, want1, want2);
+                    differ += std::memcmp(&g1[j], &want1, sizeof want1) != 0;
+                    differ += second && std::memcmp(&g2[j], &want2, sizeof want2) != 0;
+                }
+            }
+            std::printf("  %s, %s: %zu words in the undecided band, %zu / %zu with the bracket above / below lhs "
+                        "and the exp on the other side\n",
+                        l == SimdLevel::Baseline ? "baseline" : l == SimdLevel::AVX2 ? "AVX2" : "AVX-512",
+                        second ? "two normals" : "one normal", banded, bracket_above, bracket_below);
+            CHECK(differ == 0);
+            CHECK(banded > 5000 && bracket_below > 20);
+        }
     }
     set_simd_level(before);
 }
