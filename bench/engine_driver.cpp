@@ -4,7 +4,7 @@
 // sets the source follower's cutoff: 200 Hz makes the event-heavy load (the 18,000 e-/s dark
 // current's shot noise then crosses the thresholds ~180 times a pixel a second). THREADS
 // (default 1) is the engine's thread count. "pole" is "continuous" with the photoreceptor pole
-// (pr_pole, as the DAVIS346 presets and mcreynolds have it).
+// (pr_pole, as the IMX636 and Gen3 VGA presets and mcreynolds have it; the DAVIS346 preset does not).
 //
 //   g++ -std=c++17 -O3 -DNDEBUG -fopenmp -Icpp/include bench/engine_driver.cpp -o /tmp/engine_driver
 //   valgrind --tool=callgrind /tmp/engine_driver continuous 64          # or: sampled 64
