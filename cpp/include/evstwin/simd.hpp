@@ -177,90 +177,80 @@ inline void philox_batch_tail(std::size_t from, const std::uint32_t* c0, const s
 // The AVX2 and AVX-512 batches are written with intrinsics: each 32-bit word rides in a 64-bit
 // lane (its upper half ignored: the multiplication reads the low 32 bits, the stores
 // truncate), so each product is one 32 x 32 -> 64-bit multiplication (vpmuludq) and the three
-// words of an XOR one instruction, with no shuffles. From the plain loop GCC made 32-bit
+// words of an XOR one instruction, with no permutes. From the plain loop GCC made 32-bit
 // lanes and split even from odd ones with permutes for every product (AVX-512), or
 // emulated a 64-bit multiplication with shifts and adds (the loop over 64-bit lanes, AVX2).
-// Integer arithmetic: the same words as philox4x32 at every level. The last n % width
-// counters are done by the scalar philox4x32.
+// Integer arithmetic: the same words as philox4x32 at every level. Each batch takes several
+// vectors of counters through the ten rounds side by side, so one vector's multiplications fill
+// another's latency: four at AVX2, two at AVX-512 (more gained nothing), then the rest one
+// vector at a time; the last n % width counters are done by the scalar philox4x32. Figures:
+// bench/philox_batch.cpp, README's eleventh round.
+// (Macros and functions, not lambdas: a lambda would not inherit the target attribute.)
+#define EVSTWIN_LOAD4(P) _mm256_cvtepu32_epi64(_mm_loadu_si128(reinterpret_cast<const __m128i*>(P)))
+#define EVSTWIN_STORE4(P, V)                                                                      \
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(P),                                               \
+                     _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(V, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7))))
+/// philox_batch_avx2's rounds for the U vectors of counters from index i. With U = 4 some of
+/// them spill (16 registers), which costs instructions but not time here.
+template <int U>
+EVSTWIN_TARGET_AVX2 EVSTWIN_ALWAYS_INLINE void philox_vectors_avx2(const std::uint32_t* c0, const std::uint32_t* c1,
+                                                                 const std::uint32_t* c2, std::size_t i,
+                                                                 const __m256i* k0, const __m256i* k1,
+                                                                 const __m256i& x3_0, std::uint32_t* r0,
+                                                                 std::uint32_t* r1, std::uint32_t* r2,
+                                                                 std::uint32_t* r3) {
+    const __m256i m0 = _mm256_set1_epi64x(0xD2511F53u), m1 = _mm256_set1_epi64x(0xCD9E8D57u);
+    __m256i x0[U], x1[U], x2[U], x3[U];
+#if defined(__GNUC__)
+#pragma GCC unroll 4
+#endif
+    for (int u = 0; u < U; ++u) {
+        x0[u] = EVSTWIN_LOAD4(c0 + i + 4 * u);
+        x1[u] = EVSTWIN_LOAD4(c1 + i + 4 * u);
+        x2[u] = EVSTWIN_LOAD4(c2 + i + 4 * u);
+        x3[u] = x3_0;
+    }
+#if defined(__GNUC__)
+#pragma GCC unroll 10
+#endif
+    for (int round = 0; round < 10; ++round) {
+#if defined(__GNUC__)
+#pragma GCC unroll 4
+#endif
+        for (int u = 0; u < U; ++u) {
+            const __m256i p0 = _mm256_mul_epu32(x0[u], m0), p1 = _mm256_mul_epu32(x2[u], m1);
+            x0[u] = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1, 32), x1[u]), k0[round]);
+            x1[u] = p1;
+            x2[u] = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0, 32), x3[u]), k1[round]);
+            x3[u] = p0;
+        }
+    }
+#if defined(__GNUC__)
+#pragma GCC unroll 4
+#endif
+    for (int u = 0; u < U; ++u) {
+        EVSTWIN_STORE4(r0 + i + 4 * u, x0[u]);
+        EVSTWIN_STORE4(r1 + i + 4 * u, x1[u]);
+        EVSTWIN_STORE4(r2 + i + 4 * u, x2[u]);
+        EVSTWIN_STORE4(r3 + i + 4 * u, x3[u]);
+    }
+}
+#undef EVSTWIN_LOAD4
+#undef EVSTWIN_STORE4
 EVSTWIN_TARGET_AVX2 inline void philox_batch_avx2(const std::uint32_t* c0, const std::uint32_t* c1,
                                                   const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key,
                                                   std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
                                                   std::uint32_t* r2, std::uint32_t* r3) {
-    constexpr std::uint32_t M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
     constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
     __m256i k0[10], k1[10];
     for (int round = 0; round < 10; ++round) {
         k0[round] = _mm256_set1_epi64x(static_cast<std::uint32_t>(key[0] + static_cast<std::uint32_t>(round) * W0));
         k1[round] = _mm256_set1_epi64x(static_cast<std::uint32_t>(key[1] + static_cast<std::uint32_t>(round) * W1));
     }
-    const __m256i m0 = _mm256_set1_epi64x(M0), m1 = _mm256_set1_epi64x(M1), x3_0 = _mm256_set1_epi64x(c3);
-    const __m256i low_halves = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
-    // (Macros, not lambdas: a lambda would not inherit the target attribute.)
-#define EVSTWIN_LOAD4(P) _mm256_cvtepu32_epi64(_mm_loadu_si128(reinterpret_cast<const __m128i*>(P)))
-#define EVSTWIN_STORE4(P, V) \
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(P), _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(V, low_halves)))
+    const __m256i x3_0 = _mm256_set1_epi64x(c3);
     std::size_t i = 0;
-    // Four vectors of counters through the rounds side by side (arrays that the full unroll
-    // keeps in registers, some spilled), so their multiplications fill one another's latency:
-    // 3.22-3.35 -> 2.84-2.89 ns a counter at AVX2 (bench/philox_batch.cpp, README's eleventh
-    // round; two vectors were 3.1-3.3 in a trial). Unlike AVX-512's batch below, the shift
-    // stays: the half swap there lost here with four vectors. Then the rest one vector at a time.
-    constexpr int U = 4;
-    for (; i + 4 * U <= n; i += 4 * U) {
-        __m256i x0[U], x1[U], x2[U], x3[U];
-#if defined(__GNUC__)
-#pragma GCC unroll 4
-#endif
-        for (int u = 0; u < U; ++u) {
-            x0[u] = EVSTWIN_LOAD4(c0 + i + 4 * u);
-            x1[u] = EVSTWIN_LOAD4(c1 + i + 4 * u);
-            x2[u] = EVSTWIN_LOAD4(c2 + i + 4 * u);
-            x3[u] = x3_0;
-        }
-#if defined(__GNUC__)
-#pragma GCC unroll 10
-#endif
-        for (int round = 0; round < 10; ++round) {
-#if defined(__GNUC__)
-#pragma GCC unroll 4
-#endif
-            for (int u = 0; u < U; ++u) {
-                const __m256i p0 = _mm256_mul_epu32(x0[u], m0), p1 = _mm256_mul_epu32(x2[u], m1);
-                x0[u] = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1, 32), x1[u]), k0[round]);
-                x1[u] = p1;
-                x2[u] = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0, 32), x3[u]), k1[round]);
-                x3[u] = p0;
-            }
-        }
-#if defined(__GNUC__)
-#pragma GCC unroll 4
-#endif
-        for (int u = 0; u < U; ++u) {
-            EVSTWIN_STORE4(r0 + i + 4 * u, x0[u]);
-            EVSTWIN_STORE4(r1 + i + 4 * u, x1[u]);
-            EVSTWIN_STORE4(r2 + i + 4 * u, x2[u]);
-            EVSTWIN_STORE4(r3 + i + 4 * u, x3[u]);
-        }
-    }
-    for (; i + 4 <= n; i += 4) {
-        __m256i x0 = EVSTWIN_LOAD4(c0 + i), x1 = EVSTWIN_LOAD4(c1 + i), x2 = EVSTWIN_LOAD4(c2 + i), x3 = x3_0;
-#if defined(__GNUC__)
-#pragma GCC unroll 10
-#endif
-        for (int round = 0; round < 10; ++round) {
-            const __m256i p0 = _mm256_mul_epu32(x0, m0), p1 = _mm256_mul_epu32(x2, m1);
-            x0 = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1, 32), x1), k0[round]);
-            x1 = p1;
-            x2 = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0, 32), x3), k1[round]);
-            x3 = p0;
-        }
-        EVSTWIN_STORE4(r0 + i, x0);
-        EVSTWIN_STORE4(r1 + i, x1);
-        EVSTWIN_STORE4(r2 + i, x2);
-        EVSTWIN_STORE4(r3 + i, x3);
-    }
-#undef EVSTWIN_LOAD4
-#undef EVSTWIN_STORE4
+    for (; i + 16 <= n; i += 16) philox_vectors_avx2<4>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
+    for (; i + 4 <= n; i += 4) philox_vectors_avx2<1>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
     philox_batch_tail(i, c0, c1, c2, c3, key, n, r0, r1, r2, r3);
 }
 // GCC 12's AVX-512 intrinsics leave an undefined vector that -Wmaybe-uninitialized reports
@@ -269,76 +259,71 @@ EVSTWIN_TARGET_AVX2 inline void philox_batch_avx2(const std::uint32_t* c0, const
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
+#define EVSTWIN_LOAD8(P) _mm512_cvtepu32_epi64(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(P)))
+#define EVSTWIN_STORE8(P, V) _mm256_storeu_si256(reinterpret_cast<__m256i*>(P), _mm512_cvtepi64_epi32(V))
+/// philox_batch_avx512's rounds for the U vectors of counters from index i. Each product's high
+/// half reaches the low 32 bits by swapping the halves of its lane (vpshufd, a shuffle port)
+/// rather than by a shift, which shares its port with the multiplications; the upper halves then
+/// hold the low halves, ignored as above. (At AVX2, with four vectors, the swap lost.)
+template <int U>
+EVSTWIN_TARGET_AVX512 EVSTWIN_ALWAYS_INLINE void philox_vectors_avx512(const std::uint32_t* c0, const std::uint32_t* c1,
+                                                                     const std::uint32_t* c2, std::size_t i,
+                                                                     const __m512i* k0, const __m512i* k1,
+                                                                     const __m512i& x3_0, std::uint32_t* r0,
+                                                                     std::uint32_t* r1, std::uint32_t* r2,
+                                                                     std::uint32_t* r3) {
+    const __m512i m0 = _mm512_set1_epi64(0xD2511F53u), m1 = _mm512_set1_epi64(0xCD9E8D57u);
+    __m512i x0[U], x1[U], x2[U], x3[U];
+#if defined(__GNUC__)
+#pragma GCC unroll 2
+#endif
+    for (int u = 0; u < U; ++u) {
+        x0[u] = EVSTWIN_LOAD8(c0 + i + 8 * u);
+        x1[u] = EVSTWIN_LOAD8(c1 + i + 8 * u);
+        x2[u] = EVSTWIN_LOAD8(c2 + i + 8 * u);
+        x3[u] = x3_0;
+    }
+#if defined(__GNUC__)
+#pragma GCC unroll 10
+#endif
+    for (int round = 0; round < 10; ++round) {
+#if defined(__GNUC__)
+#pragma GCC unroll 2
+#endif
+        for (int u = 0; u < U; ++u) {
+            const __m512i p0 = _mm512_mul_epu32(x0[u], m0), p1 = _mm512_mul_epu32(x2[u], m1);
+            x0[u] = _mm512_ternarylogic_epi64(_mm512_shuffle_epi32(p1, _MM_PERM_CDAB), x1[u], k0[round], 0x96);  // a ^ b ^ c
+            x1[u] = p1;
+            x2[u] = _mm512_ternarylogic_epi64(_mm512_shuffle_epi32(p0, _MM_PERM_CDAB), x3[u], k1[round], 0x96);
+            x3[u] = p0;
+        }
+    }
+#if defined(__GNUC__)
+#pragma GCC unroll 2
+#endif
+    for (int u = 0; u < U; ++u) {
+        EVSTWIN_STORE8(r0 + i + 8 * u, x0[u]);
+        EVSTWIN_STORE8(r1 + i + 8 * u, x1[u]);
+        EVSTWIN_STORE8(r2 + i + 8 * u, x2[u]);
+        EVSTWIN_STORE8(r3 + i + 8 * u, x3[u]);
+    }
+}
+#undef EVSTWIN_LOAD8
+#undef EVSTWIN_STORE8
 EVSTWIN_TARGET_AVX512 inline void philox_batch_avx512(const std::uint32_t* c0, const std::uint32_t* c1,
                                                       const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key,
                                                       std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
                                                       std::uint32_t* r2, std::uint32_t* r3) {
-    constexpr std::uint32_t M0 = 0xD2511F53u, M1 = 0xCD9E8D57u;
     constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
     __m512i k0[10], k1[10];
     for (int round = 0; round < 10; ++round) {
         k0[round] = _mm512_set1_epi64(static_cast<std::uint32_t>(key[0] + static_cast<std::uint32_t>(round) * W0));
         k1[round] = _mm512_set1_epi64(static_cast<std::uint32_t>(key[1] + static_cast<std::uint32_t>(round) * W1));
     }
-    const __m512i m0 = _mm512_set1_epi64(M0), m1 = _mm512_set1_epi64(M1), x3_0 = _mm512_set1_epi64(c3);
-#define EVSTWIN_LOAD8(P) _mm512_cvtepu32_epi64(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(P)))
-#define EVSTWIN_STORE8(P, V) _mm256_storeu_si256(reinterpret_cast<__m256i*>(P), _mm512_cvtepi64_epi32(V))
-    // Each product's high half reaches the low 32 bits by swapping the halves of its lane
-    // (vpshufd, a shuffle port) rather than by a shift, which shares its port with the
-    // multiplications; the upper halves then hold the low halves, ignored as above. And two
-    // vectors of counters go through the rounds side by side, so one's multiplications fill
-    // the other's latency. The same words: 1.74-1.80 -> 1.61-1.62 ns a counter
-    // (bench/philox_batch.cpp, README's eleventh round; in a trial each change alone gave
-    // about half of that, four vectors no more).
-#define EVSTWIN_HIGH_HALF(P) _mm512_shuffle_epi32(P, _MM_PERM_CDAB)
+    const __m512i x3_0 = _mm512_set1_epi64(c3);
     std::size_t i = 0;
-    for (; i + 16 <= n; i += 16) {
-        __m512i x0 = EVSTWIN_LOAD8(c0 + i), x1 = EVSTWIN_LOAD8(c1 + i), x2 = EVSTWIN_LOAD8(c2 + i), x3 = x3_0;
-        __m512i y0 = EVSTWIN_LOAD8(c0 + i + 8), y1 = EVSTWIN_LOAD8(c1 + i + 8), y2 = EVSTWIN_LOAD8(c2 + i + 8), y3 = x3_0;
-#if defined(__GNUC__)
-#pragma GCC unroll 10
-#endif
-        for (int round = 0; round < 10; ++round) {
-            const __m512i p0 = _mm512_mul_epu32(x0, m0), p1 = _mm512_mul_epu32(x2, m1);
-            const __m512i q0 = _mm512_mul_epu32(y0, m0), q1 = _mm512_mul_epu32(y2, m1);
-            x0 = _mm512_ternarylogic_epi64(EVSTWIN_HIGH_HALF(p1), x1, k0[round], 0x96);  // a ^ b ^ c
-            y0 = _mm512_ternarylogic_epi64(EVSTWIN_HIGH_HALF(q1), y1, k0[round], 0x96);
-            x1 = p1;
-            y1 = q1;
-            x2 = _mm512_ternarylogic_epi64(EVSTWIN_HIGH_HALF(p0), x3, k1[round], 0x96);
-            y2 = _mm512_ternarylogic_epi64(EVSTWIN_HIGH_HALF(q0), y3, k1[round], 0x96);
-            x3 = p0;
-            y3 = q0;
-        }
-        EVSTWIN_STORE8(r0 + i, x0);
-        EVSTWIN_STORE8(r1 + i, x1);
-        EVSTWIN_STORE8(r2 + i, x2);
-        EVSTWIN_STORE8(r3 + i, x3);
-        EVSTWIN_STORE8(r0 + i + 8, y0);
-        EVSTWIN_STORE8(r1 + i + 8, y1);
-        EVSTWIN_STORE8(r2 + i + 8, y2);
-        EVSTWIN_STORE8(r3 + i + 8, y3);
-    }
-    for (; i + 8 <= n; i += 8) {
-        __m512i x0 = EVSTWIN_LOAD8(c0 + i), x1 = EVSTWIN_LOAD8(c1 + i), x2 = EVSTWIN_LOAD8(c2 + i), x3 = x3_0;
-#if defined(__GNUC__)
-#pragma GCC unroll 10
-#endif
-        for (int round = 0; round < 10; ++round) {
-            const __m512i p0 = _mm512_mul_epu32(x0, m0), p1 = _mm512_mul_epu32(x2, m1);
-            x0 = _mm512_ternarylogic_epi64(EVSTWIN_HIGH_HALF(p1), x1, k0[round], 0x96);
-            x1 = p1;
-            x2 = _mm512_ternarylogic_epi64(EVSTWIN_HIGH_HALF(p0), x3, k1[round], 0x96);
-            x3 = p0;
-        }
-        EVSTWIN_STORE8(r0 + i, x0);
-        EVSTWIN_STORE8(r1 + i, x1);
-        EVSTWIN_STORE8(r2 + i, x2);
-        EVSTWIN_STORE8(r3 + i, x3);
-    }
-#undef EVSTWIN_HIGH_HALF
-#undef EVSTWIN_LOAD8
-#undef EVSTWIN_STORE8
+    for (; i + 16 <= n; i += 16) philox_vectors_avx512<2>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
+    for (; i + 8 <= n; i += 8) philox_vectors_avx512<1>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
     philox_batch_tail(i, c0, c1, c2, c3, key, n, r0, r1, r2, r3);
 }
 // The ziggurat's batches are written with gathers: from the plain loop GCC 12 looked the
