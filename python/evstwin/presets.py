@@ -28,6 +28,7 @@ from ._core import ELEMENTARY_CHARGE_C  # one place for each constant
 from .optics import DAVIS346_MEAN_WAVELENGTH_M, Optics, _finite, _positive
 from .pixel import PixelParams
 from .readout import ReadoutParams
+from .spectra import QECurve, silicon_absorption_per_m, silicon_qe_curve
 
 # ---------------------------------------------------------------------------------------------
 # constants
@@ -66,6 +67,23 @@ REFRACTORY_CHARGE_C = REFRACTORY_CALIBRATION_S * REFRACTORY_CALIBRATION_CURRENT_
 far above any in-pixel node: the nominal bias-generator current is evidently not the current
 in the pixel's refractory transistor, so Q is an effective constant, not a capacitance."""
 
+
+DARK_DOUBLING_C = 6.5
+"""Temperature rise [degC] that doubles a pixel's dark current: the middle of the 5-8 degC
+that Theuwissen gives for CMOS image sensors (Harvest Imaging blog, "How to measure dark
+current", September 2009: "the dark current can double for every 5 degC ... 8 degC"). No
+published figure for these event sensors was at hand (Nozaki & Delbruck 2017, IEEE TED 64,
+3239, measured the DAVIS's leak against temperature; its numbers were not reachable)."""
+TEMPERATURE_RANGE_C = (-30.0, 70.0)
+"""Temperatures [degC] ``at_temperature`` accepts: the span over which image-sensor dark
+current is usually characterised (an assumption; beyond it other leakage paths take over)."""
+TEMPERATURE_SCALED_FIELDS = (
+    "dark_rate_e_per_s", "leak_rate_hz", "shot_noise_rate_hz", "shot_noise_on_rate_hz", "shot_noise_off_rate_hz",
+    "hot_pixel_rate_hz",
+)
+"""PixelParams fields ``at_temperature`` scales: the dark current and the rates it drives
+(the leak: junction leakage in the reset switch, Nozaki & Delbruck 2017; the dark background;
+hot pixels, pixels of high dark current)."""
 
 # ---------------------------------------------------------------------------------------------
 # bias -> parameter models
@@ -324,6 +342,15 @@ class SensorPreset:
     """The readout's maximum event rate, FIFO depth and timestamp tick (``evstwin.readout``);
     None: an ideal readout (``simulate`` then keeps the engine's times unless the scenario
     gives ``[readout]`` figures)."""
+    qe: QECurve | None = None
+    """Spectral quantum efficiency (``evstwin.spectra``): magnitudes become electrons through
+    it and the source's spectrum. None: the paper's convention, a magnitude counts the photons
+    of the V band (``Optics.zero_point_ph_s_m2``) and the pixel's yield applies to them all."""
+    dark_reference_temperature_c: float = 25.0
+    """Temperature [degC] at which ``pixel``'s dark current, leak, background and hot-pixel
+    rates hold (``at_temperature``)."""
+    dark_doubling_c: float = DARK_DOUBLING_C
+    """Temperature rise [degC] that doubles the dark current and the rates it drives."""
 
     def __post_init__(self) -> None:
         for f in ("width", "height"):
@@ -339,6 +366,19 @@ class SensorPreset:
             raise ValueError(
                 f"pixel.fill_factor={self.pixel.fill_factor!r} must equal the preset's fill_factor={ff!r}"
             )
+
+    def at_temperature(self, params: PixelParams, temperature_c: float) -> PixelParams:
+        """``params`` with the dark current and the rates it drives (leak, eq. 12 background,
+        hot pixels) moved from ``dark_reference_temperature_c`` to ``temperature_c`` by
+        ``2 ** ((T - T_ref) / dark_doubling_c)`` (see ``DARK_DOUBLING_C``). ValueError outside
+        ``TEMPERATURE_RANGE_C``, where the law has not been shown to hold."""
+        t = _finite("temperature_c", temperature_c)
+        lo, hi = TEMPERATURE_RANGE_C
+        if not lo <= t <= hi:
+            raise ValueError(f"temperature_c must be in [{lo:g}, {hi:g}] degC (the range of the dark-current law "
+                             f"2^(dT/{self.dark_doubling_c:g} degC)); got temperature_c={temperature_c!r}")
+        factor = 2.0 ** ((t - self.dark_reference_temperature_c) / self.dark_doubling_c)
+        return params.replace(**{name: getattr(params, name) * factor for name in TEMPERATURE_SCALED_FIELDS})
 
     def readout_params(self, **overrides: Any) -> ReadoutParams | None:
         """The preset's readout figures with overrides (``max_rate_hz``, ``fifo_depth``,
@@ -424,13 +464,15 @@ IMX636_READOUT = ReadoutParams(
 )
 """IMX636 readout: 1.066 Gev/s (the sensor's), 1 us timestamps, FIFO assumed."""
 
-DAVIS346_RECORDING = "../shared/data/davis346_road.aedat4 (iniVation DAVIS346, 2.36 s of a road in daylight)"
+DAVIS346_RECORDING = (
+    "a public DAVIS346 recording (the test data of the aedat package 2.3.0 on PyPI, tests/data/test_data.aedat4: "
+    "2.36 s of a road in daylight)"
+)
 """The real DAVIS346 recording the preset's background was measured on."""
 DAVIS346_BACKGROUND_SOURCE = (
     f"{DAVIS346_RECORDING}, its static upper half (y < 120, 41,520 pixels): 289 events, all ON, "
     "2.95e-3 +- 0.18e-3 Hz per pixel, log-normal spread sigma 1.51 +- 0.14, 0 OFF (an OFF rate "
-    "below 3.1e-5 Hz at 95 %), no hot pixel (evstwin calibrate-noise ../shared/data/davis346_road.aedat4 "
-    "--roi 0,0,346,120)"
+    "below 3.1e-5 Hz at 95 %), no hot pixel (evstwin calibrate-noise RECORDING --roi 0,0,346,120)"
 )
 """Where the DAVIS346 preset's leak and background figures come from."""
 
@@ -453,9 +495,31 @@ _DAVIS346_BASE = PixelParams(
     shot_noise_i_max_a=3.16e-9,
 )
 
-DAVIS346 = SensorPreset(
-    name="davis346",
-    description="iniVation DAVIS346 (2nd generation), the sensor of the paper",
+_DAVIS346_SOURCES = (
+    f"{_PAPER}, sec. 3.1: 346 x 260 pixels, 18.5 um pitch, 22 % fill factor",
+    f"{_PAPER}, Table 1: bias set 'Fast PR, Slow SF, Balanced TH' (McReynolds et al.)",
+    f"{_PAPER}, sec. 2.1: dark rate 18000 e-/s (iniVation, its ref. [11])",
+    f"{_PAPER}, sec. 2.4: F 0.25, I_max 3.16 nA (its leak 0.1 Hz and R_n 0.05 Hz: the run scenarios)",
+    DAVIS346_BACKGROUND_SOURCE,
+    "Nozaki & Delbruck (2017), IEEE Trans. Electron Devices (the paper's ref. [15]): eq. 8-9",
+    "k = 0.0659 reproduces every threshold of the paper's Tables 1-2 (K_THRESHOLD_DAVIS346)",
+)
+_DAVIS346_ASSUMPTIONS = (
+    "refractory 1 ms from I_refr = 4.7 nA via the calibrated Q = 4.7 pC (REFRACTORY_CHARGE_C)",
+    "cutoff 10 Hz from I_sf = 834.7 fA via the calibrated C = 360 fF (SF_LOAD_CAPACITANCE_F)",
+    "mean wavelength 0.7 um: the middle of a silicon photodiode's ~0.4-1.0 um response",
+    "background measured in daylight only: the leak is taken as independent of the light (the "
+    "paper's eq. 10-11); in the dark the twin adds its own filtered shot noise of the 18000 e-/s "
+    "dark current; no dark DAVIS346 recording was at hand to check that",
+    "the real background comes on the camera's 40 ms frame cycle (APS readout coupling); the "
+    "twin's leak is not locked to it, so its rate matches and its timing does not",
+    "dark current, leak and background hold at 25 degC and double every 6.5 degC (DARK_DOUBLING_C); the "
+    "paper does not give the temperature of its 18000 e-/s",
+)
+
+DAVIS346_PAPER = SensorPreset(
+    name="davis346_paper",
+    description="the paper's DAVIS346: its Table 3 photodiode (0.35 % of photons absorbed), kept to reproduce it",
     width=346,
     height=260,
     pixel_pitch_m=18.5e-6,
@@ -467,36 +531,91 @@ DAVIS346 = SensorPreset(
     qe_notes=(
         "Front-illuminated, 22 % fill factor, no microlens gain assumed. Photon-to-electron "
         "efficiency by eq. 2 with Table 3: tau (1 - exp(-alpha W)) = 0.68 x 0.0035 = 0.24 % of the "
-        "photons on the photodiode (x 0.22 fill factor): the paper's constants, kept as given."
+        "photons on the photodiode (x 0.22 fill factor): the paper's constants, kept as given. No "
+        "spectrum: a magnitude counts the V band's photons (the paper's scenes are lab LEDs given in photons/s)."
     ),
-    sources=(
-        f"{_PAPER}, sec. 3.1: 346 x 260 pixels, 18.5 um pitch, 22 % fill factor",
-        f"{_PAPER}, Table 1: bias set 'Fast PR, Slow SF, Balanced TH' (McReynolds et al.)",
-        f"{_PAPER}, Table 3: alpha, eta_i, tau, W",
-        f"{_PAPER}, sec. 2.1: dark rate 18000 e-/s (iniVation, its ref. [11])",
-        f"{_PAPER}, sec. 2.4: F 0.25, I_max 3.16 nA (its leak 0.1 Hz and R_n 0.05 Hz: the run scenarios)",
-        DAVIS346_BACKGROUND_SOURCE,
-        "Nozaki & Delbruck (2017), IEEE Trans. Electron Devices (the paper's ref. [15]): eq. 8-9",
-        "DESIGN.md point 5: k = 0.0659 reproduces all of the paper's threshold values",
-    ),
-    assumptions=(
-        "refractory 1 ms from I_refr = 4.7 nA via the calibrated Q = 4.7 pC (REFRACTORY_CHARGE_C)",
-        "cutoff 10 Hz from I_sf = 834.7 fA via the calibrated C = 360 fF (SF_LOAD_CAPACITANCE_F)",
-        "mean wavelength 0.7 um: the middle of a silicon photodiode's ~0.4-1.0 um response",
-        "background measured in daylight only: the leak is taken as independent of the light (the "
-        "paper's eq. 10-11); in the dark the twin adds its own filtered shot noise of the 18000 e-/s "
-        "dark current; no dark DAVIS346 recording was at hand to check that",
-        "the real background comes on the camera's 40 ms frame cycle (APS readout coupling); the "
-        "twin's leak is not locked to it, so its rate matches and its timing does not",
-    ),
+    sources=_DAVIS346_SOURCES + (f"{_PAPER}, Table 3: alpha, eta_i, tau, W",),
+    assumptions=_DAVIS346_ASSUMPTIONS,
     readout=DAVIS346_READOUT,
 )
-"""The paper's DAVIS346 with its Table 1 biases (theta 0.2060 / 0.0930, 1 ms, 10 Hz)."""
+"""The paper's DAVIS346 with its Table 1 biases (theta 0.2060 / 0.0930, 1 ms, 10 Hz) and its
+Table 3 photodiode: what the paper's tables and its section 3 were computed with."""
 
-IMX636_RECORDING = "../shared/data/imx636_pointsource_evt3.raw (faery's tests/data/evt3.raw, Prophesee EVK4)"
+QE_REFERENCE_WAVELENGTH_M = 550e-9
+"""Wavelength [m] whose photons the engine counts for a front-illuminated preset with a QE
+curve: the pixel's yield (``PixelParams.electrons_per_photon``) is the curve's QE there."""
+FSI_COLLECTION_DEPTH_M = 2e-6
+"""Depth [m] from which a front-illuminated 0.18 um CMOS photodiode collects its electrons
+(depletion plus diffusion; an assumption: no figure for these pixels was found). It sets the
+red and near-infrared response: QE at 700 nm is 1 - exp(-1890/cm x 2 um) = 31 % of the
+optical factor, at 550 nm 72 %."""
+FSI_TRANSMISSION = 0.68
+"""Share of the light entering a front-illuminated photodiode through its dielectric stack:
+the paper's Table 3 tau, kept."""
+
+
+def _fsi_pixel(base: PixelParams, fill_factor: float) -> PixelParams:
+    """``base`` with a front-illuminated silicon photodiode whose yield is its QE curve's at
+    ``QE_REFERENCE_WAVELENGTH_M`` (eq. 2 with silicon's alpha there and the collection depth)."""
+    return base.replace(fill_factor=fill_factor, internal_qe=1.0, transmission=FSI_TRANSMISSION,
+                        absorption_per_m=float(silicon_absorption_per_m(QE_REFERENCE_WAVELENGTH_M)),
+                        depletion_width_m=FSI_COLLECTION_DEPTH_M)
+
+
+def _fsi_qe(fill_factor: float, what: str) -> QECurve:
+    return silicon_qe_curve(
+        fill_factor * FSI_TRANSMISSION, FSI_COLLECTION_DEPTH_M,
+        f"{what}: eq. 2 with silicon's absorption spectrum (Green 2008), fill factor {fill_factor:g} x "
+        f"transmission {FSI_TRANSMISSION:g} x (1 - exp(-alpha(lambda) x {FSI_COLLECTION_DEPTH_M * 1e6:g} um)); no "
+        "measured QE curve of this sensor was found (Taverni et al. 2018, IEEE TCAS-II 65, 677, measured the "
+        "DAVIS346's; its numbers were not reachable)")
+
+
+DAVIS346 = SensorPreset(
+    name="davis346",
+    description="iniVation DAVIS346 (2nd generation, front-illuminated), the sensor of the paper",
+    width=346,
+    height=260,
+    pixel_pitch_m=18.5e-6,
+    fill_factor=0.22,
+    back_illuminated=False,
+    mean_wavelength_m=DAVIS346_MEAN_WAVELENGTH_M,
+    pixel=FAST_PR_SLOW_SF_BALANCED_TH.pixel_params(_fsi_pixel(_DAVIS346_BASE, 0.22)),
+    biases=FAST_PR_SLOW_SF_BALANCED_TH,
+    qe_notes=(
+        "Front-illuminated, 22 % fill factor, no microlens gain assumed; QE from silicon's absorption "
+        "spectrum over a 2 um collection depth through the paper's 0.68 transmission: 10 % at 550 nm (the "
+        "engine's reference photon), 15 % peak, 4.6 % at 700 nm. davis346_paper keeps the paper's 0.35 %."
+    ),
+    sources=_DAVIS346_SOURCES + ("Green (2008), Sol. Energy Mater. Sol. Cells 92, 1305: silicon's absorption",),
+    assumptions=_DAVIS346_ASSUMPTIONS + (
+        "collection depth 2 um (FSI_COLLECTION_DEPTH_M) and the paper's transmission 0.68: they set the QE curve",
+    ),
+    readout=DAVIS346_READOUT,
+    qe=_fsi_qe(0.22, "DAVIS346"),
+)
+"""The DAVIS346 as a camera: the paper's geometry, biases and dark current, the measured
+background, and a silicon QE curve (about 15 % at its peak) in place of the paper's 0.35 %."""
+
+IMX636_RECORDING = (
+    "a public Prophesee EVK4 recording (the test data of the faery package, tests/data/evt3.raw: 10.77 s of a "
+    "point source on a dark field)"
+)
 """The real IMX636 recording the preset's background figures were measured on."""
 IMX636_THETA = math.log(1.25)
-"""The IMX636 preset's ON and OFF thresholds [ln units]: a 25 % contrast step (an assumption)."""
+"""A 25 % contrast step [ln units]: the nominal contrast threshold quoted for Sony's 4.86 um
+event sensors (a camera datasheet of the IMX646, the IMX636's sibling), the Gen3 preset's."""
+IMX636_THETA_ON = 0.235
+IMX636_THETA_OFF = 0.21
+"""The IMX636 preset's thresholds [ln units]: a 25 % step on average, split by the EVK4
+recording's ON/OFF ratio of 0.91 within 200 px of its star (``imx636-pointsource``)."""
+IMX636_COLLECTION_DEPTH_M = 5e-6
+"""Depth [m] from which the IMX636's back-illuminated photodiode collects (an assumption: a
+few um of epitaxial silicon is typical of BSI pixels). With the paper's 0.68 surface
+transmission it gives a QE of 68 % in the blue-green, 43 % at 690 nm, 24 % at 800 nm."""
+IMX636_ABSORPTION_PER_M = 2.0e5
+"""Silicon's absorption at 690 nm [1/m] (Green 2008: 2.04e5): the IMX636 preset's engine counts
+690 nm photons, its yield 0.68 (1 - exp(-2e5 x 5 um)) = 43 %, the QE curve's there."""
 
 IMX636 = SensorPreset(
     name="imx636",
@@ -509,10 +628,12 @@ IMX636 = SensorPreset(
     mean_wavelength_m=DAVIS346_MEAN_WAVELENGTH_M,
     pixel=_DAVIS346_BASE.replace(
         fill_factor=1.0,
-        theta_on=IMX636_THETA,
-        theta_off=IMX636_THETA,
+        absorption_per_m=IMX636_ABSORPTION_PER_M,
+        depletion_width_m=IMX636_COLLECTION_DEPTH_M,
+        theta_on=IMX636_THETA_ON,
+        theta_off=IMX636_THETA_OFF,
         refractory_s=1.3e-4,
-        cutoff_hz=10.0,
+        cutoff_hz=2000.0,
         pr_pole=True,
         leak_rate_hz=0.0,
         shot_noise_on_rate_hz=2.2e-4,
@@ -529,9 +650,10 @@ IMX636 = SensorPreset(
     biases=None,
     qe_notes=(
         "Back-illuminated stacked sensor with microlenses: fill_factor 1.0 stands for an effective "
-        "optical fill factor near 1 (assumption). The photodiode constants (eq. 2) are the "
-        "DAVIS346 placeholders and certainly underestimate a BSI pixel's QE: set "
-        "absorption_per_m / depletion_width_m / transmission from a measured QE."
+        "optical fill factor near 1 (Prophesee measures QE over the whole 4.86 um pixel). QE from silicon's "
+        "absorption spectrum over a 5 um collection depth through the paper's 0.68 transmission: 68 % peak, "
+        "43 % at 690 nm (the engine's reference photon). No measured curve was found (Prophesee publishes it "
+        "as a figure only)."
     ),
     sources=(
         (
@@ -564,15 +686,36 @@ IMX636 = SensorPreset(
             "settings, not the currents of eq. 8-9, so measure theta with S-curves (McReynolds et al. 2024, "
             "arXiv:2404.07656) for a given camera"
         ),
-        "photodiode constants, dark rate and the 10 Hz source follower copied from the DAVIS346 preset",
+        (
+            "QE: collection depth 5 um and transmission 0.68 (IMX636_COLLECTION_DEPTH_M); a simulator's 0.6 "
+            "(dvs_performance_metrics, Gen4 config) is the only other figure found"
+        ),
+        (
+            "dark rate 18000 e-/s at 25 degC, the DAVIS346's: no primary IMX636 figure was found (a simulator "
+            "uses 5.5 fA = 34,000 e-/s, dvs_performance_metrics); the recording's fluxes are set against it"
+        ),
+        (
+            "source follower 2 kHz: the EVK4 recording's star core follows ms-scale image motion (the 10 Hz of "
+            "the DAVIS346's Table 1 bias would smear it); Prophesee quotes a pixel latency under 100 us at "
+            "1000 lux (IMX636 product brief 2024, as quoted by public notes)"
+        ),
         "mean wavelength 0.7 um as for the DAVIS346",
         "eq. 12's illumination factor F = 1 (the recording is dark: it says nothing about F)",
     ),
     readout=IMX636_READOUT,
+    qe=silicon_qe_curve(
+        0.68, IMX636_COLLECTION_DEPTH_M,
+        "IMX636: eq. 2 with silicon's absorption spectrum (Green 2008), transmission 0.68 x (1 - exp(-alpha(lambda) x "
+        "5 um)), fill factor 1 (BSI with microlenses); an assumption, no measured curve was found"),
 )
-"""Sony IMX636 / Prophesee EVK4: geometry sourced; refractory period and background (rates per polarity,
-their spread, hot pixels) measured on a real recording; thresholds and photodiode assumed."""
+"""Sony IMX636 / Prophesee EVK4: geometry sourced; refractory period, background (rates per
+polarity, their spread, hot pixels), thresholds' ON/OFF split and the source follower from a
+real recording; QE curve and dark current assumed."""
 
+GEN3_VGA_DARK_RATE_E_PER_S = 18000.0 * (15.0**2 * 0.25) / (18.5**2 * 0.22)
+"""The Gen3 VGA preset's dark current [e-/s]: the DAVIS346's 18,000 e-/s scaled by photodiode
+area (15 um x 15 um x 0.25 against 18.5 um x 18.5 um x 0.22): 13,450 e-/s. Both are 0.18 um
+CMOS front-illuminated pixels; a dark current grows with the junction's area (assumption)."""
 GEN3_VGA_THETA = IMX636_THETA  # the same assumed 25 % contrast step (no Gen3 figure at hand)
 """The Gen3 VGA preset's ON and OFF thresholds [ln units]: a 25 % contrast step, as assumed for
 the IMX636 (Prophesee's biases are DAC settings, not currents)."""
@@ -586,8 +729,8 @@ PROPHESEE_GEN3_VGA = SensorPreset(
     fill_factor=0.25,
     back_illuminated=False,
     mean_wavelength_m=DAVIS346_MEAN_WAVELENGTH_M,
-    pixel=_DAVIS346_BASE.replace(
-        fill_factor=0.25,
+    pixel=_fsi_pixel(_DAVIS346_BASE, 0.25).replace(
+        dark_rate_e_per_s=GEN3_VGA_DARK_RATE_E_PER_S,
         theta_on=GEN3_VGA_THETA,
         theta_off=GEN3_VGA_THETA,
         refractory_s=1e-3,
@@ -597,8 +740,8 @@ PROPHESEE_GEN3_VGA = SensorPreset(
     biases=None,
     qe_notes=(
         "Front-illuminated 0.18 um CMOS pixel (Gen3 predates the stacked BSI Gen4 of Finateu et al. 2020), "
-        "fill factor 25 % (assumed, see assumptions); photodiode constants of eq. 2 copied from the DAVIS346 "
-        "preset: set absorption_per_m / depletion_width_m / transmission from a measured QE."
+        "fill factor 25 % (assumed, see assumptions); QE from silicon's absorption spectrum over a 2 um "
+        "collection depth through 0.68 transmission, as for the DAVIS346: 17 % peak, 12 % at 550 nm."
     ),
     sources=(
         "Prophesee, Gen3 VGA CD sensor (PPS3MVCD) and its evaluation kit: 640 x 480 pixels, 15 um pitch "
@@ -615,17 +758,28 @@ PROPHESEE_GEN3_VGA = SensorPreset(
         "fill factor 0.25: the order of the figure quoted for Gen3 pixels (secondary sources; not verified)",
         "thresholds ln(1.25) = 0.223 both ways, a 25 % contrast step, as for the IMX636 preset",
         "refractory 1 ms and the 10 Hz source follower of the DAVIS346 preset; the photoreceptor pole on",
-        "dark rate 18000 e-/s and the background copied from the DAVIS346 preset (a 2.95e-3 Hz leak, "
-        "sigma 1.51, no eq. 12 rate; no Gen3 background figures at hand: measure them with `evstwin "
-        "calibrate-noise` on a Gen3 recording)",
+        "dark rate 13,450 e-/s at 25 degC (GEN3_VGA_DARK_RATE_E_PER_S: the DAVIS346's per photodiode area) and "
+        "the DAVIS346's background (a 2.95e-3 Hz leak, sigma 1.51, no eq. 12 rate; no Gen3 background figures "
+        "at hand: measure them with `evstwin calibrate-noise` on a Gen3 recording)",
+        "QE: collection depth 2 um and transmission 0.68, as for the DAVIS346 (FSI_COLLECTION_DEPTH_M)",
         "mean wavelength 0.7 um as for the DAVIS346",
-        "no readout figures (an ideal readout): give [readout] max_rate_hz and fifo_depth for your camera",
+        "readout FIFO depth assumed (READOUT_FIFO_ASSUMPTION)",
     ),
-    readout=None,
+    readout=ReadoutParams(
+        max_rate_hz=50e6,
+        fifo_depth=4096,
+        tick_s=1e-6,
+        sources=(
+            "CenturyArks SilkyEvCam-USB specification Rev 1.02 (PPS3MVCD sensor), Table 1: 'Maximum readout "
+            "throughput 50Mevents/s', 'Typical Latency 200us' (as quoted by public notes)",
+        ),
+        assumptions=(READOUT_FIFO_ASSUMPTION,),
+    ),
+    qe=_fsi_qe(0.25, "Prophesee Gen3 VGA"),
 )
-"""Prophesee Gen3 VGA: geometry as published (640 x 480, 15 um); every pixel figure assumed."""
+"""Prophesee Gen3 VGA: geometry and readout as published (640 x 480, 15 um, 50 Mev/s); pixel figures assumed."""
 
-PRESETS: dict[str, SensorPreset] = {p.name: p for p in (DAVIS346, IMX636, PROPHESEE_GEN3_VGA)}
+PRESETS: dict[str, SensorPreset] = {p.name: p for p in (DAVIS346, IMX636, PROPHESEE_GEN3_VGA, DAVIS346_PAPER)}
 """Built-in sensor presets by name."""
 
 
@@ -643,10 +797,10 @@ def paper_run_params(run: int, base: PixelParams | None = None, **overrides: Any
     1: Table 2 run-1 biases, shot and leak noise on, 18000 e-/s dark;
     2: same biases, no shot or leak noise, 18000 e-/s;
     3: run-3 biases, no shot or leak noise, 290 e-/s.
-    Everything else from ``base`` (default: the DAVIS346 preset, so 1 ms and 10 Hz). The paper
+    Everything else from ``base`` (default: the davis346_paper preset, so 1 ms and 10 Hz). The paper
     used eq. 4 literally for the dark current: pass ``dark_model='paper'`` to do the same.
     """
-    base = DAVIS346.pixel if base is None else base
+    base = DAVIS346_PAPER.pixel if base is None else base
     if run == 1:
         changes: dict[str, Any] = dict(
             PAPER_RUN_1.derived(), dark_rate_e_per_s=18000.0, shot_noise_rate_hz=0.05, leak_rate_hz=0.1

@@ -105,6 +105,7 @@ from .sky.atmosphere import (
     Atmosphere,
     atmosphere_from_table,
 )
+from .spectra import PHOTOMETRY_KEYS, SensorResponse
 from .targets import (
     MAX_STARS,
     CircularTarget,
@@ -165,18 +166,20 @@ SCHEMA: dict[str, Any] = {
     "base": str,
     "duration_s": float,
     "seed": int,
-    "sensor": {"preset": str, "width": int, "height": int, "roi": list, "bias_set": str, "k": float},
+    "sensor": {"preset": str, "width": int, "height": int, "roi": list, "bias_set": str, "k": float,
+               "temperature_c": float},
     "biases": {k: float for k in _BIAS_KEYS},
     "pixel": {name: Any for name in PixelParams.field_names()},
     "optics": {k: Any for k in _OPTICS_KEYS},
     "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int, "max_events": int,
                  "pre_roll_s": float, "pre_roll_rate_hz": float},
     "background": {"photon_rate_ph_s": float, "sky_mag_per_arcsec2": float},
+    "photometry": {k: str for k in PHOTOMETRY_KEYS},
     "hot_pixels": {"pixels": list, "file": str},
     "targets": list,
     "star_field": {"n_stars": int, "density_per_deg2": float, "mag_min": float, "mag_max": float,
                    "counts_slope": float, "seed": int, "drift_px_s": Any, "drift_arcsec_s": Any,
-                   "distribution": str, "density_scale": float, "path": dict},
+                   "distribution": str, "density_scale": float, "path": dict, "spectrum": str},
     "atmosphere": {k: Any for k in ATMOSPHERE_KEYS},
     "readout": {"enabled": bool, "max_rate_hz": float, "fifo_depth": int, "tick_s": float},
     # The sky (evstwin.sky.scene): when t = 0 is, where the observer stands, where the camera looks.
@@ -344,7 +347,7 @@ def _check_target_keys(i: int, target: dict[str, Any]) -> None:
         allowed = ("kind", "label") + _TARGET_KEYS[kind] + ("magnitude", "light_curve")
     else:
         brightness = () if kind == "ghost" else _BRIGHTNESS_KEYS  # a ghost's is its source's
-        allowed = ("kind", "label") + (() if kind == "ghost" else ("frame", "halo")) + _TARGET_KEYS[kind] \
+        allowed = ("kind", "label") + (() if kind == "ghost" else ("frame", "halo", "spectrum")) + _TARGET_KEYS[kind] \
             + brightness + _TARGET_PSF_KEYS
     for key in target:
         if key not in allowed:
@@ -620,6 +623,8 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         where = "biases" + (f" with sensor.k={k!r}" if k is not None else "") + (
             f" (sensor.bias_set={set_name!r})" if set_name else "")
         params = _wrap(where, params.replace, **derived)
+    if "temperature_c" in s["sensor"]:
+        params = _wrap("sensor.temperature_c", preset.at_temperature, params, s["sensor"]["temperature_c"])
     pixel = dict(s.get("pixel", {}))
     if pixel.get("cutoff_hz") in ("none", "None", "off"):
         pixel["cutoff_hz"] = None
@@ -642,6 +647,24 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         optics_kw.pop("f_number", PAPER_F_NUMBER), **optics_kw
     )
     optics = _wrap(f"optics={s.get('optics', {})}", optics.replace, width_px=width, height_px=height)
+    response = _response(s, preset)
+    spectral_optics: dict[str | None, Optics] = {}
+
+    def optics_for(spectrum: str | None, key: str) -> Optics:
+        """The optics whose zero point turns magnitudes of ``spectrum`` into engine photons."""
+        if response is None:
+            if spectrum is not None:
+                why = ("optics.zero_point_ph_s_m2 is given (magnitudes count its photons)"
+                       if "zero_point_ph_s_m2" in s.get("optics", {}) else
+                       f"preset {preset.name!r} has no QE curve (it counts the V band's photons)")
+                raise ScenarioError(f"{key}={spectrum!r} needs a sensor with a QE curve: {why}")
+            return optics
+        if spectrum not in spectral_optics:
+            zp = _wrap(key, response.zero_point_ph_s_m2, spectrum)
+            spectral_optics[spectrum] = optics.replace(zero_point_ph_s_m2=zp)
+        return spectral_optics[spectrum]
+
+    optics = optics_for(None, "photometry.spectrum")
 
     # The run's end: whole base samples, as simulate runs them (the drift sweeps until then).
     t_end = max(1, math.ceil(float(s["duration_s"]) * float(s["sampling"]["rate_hz"]) - 1e-9)) / float(
@@ -693,7 +716,8 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         if table["kind"] == "ghost":
             made = [_wrap(f"targets[{i}]", _ghost, table, targets, width, height)]
         else:
-            made = _wrap(label, _target, table, optics, width, height)
+            made = _wrap(label, _target, table, optics_for(table.get("spectrum"), f"targets[{i}].spectrum"),
+                         width, height)
         source = f"targets[{i}]"
         if table.get("frame") == "field" and moves:
             made = [drifting(t, *drift) for t in made]
@@ -717,6 +741,10 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     field_stars = 0
     sf = dict(s.get("star_field", {}))
     sf.pop("path", None)
+    star_spectrum = sf.pop("spectrum", None)
+    if star_spectrum is not None and sky is not None:
+        raise ScenarioError(f"star_field.spectrum={star_spectrum!r} applies to a random star field; stars placed on "
+                            "the sky by [pointing] take photometry.spectrum")
     drift_only = (any(k in sf for k in _DRIFT_KEYS) and "n_stars" not in sf and "density_per_deg2" not in sf
                   and sf.get("distribution") != "all-sky")
     if sky is not None and sky.stars:
@@ -753,8 +781,8 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
                                 f"got {slope!r}")
         # A path (a slew) brings in stars from up to its largest offset beyond the field.
         margin = 0.0 if path is None else float(np.max(np.hypot(path.dx_px, path.dy_px)))
-        stars = _wrap("star_field", random_star_field, width, height, optics, **sf, drift_px_s=drift, duration_s=t_end,
-                      margin_px=margin)
+        stars = _wrap("star_field", random_star_field, width, height, optics_for(star_spectrum, "star_field.spectrum"),
+                      **sf, drift_px_s=drift, duration_s=t_end, margin_px=margin)
         stars = [along_path(t, path) for t in stars]
         targets.extend(stars)
         sources.extend([f"star_field (moved by {drift_key})" if moves else "star_field"] * len(stars))
@@ -762,8 +790,9 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
 
     bg = s.get("background", {})
     if "sky_mag_per_arcsec2" in bg:
+        sky_optics = optics if response is None else optics_for(response.sky_spectrum, "photometry.sky_spectrum")
         background = float(_wrap(f"background.sky_mag_per_arcsec2 through optics={s.get('optics', {})}",
-                                 optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
+                                 sky_optics.background_ph_s_per_px, bg["sky_mag_per_arcsec2"]))
     else:
         background = float(bg.get("photon_rate_ph_s", 0.0))
     _check_peak_rate(background, dict(bg), targets, sources, shape, s.get("optics", {}))
@@ -802,6 +831,31 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         pre_roll_rate_hz=None if "pre_roll_rate_hz" not in sp else float(sp["pre_roll_rate_hz"]),
         readout=readout, atmosphere=atmosphere,
     )
+
+
+def _response(s: dict[str, Any], preset: SensorPreset) -> SensorResponse | None:
+    """[photometry] on the preset's QE curve: how magnitudes become engine photons (None: the
+    preset has no QE curve, or optics.zero_point_ph_s_m2 is given, and magnitudes count the
+    zero point's photons)."""
+    table = dict(s.get("photometry", {}))
+    if preset.qe is None or "zero_point_ph_s_m2" in s.get("optics", {}):
+        if table:
+            why = (f"preset {preset.name!r} has no QE curve" if preset.qe is None
+                   else "optics.zero_point_ph_s_m2 is given")
+            raise ScenarioError(f"[photometry] {table} needs a sensor with a QE curve and no optics.zero_point_ph_s_m2; "
+                                f"{why}")
+        return None
+    from .spectra import band, spectrum_from_name, transmission_from_table
+
+    _wrap("photometry.band", band, table.get("band", "V"))
+    for key in ("spectrum", "sky_spectrum"):
+        if key in table:
+            _wrap(f"photometry.{key}", spectrum_from_name, table[key])
+    for key in ("transmission_file", "filter_file"):
+        if key in table:
+            _wrap(f"photometry.{key}", transmission_from_table, table[key], f"photometry.{key}")
+    kwargs = {"band_name": table.pop("band", "V"), **table}
+    return _wrap("photometry", SensorResponse, preset.qe, preset.pixel.electrons_per_photon, **kwargs)
 
 
 def _atmosphere(s: dict[str, Any], optics: Optics, elevation_deg: float | None = None,

@@ -12,6 +12,7 @@ from evstwin import PixelParams
 from evstwin.presets import (
     BIAS_SETS,
     DAVIS346,
+    DAVIS346_PAPER,
     FAST_PR_SLOW_SF_BALANCED_TH,
     K_THRESHOLD_DAVIS346,
     K_THRESHOLD_TEXT,
@@ -146,9 +147,9 @@ def test_threshold_function_validation() -> None:
         cutoff_from_bias(-1e-12)
 
 
-def test_davis346_preset() -> None:
-    p = get_preset("DAVIS346")
-    assert p is DAVIS346
+def test_davis346_paper_preset_keeps_the_papers_numbers() -> None:
+    p = get_preset("DAVIS346_paper")
+    assert p is DAVIS346_PAPER and p.qe is None
     assert (p.width, p.height, p.pixel_pitch_m, p.fill_factor, p.back_illuminated) == (
         346,
         260,
@@ -182,19 +183,38 @@ def test_davis346_preset() -> None:
     assert (s.width, s.height) == (346, 260)
 
 
+def test_davis346_preset_is_the_paper_camera_with_a_silicon_qe_curve() -> None:
+    p = get_preset("davis346")
+    paper = DAVIS346_PAPER.pixel
+    # Everything but the photodiode is the paper's camera.
+    same = [f for f in PixelParams.field_names()
+            if f not in ("absorption_per_m", "depletion_width_m") and getattr(p.pixel, f) != getattr(paper, f)]
+    assert same == []
+    # eq. 2 with silicon's alpha at 550 nm (Green 2008: 6.39e3 /cm) over 2 um, by hand:
+    assert p.pixel.electrons_per_photon == pytest.approx(0.22 * 0.68 * (1 - math.exp(-6.39e5 * 2e-6)), rel=1e-6)
+    assert p.qe is not None
+    qe = dict(zip(np.round(np.array(p.qe.wavelength_m) * 1e9).astype(int), p.qe.qe))
+    assert qe[550] == pytest.approx(p.pixel.electrons_per_photon, rel=1e-6)  # the engine counts 550 nm photons
+    assert qe[700] == pytest.approx(0.22 * 0.68 * (1 - math.exp(-1.89e5 * 2e-6)), rel=1e-6)
+    assert p.qe.peak == pytest.approx(0.22 * 0.68, rel=1e-3)  # blue light is absorbed within 2 um
+
+
 def test_imx636_preset() -> None:
     p = get_preset("imx636")
     assert (p.width, p.height, p.pixel_pitch_m, p.back_illuminated) == (1280, 720, 4.86e-6, True)
     assert p.fill_factor == p.pixel.fill_factor == 1.0
     assert p.biases is None
     assert any("assumption" in a or "25 %" in a for a in p.assumptions)
-    assert sum("imx636_pointsource_evt3.raw" in src for src in p.sources) == 3  # measured on the recording
+    assert sum("faery" in src for src in p.sources) == 3  # measured on the recording
     assert p.pixel.refractory_s == pytest.approx(1.3e-4) and p.pixel.hot_pixel_fraction > 0
-    assert set(PRESETS) == {"davis346", "imx636", "prophesee_gen3_vga"}
+    # What the EVK4 recording taught (imx636-pointsource) is the preset's:
+    assert (p.pixel.cutoff_hz, p.pixel.theta_on, p.pixel.theta_off) == (2000.0, 0.235, 0.21)
+    assert p.pixel.electrons_per_photon == pytest.approx(0.68 * (1 - math.exp(-1.0)), rel=1e-12)
+    assert set(PRESETS) == {"davis346", "davis346_paper", "imx636", "prophesee_gen3_vga"}
 
 
 def test_unknown_preset_lists_the_names() -> None:
-    with pytest.raises(ValueError, match=r"known: \['davis346', 'imx636', 'prophesee_gen3_vga'\]"):
+    with pytest.raises(ValueError, match=r"known: \['davis346', 'davis346_paper', 'imx636', 'prophesee_gen3_vga'\]"):
         get_preset("davis240")
 
 
@@ -282,7 +302,9 @@ def test_prophesee_gen3_vga_preset() -> None:
     assert p is PROPHESEE_GEN3_VGA
     assert (p.width, p.height, p.pixel_pitch_m, p.back_illuminated) == (640, 480, 15e-6, False)
     assert p.fill_factor == p.pixel.fill_factor == 0.25
-    assert p.biases is None and p.readout is None
+    assert p.biases is None and p.readout is not None and p.readout.max_rate_hz == 50e6  # the SilkyEvCam's
+    # dark current: the DAVIS346's per photodiode area, by hand
+    assert p.pixel.dark_rate_e_per_s == pytest.approx(18000 * (15**2 * 0.25) / (18.5**2 * 0.22))
     # geometry sourced, the pixel assumed: both said
     assert any("640 x 480" in src and "15 um" in src for src in p.sources)
     assert any("Afshar" in src for src in p.sources)

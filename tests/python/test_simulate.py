@@ -84,7 +84,7 @@ def test_set_overrides_one_value_and_names_bad_keys() -> None:
         ({"targets": [{"kind": "comet", "flux_ph_s": 1.0}]}, r"targets\[0\].kind must be one of static, linear"),
         ({"targets": [{"kind": "static", "x_px": 1, "y_px": 1}]}, r"targets\[0\] needs exactly one of flux_ph_s"),
         ({"sampling": {"rate_hz": 0}}, r"sampling.rate_hz must be > 0"),
-        ({"sensor": {"preset": "davis240"}}, r"sensor.preset must be one of davis346, imx636, prophesee_gen3_vga; got 'davis240'"),
+        ({"sensor": {"preset": "davis240"}}, r"sensor.preset must be one of davis346, davis346_paper, imx636, prophesee_gen3_vga; got 'davis240'"),
         ({"sensor": {"width": 400}}, r"sensor.width must be in \[1, 346\] for preset 'davis346'; got 400"),
         ({"duration_s": -1}, r"duration_s must be > 0"),
         ({"biases": {"i_on_a": 1e-9, "i_off_a": 2e-9, "i_diff_a": 5e-9}}, r"biases"),
@@ -274,9 +274,17 @@ def test_user_scenarios_get_the_builtins_photoreceptor_pole(tmp_path) -> None:
         ("sensor.width=1.5", "sensor.width must be an integer; got 1.5"),
         ("sensor.width=true", "sensor.width must be an integer; got True"),
         ("targets.0.kind={a = 1}", "targets[0].kind must be one of"),
-        ("background.sky_mag_per_arcsec2=-30", "a pixel could receive 4.57e+21 photons/s (> 1e+20, the engine's "
-                                               "limit): background={'sky_mag_per_arcsec2': -30} gives 4.57e+21"),
-        ("targets.0.magnitude=-30", "the brightest targets[0] at 1.26e+21 photons/s"),
+        ("background.sky_mag_per_arcsec2=-30", "a pixel could receive 2.28e+22 photons/s (> 1e+20, the engine's "
+                                               "limit): background={'sky_mag_per_arcsec2': -30} gives 2.28e+22"),
+        ("targets.0.magnitude=-30", "the brightest targets[0] at 5.36e+21 photons/s"),
+        # issue 29: spectra, bands and the sensor's temperature
+        ('photometry.band="U"', "photometry.band: band must be V, G or the path of a .csv response; got 'U'"),
+        ('photometry.spectrum="led:1200:20"', "photometry.spectrum: LED peak must be in [300, 1100] nm; got 1200 nm"),
+        ('photometry.spectrum="bv:5"', "photometry.spectrum: B-V colour must be in [-0.4, 2.0]"),
+        ('targets.0.spectrum="plasma"', "targets[0].spectrum: spectrum must be one of sun, night-sky, flat"),
+        ('photometry.filter_file="no-such-filter.csv"', "photometry.filter_file: photometry.filter_file file "
+                                                        "'no-such-filter.csv' cannot be read"),
+        ("sensor.temperature_c=200", "sensor.temperature_c: temperature_c must be in [-30, 70] degC"),
         ("sensor.k=4.0", "biases with sensor.k=4.0 (sensor.bias_set='fast_pr_slow_sf_balanced_th'): theta_on must be"),
         ("optics.zero_point_ph_s_m2=1e30", "optics={'focal_length_m': 2.0, 'f_number': 4.0, 'transmission': 0.8, "),
         ("star_field.n_stars=1000000000", "star_field gives 1e+09 stars (> 1e+06, about 300 GB of targets): lower "

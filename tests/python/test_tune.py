@@ -47,7 +47,7 @@ def recovery_scenario(theta_on: float, theta_off: float, dark_rate_e_per_s: floa
         "name": "recovery",
         "duration_s": 0.4,
         "background": {"photon_rate_ph_s": 2e6},
-        "sensor": {"preset": "davis346", "width": 48, "height": 36},
+        "sensor": {"preset": "davis346_paper", "width": 48, "height": 36},
         # The single-pole pixel with the paper's sampled noise that these recovery problems
         # were designed on (scenarios now default to the photoreceptor pole, which damps the
         # dark pixels' noise, and to the continuous noise model; recovery with those is
@@ -80,7 +80,7 @@ def noise_scenario() -> dict:
         "name": "toy",
         "duration_s": 0.3,
         "background": {"photon_rate_ph_s": 1e6},
-        "sensor": {"preset": "davis346", "width": 24, "height": 16},
+        "sensor": {"preset": "davis346_paper", "width": 24, "height": 16},
         "pixel": {"dark_rate_e_per_s": 2000.0, "pr_pole": False},
         "sampling": {"rate_hz": 200.0},
         "targets": [{"kind": "static", "x_px": 5.0, "y_px": 5.0, "flux_ph_s": 1e9}],
@@ -342,21 +342,21 @@ def test_detect_ranks_bright_above_faint_and_low_threshold_above_high() -> None:
     # fast_pr_slow_sf_balanced_th: I_diff 8.2 nA; I_ON 30 nA / 187 nA give theta_on 0.085 / 0.206.
     result = tune.sweep(
         geo_small(),
-        {"targets.0.magnitude": [7.0, 9.0, 12.0], "biases.i_on_a": [3e-8, 1.869e-7]},
+        {"targets.0.magnitude": [9.0, 11.0, 14.0], "biases.i_on_a": [3e-8, 1.869e-7]},
         objective="detect",
         runs=2,
         workers=2,
     )
     m = {(r["targets.0.magnitude"], r["biases.i_on_a"]): r for r in result.summary}
     for bias in (3e-8, 1.869e-7):  # bright above faint
-        assert m[(7.0, bias)]["mean_excess_fraction"] > 0.9 > m[(12.0, bias)]["mean_excess_fraction"] + 0.5
-        assert m[(7.0, bias)]["mean_snr"] > m[(12.0, bias)]["mean_snr"]
-        assert m[(7.0, bias)]["mean_track_events_per_s"] > m[(12.0, bias)]["mean_track_events_per_s"]
-    # Low threshold above high, same target (magnitude 9).
-    low, high = m[(9.0, 3e-8)], m[(9.0, 1.869e-7)]
+        assert m[(9.0, bias)]["mean_excess_fraction"] > 0.9 > m[(14.0, bias)]["mean_excess_fraction"] + 0.5
+        assert m[(9.0, bias)]["mean_snr"] > m[(14.0, bias)]["mean_snr"]
+        assert m[(9.0, bias)]["mean_track_events_per_s"] > m[(14.0, bias)]["mean_track_events_per_s"]
+    # Low threshold above high, same target (magnitude 11).
+    low, high = m[(11.0, 3e-8)], m[(11.0, 1.869e-7)]
     assert low["mean_excess_fraction"] > high["mean_excess_fraction"] + 0.3
     assert low["mean_track_events_per_s"] > high["mean_track_events_per_s"]
-    bright = m[(7.0, 3e-8)]
+    bright = m[(9.0, 3e-8)]
     # The track fraction noise alone would give: with theta_on 0.085 about 4 sigma of the
     # filtered dark shot noise above the level, ~10 % in the continuous noise model.
     assert 0.0 <= bright["mean_chance_fraction"] < 0.2 and bright["mean_track_px"] >= 25
