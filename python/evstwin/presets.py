@@ -378,7 +378,8 @@ class SensorPreset:
             raise ValueError(f"temperature_c must be in [{lo:g}, {hi:g}] degC (the range of the dark-current law "
                              f"2^(dT/{self.dark_doubling_c:g} degC)); got temperature_c={temperature_c!r}")
         factor = 2.0 ** ((t - self.dark_reference_temperature_c) / self.dark_doubling_c)
-        return params.replace(**{name: getattr(params, name) * factor for name in TEMPERATURE_SCALED_FIELDS})
+        return params.replace(**{name: getattr(params, name) * factor for name in TEMPERATURE_SCALED_FIELDS
+                                 if getattr(params, name) is not None})  # None: the per-polarity rate unset
 
     def readout_params(self, **overrides: Any) -> ReadoutParams | None:
         """The preset's readout figures with overrides (``max_rate_hz``, ``fifo_depth``,
