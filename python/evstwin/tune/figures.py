@@ -180,6 +180,11 @@ def plot_limiting_magnitude(result: LimitingMagnitudeResult, path: PathLike) -> 
         lw=2,
         label=f"limiting magnitude ({metric} >= {threshold:g})",
     )
+    undetermined = np.array([r.get("status") == "undetermined" for r in result.table])[order]
+    for rate in rates[order][undetermined]:
+        ax.axvspan(rate / 1.12, rate * 1.12, color=plots.OFF_COLOUR, alpha=0.25, lw=0)
+        ax.text(rate, float(np.mean(edges_y[[0, -1]])), "undetermined:\nnoise fires most pixels", rotation=90,
+                ha="center", va="center", fontsize="x-small", color=plots.OFF_COLOUR)
     ax.set_xscale("log")
     ax.set_xlabel(f"angular rate relative to the stars [arcsec/s] ({result.pointing} pointing)")
     ax.set_ylabel("magnitude (fainter up)")

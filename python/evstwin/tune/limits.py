@@ -47,6 +47,11 @@ DEFAULT_MAGNITUDES: tuple[float, ...] = (6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 1
 """Visual magnitudes (V zero point of :mod:`evstwin.optics`)."""
 
 
+UNDETERMINED_CHANCE = 0.5
+"""Where noise alone fires at least this share of the pixels in a track's time (the mean
+``chance_fraction`` over the magnitudes of a rate), detection cannot be told from noise: the
+rate's limit is "undetermined", not a magnitude."""
+
 SIDEREAL_RATE_ARCSEC_S = EARTH_ROTATION_RAD_S * ARCSEC_PER_RAD
 """The stars' apparent rate at declination 0 [arcsec/s]: 360 deg per sidereal day (86164.0905 s)."""
 POINTINGS = ("sidereal", "staring", "target")
@@ -360,13 +365,16 @@ class LimitingMagnitudeResult:
 
     ``table``: one row per rate: rate_arcsec_s (relative to the stars), rate_px_s (the same
     through the plate scale), target_px_s and stars_px_s (their motion on the sensor under the
-    pointing), limiting_magnitude (nan when even the brightest magnitude fails), and the
-    criterion metric's mean at the limit. The limit is the faintest magnitude reached going
+    pointing), limiting_magnitude (nan when there is none), the criterion metric's mean at the
+    limit, chance_fraction (the share of pixels noise alone fires in a track's time, mean over
+    the magnitudes) and status: ``limit``, ``none`` (even the brightest magnitude fails) or
+    ``undetermined`` (chance_fraction >= ``UNDETERMINED_CHANCE``: noise fires most pixels, so
+    no magnitude can be told detected). The limit is the faintest magnitude reached going
     from bright to faint before the first that fails (a noise-dependent miss does not let a
     fainter success count). ``setup``: one line naming the setup (the figure's title)."""
 
     criterion: tuple[str, float]
-    table: list[dict[str, float]]
+    table: list[dict[str, Any]]
     sweep: SweepResult
     table_path: Path | None = None
     figure_path: Path | None = None
@@ -394,10 +402,15 @@ class LimitingMagnitudeResult:
             "-" * 97,
         ]
         for r in self.table:
+            limit = {"undetermined": "undetermined", "none": "none"}.get(str(r["status"]),
+                                                                         _fmt_num(r["limiting_magnitude"]))
             lines.append(
                 f"{r['rate_arcsec_s']:16.4g}  {r['rate_px_s']:11.4g}  {r['target_px_s']:13.4g}  {r['stars_px_s']:12.4g}  "
-                f"{_fmt_num(r['limiting_magnitude']):>12}  {_fmt_num(r['metric_at_limit']):>24}"
+                f"{limit:>12}  {_fmt_num(r['metric_at_limit']):>24}"
             )
+        if any(r["status"] == "undetermined" for r in self.table):
+            lines.append(f"undetermined: noise alone fires >= {UNDETERMINED_CHANCE:g} of the pixels in a track's time "
+                         "(chance_fraction): raise the thresholds or lower the noise")
         lines.append(f"pointing: {self.pointing} (rates relative to the stars)")
         lines.append(f"criterion: {self.criterion_text()}")
         return "\n".join(lines)
@@ -499,7 +512,7 @@ def limiting_magnitude(
     setup_text = setup.describe() if setup is not None else f"scenario {base['name']}; {pointing} pointing"
     if sets:
         setup_text += "; " + ", ".join(sets)
-    table = []
+    table: list[dict[str, Any]] = []
     for rate in rates:
         rows = {
             float(r["targets.0.magnitude"]): r for r in result.summary if r["targets.0.wx_arcsec_s"] == rate
@@ -510,6 +523,12 @@ def limiting_magnitude(
             if not (rows[m]["runs"] > 0 and value >= threshold):
                 break
             limit, at_limit = m, value
+        chances = [rows[m]["mean_chance_fraction"] for m in mags if rows[m]["runs"] > 0]
+        chance = float(np.nanmean(chances)) if chances and np.any(np.isfinite(chances)) else math.nan
+        if math.isfinite(chance) and chance >= UNDETERMINED_CHANCE:
+            status, limit, at_limit = "undetermined", math.nan, math.nan
+        else:
+            status = "limit" if math.isfinite(limit) else "none"
         on_sensor, stars = objective.motion(rate)
         table.append(
             {
@@ -519,6 +538,8 @@ def limiting_magnitude(
                 "stars_px_s": stars / plate_arcsec,
                 "limiting_magnitude": limit,
                 "metric_at_limit": at_limit,
+                "chance_fraction": chance,
+                "status": status,
             }
         )
     out = LimitingMagnitudeResult(criterion=(metric, float(threshold)), table=table, sweep=result, setup=setup_text,
@@ -529,7 +550,7 @@ def limiting_magnitude(
         _atomic_write_text(
             out.table_path,
             _csv_text(["rate_arcsec_s", "rate_px_s", "target_px_s", "stars_px_s", "limiting_magnitude",
-                       "metric_at_limit"], table),
+                       "metric_at_limit", "chance_fraction", "status"], table),
         )
     return out
 

@@ -200,9 +200,9 @@ class DetectObjective(Objective):
     * ``excess_fraction``: the detection probability corrected for chance,
       (track_fraction - chance_fraction) / (1 - chance_fraction);
     * ``latency_median_s``: median over the track pixels that fired of the first event's time
-      in the window minus the time the centre entered the pixel's square (negative when the
-      PSF wing fired the pixel first; entry times are resolved to 1/50 px of travel); nan when
-      none fired;
+      in the window minus the window's opening (the target's centre coming within radius_px of
+      the pixel's square: its light arriving; resolved to 1/50 px of travel), so never
+      negative; nan when none fired;
     * ``track_px``: number of track pixels.
     """
 
@@ -377,7 +377,7 @@ def detect_metrics(
         snr = math.inf if signal_rate > 0 else math.nan
     else:
         snr = math.nan
-    latency = first[track_idx][fired] - enter[track_idx][fired]
+    latency = first[track_idx][fired] - win_open[track_idx][fired]  # events count from the window's opening
     return {
         "track_fraction": track_fraction,
         "excess_fraction": float(excess),
