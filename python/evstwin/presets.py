@@ -717,6 +717,11 @@ GEN3_VGA_DARK_RATE_E_PER_S = 18000.0 * (15.0**2 * 0.25) / (18.5**2 * 0.22)
 """The Gen3 VGA preset's dark current [e-/s]: the DAVIS346's 18,000 e-/s scaled by photodiode
 area (15 um x 15 um x 0.25 against 18.5 um x 18.5 um x 0.22): 13,450 e-/s. Both are 0.18 um
 CMOS front-illuminated pixels; a dark current grows with the junction's area (assumption)."""
+GEN3_VGA_CUTOFF_HZ = 150.0
+"""The Gen3 VGA preset's source-follower cutoff [Hz], calibrated on one published figure: the
+PPS3MVCD's typical latency of 200 us (CenturyArks SilkyEvCam-USB specification, Table 1; taken
+at 1000 lux, as Prophesee states its latencies): ``evstwin characterize prophesee_gen3_vga``
+gives a median of 202 us at 1000 lux with 150 Hz (130 Hz: 233 us, 300 Hz: 93 us)."""
 GEN3_VGA_THETA = IMX636_THETA  # the same assumed 25 % contrast step (no Gen3 figure at hand)
 """The Gen3 VGA preset's ON and OFF thresholds [ln units]: a 25 % contrast step, as assumed for
 the IMX636 (Prophesee's biases are DAC settings, not currents)."""
@@ -735,7 +740,7 @@ PROPHESEE_GEN3_VGA = SensorPreset(
         theta_on=GEN3_VGA_THETA,
         theta_off=GEN3_VGA_THETA,
         refractory_s=1e-3,
-        cutoff_hz=10.0,
+        cutoff_hz=GEN3_VGA_CUTOFF_HZ,
         pr_pole=True,
     ),
     biases=None,
@@ -758,7 +763,8 @@ PROPHESEE_GEN3_VGA = SensorPreset(
     assumptions=(
         "fill factor 0.25: the order of the figure quoted for Gen3 pixels (secondary sources; not verified)",
         "thresholds ln(1.25) = 0.223 both ways, a 25 % contrast step, as for the IMX636 preset",
-        "refractory 1 ms and the 10 Hz source follower of the DAVIS346 preset; the photoreceptor pole on",
+        "refractory 1 ms as the DAVIS346 preset's; the photoreceptor pole on",
+        "source follower 150 Hz, calibrated on the typical latency of 200 us (GEN3_VGA_CUTOFF_HZ), taken at 1000 lux",
         "dark rate 13,450 e-/s at 25 degC (GEN3_VGA_DARK_RATE_E_PER_S: the DAVIS346's per photodiode area) and "
         "the DAVIS346's background (a 2.95e-3 Hz leak, sigma 1.51, no eq. 12 rate; no Gen3 background figures "
         "at hand: measure them with `evstwin calibrate-noise` on a Gen3 recording)",

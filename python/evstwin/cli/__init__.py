@@ -4,6 +4,7 @@ the Python API, grouped by what the user is doing.
     evstwin simulate SCENARIO -o OUT      evstwin scenarios          (cli.simulate)
     evstwin info | show | compare | timing | calibrate-noise         (cli.recordings)
     evstwin fit | sweep | limiting-magnitude                         (cli.tuning)
+    evstwin characterize PRESET                                      (cli.characterize)
 
 Errors are one line on stderr (``evstwin: error: ...``) and exit status 2; nothing is
 written then.
@@ -18,7 +19,7 @@ from collections.abc import Sequence
 
 from .._core import __version__
 from .._extras import MissingExtraError
-from . import recordings, simulate, tuning
+from . import characterize, recordings, simulate, tuning
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.register(sub)
     recordings.register(sub)
     tuning.register(sub)
+    characterize.register(sub)
     return ap
 
 
