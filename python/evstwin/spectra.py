@@ -25,6 +25,7 @@ where silicon responds), :data:`GRID_M`.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from importlib import resources
@@ -303,6 +304,7 @@ BANDS: dict[str, tuple[str, float, str]] = {
 _BAND_ALIASES = {"v": "V", "johnson-v": "V", "johnson_v": "V", "g": "G", "gaia-g": "G", "gaia_g": "G"}
 
 
+@functools.lru_cache(maxsize=64)
 def band(name: str) -> Band:
     """A band by name (``V`` / ``johnson-v``, ``G`` / ``gaia-g``) or the path of a CSV of
     ``wavelength_nm,response`` per photon (its magnitudes are then taken as AB)."""
@@ -393,6 +395,7 @@ def transmission_from_table(path: str | Path, what: str = "transmission") -> np.
 # -- silicon and the eye -------------------------------------------------------------------------
 
 
+@functools.cache
 def _data_table(*parts: str) -> tuple[np.ndarray, np.ndarray]:
     path = Path(str(resources.files("evstwin").joinpath("data", *parts)))
     w_m, v, _ = _read_table(path, "data")
