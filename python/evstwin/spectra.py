@@ -291,7 +291,9 @@ def _band_from_file(path: Path, name: str, ab_minus_vega_mag: float, source: str
     r = _tabulated(w_m, v)
     if not np.any(r > 0):
         raise SpectrumError(f"band file {str(path)!r} has no response between 300 and 1100 nm")
-    return Band(name, r / r.max(), ab_minus_vega_mag, source)
+    response = r / r.max()
+    response.flags.writeable = False  # band() is cached: one array for every caller
+    return Band(name, response, ab_minus_vega_mag, source)
 
 
 BANDS: dict[str, tuple[str, float, str]] = {
@@ -399,6 +401,7 @@ def transmission_from_table(path: str | Path, what: str = "transmission") -> np.
 def _data_table(*parts: str) -> tuple[np.ndarray, np.ndarray]:
     path = Path(str(resources.files("evstwin").joinpath("data", *parts)))
     w_m, v, _ = _read_table(path, "data")
+    w_m.flags.writeable = v.flags.writeable = False  # shared by every caller (cached)
     return w_m, v
 
 
