@@ -10,7 +10,10 @@ The tables mirror the Python objects:
                   map stay in the sensor's coordinates and are cut and shifted to the ROI's,
                   and the events come out as a w x h recording in the ROI's coordinates,
                   x - x0 and y - y0), ``bias_set`` (a name from
-                  ``evstwin.presets.BIAS_SETS``), ``k`` (eq. 8-9 factor).
+                  ``evstwin.presets.BIAS_SETS``), ``k`` (eq. 8-9 factor),
+                  ``temperature_c`` (the sensor's temperature [degC], -30 to 70: the dark
+                  current, leak, background and hot-pixel rates scale from the preset's
+                  25 degC by ``SensorPreset.at_temperature``, doubling every 6.5 degC).
 ``[biases]``      bias currents in amperes (``i_on_a`` ... ``i_refr_a``), overriding the set.
 ``[pixel]``       any ``PixelParams`` field by name; overrides what biases and preset derive.
                   ``pr_pole`` defaults to true here (as in every built-in), unlike
@@ -27,6 +30,14 @@ The tables mirror the Python objects:
                   long before t = 0, its events dropped; default 0) and
                   ``pre_roll_rate_hz`` (its sampling rate; default ``rate_hz``).
 ``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
+``[photometry]``  how magnitudes become electrons on a preset with a QE curve
+                  (``evstwin.spectra``): ``band`` (``"V"``, default, ``"G"`` or a CSV of
+                  wavelength_nm,response), ``spectrum`` (of every magnitude source without its
+                  own: ``"sun"``, default, ``"night-sky"``, ``"flat"``, ``"blackbody:5800"``,
+                  ``"bv:0.65"``, ``"led:630:20"`` or a CSV of wavelength_nm,photon flux),
+                  ``sky_spectrum`` (the background's, default ``"night-sky"``),
+                  ``transmission_file`` (the optics' curve, wavelength_nm,T, times
+                  ``optics.transmission``) and ``filter_file`` (a filter's curve).
 ``[hot_pixels]``  an explicit hot-pixel map, in place of the draw of ``pixel.hot_pixel_fraction``:
                   ``pixels = [[x, y, rate_hz], ...]`` and/or ``file = "map.npy"`` (a
                   (height, width) array of rates [Hz], 0 = not hot); see
@@ -53,7 +64,8 @@ The tables mirror the Python objects:
                   with only a drift makes no random stars (it moves the field-frame targets).
                   ``distribution = "all-sky"`` draws the sky's star counts instead of
                   the power law (``evstwin.sky.stars``; no n_stars/density_per_deg2: the
-                  count follows from the field of view), scaled by ``density_scale``.
+                  count follows from the field of view), scaled by ``density_scale``;
+                  ``spectrum``: the random stars' (default ``photometry.spectrum``).
 ``[atmosphere]``  seeing, image motion and scintillation (``evstwin.sky.atmosphere``):
                   ``seeing_fwhm_arcsec`` (a Moffat of that FWHM, ``moffat_beta`` default
                   4.765, convolved with the optics' PSF), ``jitter_rms_arcsec`` and
