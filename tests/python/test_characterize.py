@@ -66,5 +66,5 @@ def test_characterize_command_writes_all_or_nothing(tmp_path: Path, capsys: pyte
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "unknown sensor preset 'davis240'" in err and not (tmp_path / "x").exists()
     assert main(["characterize", "imx636", "--out", str(tmp_path / "y"), "--size-px", "2", "--no-progress"]) == 2
-    assert "size_px must be an integer in [4, 512]" in capsys.readouterr().err and not (tmp_path / "y").exists()
+    assert "size_px must be an integer in [4, 128]" in capsys.readouterr().err and not (tmp_path / "y").exists()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary folder left
