@@ -107,6 +107,7 @@ class CharacterizationResult:
     latency_p90_s: list[float]
     response_fraction: list[float]
     low_light_cutoff_lux: float
+    """Where half the pixels respond [lux]; -inf: below the grid's lowest, nan: above its highest."""
     contrast_lux: float
     contrasts: list[float]
     contrast_response: list[float]
@@ -141,9 +142,9 @@ class CharacterizationResult:
                          f"{_fmt_s(self.latency_median_s[i]):>14}  {_fmt_s(self.latency_p90_s[i]):>11}  "
                          f"{self.response_fraction[i]:7.2f}")
         lines.append(f"low-light cutoff (half the pixels fire within {RESPONSE_WINDOW_S:g} s of a x{STEP_FACTOR:g} "
-                     f"step): {_fmt_lux(self.low_light_cutoff_lux)}")
+                     f"step): {_fmt_lux(self.low_light_cutoff_lux, self.lux[0])}")
         lines.append(f"contrast threshold at {self.contrast_lux:g} lux (half the pixels fire ON): "
-                     f"{_fmt_pct(self.contrast_threshold)}")
+                     f"{_fmt_pct(self.contrast_threshold, self.contrasts[0])}")
         if self.published:
             lines.append("published figures beside the twin's:")
             for p in self.published:
@@ -158,11 +159,15 @@ def _fmt_s(value: float) -> str:
     return f"{value * 1e6:.0f} us" if value < 1e-2 else f"{value * 1e3:.1f} ms"
 
 
-def _fmt_lux(value: float) -> str:
+def _fmt_lux(value: float, lowest: float) -> str:
+    if value == -math.inf:
+        return f"below {lowest:g} lux (half respond at the grid's lowest: give lower --lux)"
     return f"{value:.3g} lux" if math.isfinite(value) else "not reached in the grid"
 
 
-def _fmt_pct(value: float) -> str:
+def _fmt_pct(value: float, lowest: float) -> str:
+    if value == -math.inf:
+        return f"below {lowest * 100:g} % (the smallest step tried)"
     return f"{value * 100:.1f} %" if math.isfinite(value) else "not reached"
 
 
@@ -226,11 +231,11 @@ def _responding(delays: np.ndarray, on_background_hz: float) -> float:
 
 def _half_point(x: Sequence[float], y: Sequence[float], log_x: bool) -> float:
     """The first x at which y reaches 0.5 going up the grid, interpolated (in log x if asked);
-    nan if it never does; x[0] if it already does there."""
+    nan if it never does; -inf if it already does at the grid's first point (below the grid)."""
     for i, v in enumerate(y):
         if math.isfinite(v) and v >= 0.5:
             if i == 0:
-                return float(x[0])
+                return -math.inf
             x0, x1, y0 = x[i - 1], x[i], y[i - 1]
             y0 = y0 if math.isfinite(y0) else 0.0
             f = (0.5 - y0) / (v - y0) if v != y0 else 0.0
@@ -330,7 +335,7 @@ def plot_characterization(result: CharacterizationResult, path: Any) -> Any:
     ax = axes[1, 0]
     ax.semilogx(lux, result.response_fraction, "o-", color=plots.ON_COLOUR)
     ax.axhline(0.5, color="grey", lw=0.8)
-    if math.isfinite(result.low_light_cutoff_lux):
+    if math.isfinite(result.low_light_cutoff_lux):  # -inf (below the grid) and nan draw nothing
         ax.axvline(result.low_light_cutoff_lux, color=plots.ON_COLOUR, ls="--", label="twin's cutoff")
     if "low_light_cutoff_lux" in pub:
         ax.axvline(pub["low_light_cutoff_lux"]["value"], color="k", ls=":", label="published cutoff")
