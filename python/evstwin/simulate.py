@@ -691,12 +691,19 @@ def run_many(
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
+    from ._signals import children_without_sigint, ignore_sigint
+
     resolved = resolve_scenario(scenario, sets)
     seeds = list(seeds)
     # forkserver: never fork a process that has run OpenMP or BLAS threads.
     context = multiprocessing.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=processes, mp_context=context) as pool:
-        futures = [pool.submit(simulate, resolved, duration_s, seed, 1, labels=labels) for seed in seeds]
+    before = set(multiprocessing.active_children())
+    with children_without_sigint():
+        pool = ProcessPoolExecutor(max_workers=processes, mp_context=context, initializer=ignore_sigint)
+    done = False
+    try:
+        with children_without_sigint():
+            futures = [pool.submit(simulate, resolved, duration_s, seed, 1, labels=labels) for seed in seeds]
         if progress:
             from tqdm import tqdm
 
@@ -704,7 +711,32 @@ def run_many(
                       file=sys.stderr) as bar:
                 for _ in as_completed(futures):
                     bar.update(1)
-        return [f.result() for f in futures]
+        results = [f.result() for f in futures]
+        done = True
+        return results
+    finally:
+        if done:
+            pool.shutdown(wait=True)
+        else:  # Ctrl-C or a failed run: stop the other runs now rather than wait for them
+            stop_workers(pool, before)
+
+
+def stop_workers(pool: Any, children_before: set[Any]) -> None:
+    """Terminate a ``ProcessPoolExecutor``'s workers now (their jobs are lost) and drop the
+    pool: any child process started since ``children_before`` was taken, as a worker still
+    being spawned is not in the pool's table yet, and the interpreter joins every child at exit."""
+    import multiprocessing
+
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    processes += [p for p in multiprocessing.active_children() if p not in processes and p not in children_before]
+    for proc in processes:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in processes:
+        proc.join(timeout=5)
+        if proc.is_alive():
+            proc.kill()
+    pool.shutdown(wait=False, cancel_futures=False)
 
 
 __all__ = ["SimulationResult", "SimulationStats", "default_num_threads", "ScenarioError", "resolve_scenario", "run_many", "simulate", "simulate_to_file"]
