@@ -62,8 +62,10 @@ def register(sub: Any) -> None:
     p.add_argument("--radius-px", type=float, default=1.0,
                    help="attribute events within this distance of the track [px] (default 1)")
     p.add_argument("--max-delay-s", type=float, default=0.3,
-                   help="longest delay attributed to a crossing [s] (default 0.3); keep it below the time "
-                        "between two passes")
+                   help="longest delay after a crossing attributed to it [s] (default 0.3): an event goes to its "
+                        "pixel's latest crossing whose source had come within --radius-px; later events, and "
+                        "events before any crossing, are counted as unexplained. The result stops changing once "
+                        "this covers the slowest response")
     add_force(p)
     p.set_defaults(func=cmd_timing)
 

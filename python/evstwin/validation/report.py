@@ -364,36 +364,49 @@ def timing_report(
     labels: Sequence[str] | None = None,
 ) -> tuple[dict[str, Any], str, Path]:
     """Event-timing bias of simulated files with ground truth (``.h5``/``.npz``): the
-    :func:`timing_bias` table of each file, summarised per target, polarity, flux and speed
-    with ON and OFF apart, written to ``out_dir/timing_bias.json`` and drawn as
+    :func:`timing_attribution` table of each file, summarised per target, polarity, flux and
+    speed with ON and OFF apart, with the events no crossing explains (count and share, key
+    'events'), written to ``out_dir/timing_bias.json`` and drawn as
     ``timing_bias.png`` (one file) or ``timing_by_setting.png`` (one row per file, called
     ``labels[i]``, default the file's name and the thresholds its scenario sets). Every file is read and checked before ``out_dir``
     is created. Returns (report, text, figure path)."""
     from .. import plots
     from ..io import read_events
-    from .timing import format_timing_bias_summary, timing_bias, timing_bias_summary
+    from .timing import (
+        format_timing_bias_summary,
+        format_unexplained,
+        timing_attribution,
+        timing_bias_summary,
+    )
 
     if not radius_px > 0:
         raise ValueError(f"radius_px must be > 0 px; got {radius_px}")
     if not max_delay_s > 0:
         raise ValueError(f"max_delay_s must be > 0 s; got {max_delay_s}")
     tables: list[tuple[str, np.ndarray]] = []
+    all_counts: list[dict[str, int]] = []
     for i, path in enumerate(files):
         events, meta = read_events(path)
         truth = meta.get("truth") or {}
         if not truth:
             raise ValueError(f"{path} holds no ground truth (/truth): simulate to .h5 or .npz first")
         label = labels[i] if labels is not None else _setting_label(path, meta)
-        tables.append((label, timing_bias(events, truth, radius_px=radius_px, max_abs_delay_s=max_delay_s)))
+        table, counts = timing_attribution(events, truth, radius_px=radius_px, max_delay_s=max_delay_s)
+        tables.append((label, table))
+        all_counts.append(counts)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {}
     text: list[str] = []
-    for label, table in tables:
-        rows = {by: timing_bias_summary(table, by=by, split_polarity=True) for by in ("target", "polarity", "flux", "speed")}
+    for (label, table), counts in zip(tables, all_counts):
+        rows: dict[str, Any] = {by: timing_bias_summary(table, by=by, split_polarity=True)
+                                for by in ("target", "polarity", "flux", "speed")}
+        on_track = counts["attributed"] + counts["unexplained"]
+        rows["events"] = dict(counts, unexplained_share=counts["unexplained"] / on_track if on_track else 0.0,
+                              radius_px=radius_px, max_delay_s=max_delay_s)
         report[label] = rows
-        text.append(f"== {label}: {len(table)} events attributed to a crossing")
-        text.extend(format_timing_bias_summary(r, by=by) + "\n" for by, r in rows.items())
+        text.append(f"== {label}: {format_unexplained(counts, max_delay_s)}")
+        text.extend(format_timing_bias_summary(r, by=by) + "\n" for by, r in rows.items() if by != "events")
     if len(tables) == 1:
         png = plots.plot_timing_bias(tables[0][1], out / "timing_bias.png")
         report = report[tables[0][0]]
