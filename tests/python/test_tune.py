@@ -1192,3 +1192,22 @@ def test_least_squares_recovers_thresholds_dark_and_background_rates_on_a_davis3
     # for a simulation of the same parameters).
     assert result.best_distance < 1.0 < result.history[0].distance
     assert result.to_json_dict()["distance_formula"] == tune.CHI2_FORMULA
+
+
+def test_fit_announces_and_writes_the_recordings_duration(tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    # The real recording spans 2,359,945 us (the DAVIS recording) and has no
+    # duration_s: the fit simulates that span, so its estimate speaks of it, not of the
+    # scenario's 0.3 s, and best.toml says 2.359945, not 2.3599449999999997.
+    real = simulate(noise_scenario(), seed=5, num_threads=1, duration_s=0.05)
+    events = real.events.copy()
+    events["t"][-1] = events["t"][0] + 2_359_945
+    meta = {"width": 24, "height": 16}
+    scen = noise_scenario()
+    scen["sensor"] = dict(scen["sensor"], width=24, height=16)
+    result = tune.fit(events, meta, scen, params=["theta_on"], budget=1, workers=0, progress=True, sampler="random")
+    err = capsys.readouterr().err
+    assert "for 2.35995 s of sensor time" in err and "for 0.3 s" not in err
+    assert result.duration_s == 2.359945
+    text = (result.write(tmp_path)["best_toml"]).read_text()
+    assert "duration_s = 2.359945\n" in text
