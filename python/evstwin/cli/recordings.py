@@ -32,8 +32,10 @@ def register(sub: Any) -> None:
     p.add_argument("--out", required=True, help="output folder for the PNGs (created; must be empty or new)")
     p.add_argument("--t0", type=float, default=0.0,
                    help="start of the frames and x-y-t figures after the recording's first event [s] (default 0)")
-    p.add_argument("--window", type=float, default=0.033,
-                   help="length of each of the three frames [s] (default 0.033, the paper's Fig. 5)")
+    p.add_argument("--window", type=float,
+                   help="length of each of the three frames [s] (default: from the recording, so that a frame "
+                        "holds about 0.02 events per pixel, at most a third of what follows --t0; the paper's "
+                        "Fig. 5 used 0.033)")
     add_size(p)
     add_force(p)
     p.set_defaults(func=cmd_show)
@@ -96,13 +98,16 @@ def cmd_info(args: argparse.Namespace) -> int:
 def cmd_show(args: argparse.Namespace) -> int:
     from ..validation import show
 
-    if not args.window > 0:
+    if args.window is not None and not args.window > 0:
         raise ValueError(f"--window must be > 0 s; got {args.window}")
     if not args.t0 >= 0:
         raise ValueError(f"--t0 must be >= 0 s; got {args.t0}")
     check_output_dir(args.out, args.force)
+    notes: list[str] = []
     with staged_folder(args.out) as stage:
-        outputs = show(args.file, stage.path, window_s=args.window, t_offset_s=args.t0, size=args.size)
+        outputs = show(args.file, stage.path, window_s=args.window, t_offset_s=args.t0, size=args.size, notes=notes)
+    for note in notes:
+        print(note, file=sys.stderr)
     for name, path in outputs.items():
         print(f"{name}: {stage.final_of(path)}")
     return 0
