@@ -29,7 +29,8 @@ from . import recordings, simulate, tuning
 def build_parser() -> argparse.ArgumentParser:
     """The whole ``evstwin`` argument parser; each command module registers its own."""
     ap = argparse.ArgumentParser(
-        prog="evstwin", description="Physics-based digital twin of event cameras (DAVIS346, IMX636) for SSA."
+        prog="evstwin", description="Physics-based digital twin of event cameras (DAVIS346, IMX636, Prophesee Gen3 VGA) for "
+                                    "space-situational awareness."
     )
     ap.add_argument("--version", action="version", version=f"evstwin {__version__}")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
