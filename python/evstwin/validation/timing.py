@@ -197,12 +197,30 @@ def _bin_edges(values: np.ndarray, bins: int | Sequence[float] | np.ndarray, log
     return np.linspace(lo, hi, n + 1)
 
 
-def _rounded(values: np.ndarray) -> np.ndarray:
-    """``values`` to 9 significant digits, so a value computed twice is one value."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = 10.0 ** (8 - np.floor(np.log10(np.abs(values))))
-    scale[~np.isfinite(scale)] = 1.0
-    return np.round(values * scale) / scale
+SAME_VALUE_TOLERANCE = 1e-3
+"""Fluxes or speeds within this share of each other are one value in the timing summary and
+figure: a source's speed in pixels changes in its last digits along a track (geo-stare's
+7.8828..7.8830 px/s), and a group or axis tick per digit helps nobody."""
+
+
+def same_value_groups(values: np.ndarray, tolerance: float = SAME_VALUE_TOLERANCE) -> np.ndarray:
+    """A group number per value (0, 1, ... in increasing order of value): sorted values go in
+    one group while each is within ``tolerance`` (relative) of the group's smallest."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return np.zeros(0, np.int64)
+    order = np.argsort(v, kind="stable")
+    s = v[order]
+    group = np.zeros(s.size, np.int64)
+    start, g = s[0], 0
+    for i in range(1, s.size):  # over distinct values in practice: a handful of targets
+        if s[i] - start > tolerance * max(abs(start), abs(s[i])):
+            g += 1
+            start = s[i]
+        group[i] = g
+    out = np.empty_like(group)
+    out[order] = group
+    return out
 
 
 def timing_bias_summary(
@@ -217,8 +235,9 @@ def timing_bias_summary(
     by: 'target' (one group per name), 'polarity' (ON, OFF), 'flux' (``bins`` log-spaced
         flux bins [photons/s] between the smallest and largest, or explicit edges) or 'speed'
         (``bins`` linear speed bins [px/s], or edges). Bins are [lo, hi), the last [lo, hi];
-        a flux or speed taking no more than ``bins`` values (to 9 significant digits) has one
-        group per value, named by it (a single speed is one row, not a 7.883..7.883 bin).
+        a flux or speed taking no more than ``bins`` values (values within
+        :data:`SAME_VALUE_TOLERANCE` of each other are one) has one group per value, named by
+        its median (a single speed is one row, not a 7.883..7.883 bin).
     split_polarity: one row per group and polarity (key ``polarity``, 'ON'/'OFF'): ON and OFF
         delays differ by an order of magnitude in the dark, and a median of both describes
         neither.
@@ -239,11 +258,12 @@ def timing_bias_summary(
     else:
         col = "flux_ph_s" if by == "flux" else "speed_px_s"
         vals = np.asarray(table[col], dtype=np.float64)
-        distinct, which = np.unique(_rounded(vals),
-                                    return_inverse=True)
-        # A few values (at most ``bins``): one group each.
-        if np.ndim(bins) == 0 and distinct.size <= int(bins):  # type: ignore[arg-type]
-            groups = [(float(np.median(vals[which == i])), which == i) for i in range(distinct.size)]
+        distinct, inverse = np.unique(vals, return_inverse=True)
+        which = same_value_groups(distinct)[inverse]
+        n_groups = int(which.max()) + 1 if which.size else 0
+        # A few values (at most ``bins``, those within SAME_VALUE_TOLERANCE one): one group each.
+        if np.ndim(bins) == 0 and n_groups <= int(bins):  # type: ignore[arg-type]
+            groups = [(float(np.median(vals[which == i])), which == i) for i in range(n_groups)]
         else:
             edges = _bin_edges(vals, bins, log=(by == "flux"))
             idx = np.searchsorted(edges, vals, side="right") - 1
