@@ -42,7 +42,7 @@ def main() -> int:
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="evstwin-fuzz-") as tmp:
         work = Path(tmp)
-        files = _fuzzing.write_samples(work)
+        files = _fuzzing.write_samples(work, Path(__file__).resolve().parents[1] / "tests" / "data")
         for k, r in enumerate(_fuzzing.run(files, args.examples, work, args.seed, args.timeout, args.workers)):
             counts[r.label][r.outcome] += 1
             if r.outcome != "hang":

@@ -227,6 +227,9 @@ def _read_toml(source: str | Path) -> dict[str, Any]:
         text = (resources.files("evstwin") / "scenarios" / f"{text_source}.toml").read_text()
         where = f"built-in scenario {text_source!r}"
     elif path.suffix == ".toml" or path.exists():
+        if path.is_dir():
+            raise ScenarioError(f"scenario {text_source!r} is a folder, not a scenario file (a TOML file or a "
+                                "built-in name: `evstwin scenarios`)")
         if not path.is_file():
             raise ScenarioError(f"scenario file {text_source!r} does not exist")
         text = path.read_text()

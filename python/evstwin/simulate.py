@@ -482,7 +482,10 @@ class _Runner:
                     for j in range(0, t_fine.size, chunk):
                         yield self._dense(t_fine[j : j + chunk])
             if bar is not None:
-                bar.update(round(min(b * self.dt, self.scene.duration_s) - bar.n, 6))
+                # Set, not added up: a sum of rounded steps drifted past the total (0.77 s at
+                # 200 Hz ended at 0.7700000000000001 of 0.77: "clamping frac", a negative ETA).
+                bar.n = min(round(b * self.dt, 6), bar.total)
+                bar.update(0)  # displays at tqdm's own pace
             a = b
 
     def _n_sub(self, t0: float, t1: float) -> int:
@@ -552,26 +555,31 @@ class _Runner:
                        groups: Sequence[tuple[psf.PSFShape, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
         """Flat (sample * pixels + pixel) indices and photon rates of the (T, S) sources' windows,
         each group of columns through its PSF."""
-        parts = self._contribution_parts(x, y, f, groups)
+        parts = list(self._contribution_parts(x, y, f, groups))
         if not parts:
             return np.zeros(0, np.int64), np.zeros(0)
         return np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts])
 
     def _contribution_parts(self, x: np.ndarray, y: np.ndarray, f: np.ndarray,
                             groups: Sequence[tuple[psf.PSFShape, np.ndarray]],
-                            stride: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-        """``_contributions`` as the renderer's chunks (each at most ``psf.render``'s chunk of
-        window pixels), in the order of their concatenation. ``stride``: the flat index is
+                            stride: int | None = None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """``_contributions`` as the renderer's chunks, in the order of their concatenation,
+        rendered as they are taken: a block of whole samples at a time, of at most
+        ``psf.render``'s chunk of window pixels (the order of the pixels, and so of every sum
+        over them, is the one a single call gives). ``stride``: the flat index is
         sample * stride + pixel (default width * height; any stride >= it)."""
         sc = self.scene
         npix = sc.width * sc.height if stride is None else stride
-        parts: list[tuple[np.ndarray, np.ndarray]] = []
         for shape, cols in groups:
             n_t, n_s = x.shape[0], cols.size
-            sample = np.repeat(np.arange(n_t, dtype=np.int64), n_s)
-            parts += psf.contributions(sc.width, sc.height, x[:, cols].reshape(-1), y[:, cols].reshape(-1),
-                                       f[:, cols].reshape(-1), shape, offset=sample * npix)
-        return parts
+            k = 2 * int(shape.half_width_px) + 1
+            block = max(1, psf.render._CHUNK_ELEMENTS // max(1, n_s * k * k))
+            for t0 in range(0, n_t, block):
+                t1 = min(n_t, t0 + block)
+                sample = np.repeat(np.arange(t0, t1, dtype=np.int64), n_s)
+                yield from psf.contributions(sc.width, sc.height, x[t0:t1, cols].reshape(-1),
+                                             y[t0:t1, cols].reshape(-1), f[t0:t1, cols].reshape(-1), shape,
+                                             offset=sample * npix)
 
     def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """A C-contiguous float64 array of ``shape``, its memory reused from the last call with
@@ -581,6 +589,30 @@ class _Runner:
         if buf is None or buf.size < size:
             buf = self._buffers[name] = np.empty(size, np.float64)
         return buf[:size].reshape(shape)
+
+    def _lit(self, x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """Flat mask of the pixels inside the window of a fine-sampled source with flux > 0
+        at any of the (T, S) positions: a PSF's window is the (2 h + 1)^2 pixels around the
+        pixel the source is on (``psf.render``), those on the sensor. A difference table of
+        the rectangles' corners, summed along both axes: linear in the rectangles and pixels."""
+        sc = self.scene
+        diff = np.zeros((sc.height + 1, sc.width + 1), np.int64)
+        for shape, cols in self._fine_groups:
+            h = int(shape.half_width_px)
+            xs, ys, fs = x[:, cols].reshape(-1), y[:, cols].reshape(-1), f[:, cols].reshape(-1)
+            with np.errstate(invalid="ignore"):
+                cx, cy = np.floor(xs + 0.5), np.floor(ys + 0.5)
+                on = (fs > 0.0) & (cx + h >= 0) & (cx - h <= sc.width - 1) & (cy + h >= 0) & (cy - h <= sc.height - 1)
+            x0 = np.clip(cx[on] - h, 0, sc.width).astype(np.int64)
+            x1 = np.clip(cx[on] + h + 1, 0, sc.width).astype(np.int64)
+            y0 = np.clip(cy[on] - h, 0, sc.height).astype(np.int64)
+            y1 = np.clip(cy[on] + h + 1, 0, sc.height).astype(np.int64)
+            np.add.at(diff, (y0, x0), 1)
+            np.add.at(diff, (y0, x1), -1)
+            np.add.at(diff, (y1, x0), -1)
+            np.add.at(diff, (y1, x1), 1)
+        covered = diff.cumsum(axis=0).cumsum(axis=1)[: sc.height, : sc.width] > 0
+        return covered.reshape(-1)
 
     def _with_halos(self, frames: np.ndarray, t_base: np.ndarray, t_fine: np.ndarray, hot: np.ndarray,
                     rates: np.ndarray) -> np.ndarray:
@@ -622,22 +654,14 @@ class _Runner:
         # star's 257 px window holds ~3e7 of them, and each whole-unit temporary was ~0.25 GB
         # of fresh memory for the kernel to zero (~15 % of imx636-pointsource's CPU).
         # Hot: lit by a moving window in this chunk, or still settling from an earlier one.
-        # Marked on a flat mask (linear in the contributions, no sort).
-        mask = self.hot_until > t_fine[0]
-        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        # The windows' flat indices with a power-of-two stride between samples, so that a shift
-        # and a mask split them into (sample, pixel): NumPy's integer division by a scalar cost
-        # ~10 times a shift (and its divmod by hand a division, a multiply and a subtraction).
-        shift = (npix - 1).bit_length()
-        for idx, val in self._contribution_parts(x, y, f, self._fine_groups, stride=1 << shift):
-            # The pixels overwrite the chunk's own indices (no other reference to them): one
-            # window-sized array less to keep.
-            sample_of = idx >> shift
-            pixel = idx
-            pixel &= (1 << shift) - 1
-            mask[pixel] = True
-            self.hot_until[pixel] = t_fine[-1] + self.settle_s
-            parts.append((sample_of, pixel, val))
+        # The lit pixels are the union of the windows' rectangles, known from the positions
+        # alone: the hot set (and each hot pixel's column) is fixed before any window is
+        # rendered, and each rendered chunk is added to the rates and dropped, instead of
+        # every chunk of the unit being kept until the set was known (~3 x the rates table:
+        # 0.3 GB of a 200 x 200 ROI inside a bright star's 257 px window).
+        lit = self._lit(x, y, f)
+        mask = (self.hot_until > t_fine[0]) | lit
+        self.hot_until[lit] = t_fine[-1] + self.settle_s
         hot = np.flatnonzero(mask)
         column = self._column
         column[hot] = np.arange(hot.size)
@@ -645,12 +669,18 @@ class _Runner:
         rates = self._buffer("rates", (n_t, hot.size))
         rates[:] = self.static_map.reshape(-1)[hot][None, :]
         flat_rates = rates.reshape(-1)
-        for sample_of, pixel, val in parts:
+        # The windows' flat indices with a power-of-two stride between samples, so that a shift
+        # and a mask split them into (sample, pixel): NumPy's integer division by a scalar cost
+        # ~10 times a shift (and its divmod by hand a division, a multiply and a subtraction).
+        shift = (npix - 1).bit_length()
+        for idx, val in self._contribution_parts(x, y, f, self._fine_groups, stride=1 << shift):
             # Scatter-add only where the windows are (a bincount over every hot pixel and
             # sample would zero and add the whole table); the chunks in order, each
-            # sequentially, add in the order one call on their concatenation would.
+            # sequentially. The chunk's own index array becomes the target, in place.
             if val.size:
-                target = sample_of  # sample * hot pixels + column, in place
+                pixel = idx & ((1 << shift) - 1)
+                target = idx
+                target >>= shift
                 target *= hot.size
                 target += column[pixel]
                 np.add.at(flat_rates, target, val)
@@ -691,12 +721,19 @@ def run_many(
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
+    from ._signals import children_without_sigint, ignore_sigint
+
     resolved = resolve_scenario(scenario, sets)
     seeds = list(seeds)
     # forkserver: never fork a process that has run OpenMP or BLAS threads.
     context = multiprocessing.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=processes, mp_context=context) as pool:
-        futures = [pool.submit(simulate, resolved, duration_s, seed, 1, labels=labels) for seed in seeds]
+    before = set(multiprocessing.active_children())
+    with children_without_sigint():
+        pool = ProcessPoolExecutor(max_workers=processes, mp_context=context, initializer=ignore_sigint)
+    done = False
+    try:
+        with children_without_sigint():
+            futures = [pool.submit(simulate, resolved, duration_s, seed, 1, labels=labels) for seed in seeds]
         if progress:
             from tqdm import tqdm
 
@@ -704,7 +741,32 @@ def run_many(
                       file=sys.stderr) as bar:
                 for _ in as_completed(futures):
                     bar.update(1)
-        return [f.result() for f in futures]
+        results = [f.result() for f in futures]
+        done = True
+        return results
+    finally:
+        if done:
+            pool.shutdown(wait=True)
+        else:  # Ctrl-C or a failed run: stop the other runs now rather than wait for them
+            stop_workers(pool, before)
+
+
+def stop_workers(pool: Any, children_before: set[Any]) -> None:
+    """Terminate a ``ProcessPoolExecutor``'s workers now (their jobs are lost) and drop the
+    pool: any child process started since ``children_before`` was taken, as a worker still
+    being spawned is not in the pool's table yet, and the interpreter joins every child at exit."""
+    import multiprocessing
+
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    processes += [p for p in multiprocessing.active_children() if p not in processes and p not in children_before]
+    for proc in processes:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in processes:
+        proc.join(timeout=5)
+        if proc.is_alive():
+            proc.kill()
+    pool.shutdown(wait=False, cancel_futures=False)
 
 
 __all__ = ["SimulationResult", "SimulationStats", "default_num_threads", "ScenarioError", "resolve_scenario", "run_many", "simulate", "simulate_to_file"]

@@ -134,3 +134,27 @@ def test_the_core_imports_without_any_extra() -> None:
     lines = out.strip().splitlines()
     assert lines[0] == "True"
     assert "pip install 'evstwin[io]'" in lines[1]
+
+
+def test_help_and_messages_say_what_a_user_needs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from evstwin.cli import build_parser
+    from evstwin.presets import PRESETS
+
+    parser = build_parser()
+    for preset in PRESETS.values():  # every preset's camera is named in the description
+        name = {"prophesee_gen3_vga": "Gen3 VGA"}.get(preset.name, preset.name.upper())
+        assert name in (parser.description or ""), name
+    threads = next(a for a in parser._subparsers._group_actions[0].choices["simulate"]._actions  # type: ignore[union-attr]
+                   if a.dest == "threads")
+    assert "all cores" not in (threads.help or "") and "busy" in (threads.help or "")
+    folder = tmp_path / "adir"
+    folder.mkdir()
+    for argv, message in ((["info", str(folder)], "is a folder, not an event file"),
+                          (["simulate", str(folder), "-o", str(tmp_path / "x.h5")], "is a folder, not a scenario file")):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert message in err and "suffix ''" not in err and "does not exist" not in err and err.count("\n") == 1
+    assert main(["simulate", "leo-pass", "--duration", "3", "-o", str(tmp_path / "x.h5"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "pointing.at_s" in err and "--set pointing.at_s=" in err and err.count("\n") == 1
+    assert list(folder.parent.iterdir()) == [folder]

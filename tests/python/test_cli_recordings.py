@@ -8,6 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from evstwin.cli import build_parser, main
@@ -81,6 +82,61 @@ def test_show_takes_a_time_window_and_refuses_a_full_folder(tmp_path: Path,
     assert "not empty" in one_line_error(capsys)
     assert main(["show", str(DAVIS), "--out", str(out), "--window", "0"]) == 2
     assert "--window" in one_line_error(capsys)
+
+
+def test_show_past_the_end_says_so_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "figs"
+    assert main(["show", str(DAVIS), "--out", str(out), "--t0", "100"]) == 2
+    err = one_line_error(capsys)
+    assert "--t0 100 s is past the end" in err and "0.049926 s" in err  # the cut's span
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def _slow_recording(path: Path, rate_hz: float, duration_s: float) -> None:
+    """A 64 x 48 recording: a source crossing it at 5 px/s, one event every 1/rate_hz s."""
+    from evstwin import write_events
+    from evstwin.sensor import EVENT_DTYPE
+
+    t_us = np.arange(0, round(duration_s * 1e6), round(1e6 / rate_hz))
+    ev = np.zeros(t_us.size, EVENT_DTYPE)
+    ev["t"], ev["x"], ev["y"], ev["p"] = t_us, (t_us * 5e-6).astype(int) % 64, 24, t_us % 2
+    write_events(path, ev, {"width": 64, "height": 48})
+
+
+@pytest.mark.parametrize(("rate_hz", "duration_s", "window"), [
+    (100.0, 10.0, "3.3 s"),  # 1,000 events in all, fewer than 3 x 1,000: the span, in thirds
+    (50_000.0, 1.0, "0.02 s"),  # 1,000 events (the floor for 3,072 px) every 20 ms
+])
+def test_show_chooses_its_window_from_the_recording(tmp_path: Path, rate_hz: float, duration_s: float,
+                                                    window: str) -> None:
+    from evstwin.validation import show
+
+    _slow_recording(tmp_path / "slow.npz", rate_hz, duration_s)
+    notes: list[str] = []
+    show(tmp_path / "slow.npz", tmp_path / "figs", notes=notes)
+    assert len(notes) == 1 and f"3 of {window} " in notes[0]
+
+
+def test_show_draws_small_counts_one_bin_per_count(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from evstwin import plots
+    from evstwin.validation import show
+
+    seen = {}
+    real = plots.plot_count_histograms
+
+    def spy(edges, hists, path, **kw):  # type: ignore[no-untyped-def]
+        seen["edges"] = edges
+        return real(edges, hists, path, **kw)
+
+    monkeypatch.setattr(plots, "plot_count_histograms", spy)
+    show(DAVIS, tmp_path / "figs", window_s=0.01)  # at most 12 events a pixel
+    np.testing.assert_array_equal(seen["edges"]["total"], np.arange(0, 14))
+    fig = plots.fig_count_histograms(seen["edges"], [("cut", {k: np.ones(e.size - 1) for k, e in seen["edges"].items()})])
+    ax = fig.axes[0]
+    assert ax.get_xlim() == (-0.5, 12.5)  # each count's bar centred on it
+    ticks = [t for t in ax.get_xticks() if -0.5 <= t <= 12.5]
+    assert ticks and all(float(t).is_integer() for t in ticks)
+    assert "one bin per count" in fig.texts[0].get_text()
 
 
 @pytest.mark.parametrize(("flag", "value"), [("--radius-px", "-1"), ("--radius-px", "0"), ("--max-delay-s", "0")])

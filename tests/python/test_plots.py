@@ -223,3 +223,28 @@ def test_timing_figure_has_one_legend_and_medians_per_polarity():
     fig.canvas.draw()
     assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["1e+09"]
     assert fig.axes[0].xaxis.get_offset_text().get_text() == ""
+
+
+def test_timing_speeds_that_agree_to_the_tolerance_are_one_value():
+    # geo-stare's GEO target: its speed in pixels changes in the last digits along the track
+    # (7.882807..7.883281 px/s); the axis showed a tick per digit ("7.882807.3832808...") and
+    # the summary a row per value.
+    rng = np.random.default_rng(3)
+    n = 300
+    track = {"t_s": np.array([0.0, 1.0]), "x_px": np.array([0.0, 1.0]), "y_px": np.array([0.0, 0.0]),
+             "flux_ph_s": np.array([1.0, 1.0])}
+    tab = np.zeros(n, dtype=validation.timing_bias(REAL[:0], {"star": track}).dtype)
+    tab["p"] = rng.integers(0, 2, n)
+    tab["flux_ph_s"] = 1e5
+    tab["speed_px_s"] = 7.882807 + rng.uniform(0.0, 0.000474, n)  # 60 ppm apart: one value at 0.1 %
+    tab["delay_s"] = rng.uniform(0.0, 0.02, n)
+    fig = plots.fig_timing_bias(tab)
+    fig.canvas.draw()
+    speed = fig.axes[1]
+    labels = [t.get_text() for t in speed.get_xticklabels() if t.get_text()]
+    assert labels == ["7.883"] and "one value" in speed.get_xlabel()
+    rows = validation.timing_bias_summary(tab, by="speed")
+    assert len(rows) == 1 and rows[0]["group"] == pytest.approx(7.883, abs=5e-4) and rows[0]["n"] == n
+    # Values 1 % apart stay apart.
+    tab["speed_px_s"][: n // 2] *= 1.01
+    assert len(validation.timing_bias_summary(tab, by="speed")) == 2

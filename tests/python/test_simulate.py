@@ -464,3 +464,55 @@ def test_what_a_pre_roll_cannot_do_is_refused_by_name() -> None:
     big["sampling"].update(pre_roll_s=1e6, pre_roll_rate_hz=1e4)
     with pytest.raises(ScenarioError, match=r"sampling.pre_roll_s=1000000.0 x sampling.pre_roll_rate_hz=10000.0"):
         build(big)
+
+
+def test_the_lit_pixels_and_the_rendered_blocks_are_those_of_the_windows(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The sub-sampled units fix their hot pixels from the windows' rectangles before any
+    # window is rendered, then render a block of samples at a time and drop it (the rendered
+    # windows of a whole unit were ~3 times its rates table: 0.3 GB of a 200 x 200 ROI). The
+    # rectangles must be exactly the rendered windows' pixels, partly off the sensor included,
+    # and the blocks together exactly one call's contributions, in its order.
+    import importlib
+
+    from evstwin import psf
+
+    sim = importlib.import_module("evstwin.simulate")
+    s = spinning(250.0)
+    s["optics"] = {"extra_blur_sigma_px": 3.0}  # a 31 px window, off the 64 x 48 sensor at times
+    s["targets"].append({"kind": "linear", "x0_px": -10.0, "y0_px": 50.0, "vx_px_s": 80.0, "vy_px_s": -20.0,
+                         "flux_ph_s": 1e9})
+    scene = build(s)
+    runner = sim._Runner(scene, 1, truth_sink=lambda name, rows: None)
+    t = np.linspace(0.0, 0.5, 200)
+    x, y, f = runner._sources(t, truth=False)
+    f[3, 0] = 0.0  # a source without flux lights nothing
+    monkeypatch.setattr(psf.render, "_CHUNK_ELEMENTS", 31 * 31 * 5)  # several blocks
+    blocks = list(runner._contribution_parts(x, y, f, runner._fine_groups))
+    assert len(blocks) > 20 and all(idx.size <= 31 * 31 * 10 for idx, _ in blocks)
+    npix = scene.width * scene.height
+    whole = [psf.contributions(scene.width, scene.height, x[:, cols].reshape(-1), y[:, cols].reshape(-1),
+                               f[:, cols].reshape(-1), shape, offset=np.repeat(np.arange(t.size), cols.size) * npix)
+             for shape, cols in runner._fine_groups]
+    idx_all = np.concatenate([i for i, _ in blocks])
+    np.testing.assert_array_equal(idx_all, np.concatenate([i for g in whole for i, _ in g]))
+    np.testing.assert_array_equal(np.concatenate([v for _, v in blocks]), np.concatenate([v for g in whole for _, v in g]))
+    lit = np.zeros(npix, bool)
+    lit[np.unique(idx_all % npix)] = True
+    partial = ~np.all((x > 15) & (x < 48) & (y > 15) & (y < 32))
+    assert partial and 0 < lit.sum() < npix
+    np.testing.assert_array_equal(runner._lit(x, y, f), lit)
+
+
+@pytest.mark.parametrize("duration_s", [0.33, 0.77])
+def test_the_progress_bar_ends_at_the_duration(duration_s: float, capsys: pytest.CaptureFixture[str]) -> None:
+    # One update a chunk: the bar's position is set, not added up from rounded steps, whose
+    # sum ended past the total at these durations (TqdmWarning "clamping frac", ETA -00:00).
+    import warnings
+
+    s = {"name": "bar", "duration_s": duration_s, "sensor": {"preset": "davis346", "width": 8, "height": 8},
+         "background": {"photon_rate_ph_s": 1e6}, "sampling": {"rate_hz": 200.0, "chunk_samples": 1}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate(s, progress=True, num_threads=1)
+    last = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()[-1]
+    assert f"{duration_s:.2f}/{duration_s:.2f} s sensor time" in last and "-00:00" not in last

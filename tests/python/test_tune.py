@@ -710,8 +710,37 @@ def test_sweep_says_what_it_will_run_and_labels_its_figure(tmp_path: Path,
     assert "sweep (noise): 2 job(s) of 24x16 px for 0.3 s of sensor time at 200 Hz" in err
     assert "estimate ~" in err and "in all" in err
     assert readable("pixel.theta_on") == "ON threshold theta_on (log units)"
-    assert readable("targets.0.wx_arcsec_s") == "wx (arcsec/s)"  # unknown keys: the unit of the suffix
+    assert readable("targets.0.wx_arcsec_s") == "target 0: angular rate along x (arcsec/s)"
+    assert readable("sampling.max_shift_px") == "sampling: max shift (px)"  # others: the unit of the suffix
     assert tune.draw_sweep(result).is_file()
+
+
+def test_sweep_error_bars_stop_where_the_metric_does(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from evstwin.tune import figures
+    from evstwin.tune.sweep import SweepResult
+
+    # A share of 0.99 +- 0.013 (the bar reached 1.003), a rate of 0.5 +- 2, a latency
+    # of -0.01 +- 0.02 s (a PSF wing can fire a pixel early: not clipped).
+    err = figures.clipped_error(np.array([0.99, 0.2]), np.array([0.013, np.nan]), "excess_fraction")
+    np.testing.assert_allclose(err, [[0.013, 0.0], [0.01, 0.0]])
+    np.testing.assert_allclose(figures.clipped_error(np.array([0.5]), np.array([2.0]), "noise_rate_per_px_hz"),
+                               [[0.5], [2.0]])
+    np.testing.assert_allclose(figures.clipped_error(np.array([-0.01]), np.array([0.02]), "latency_median_s"),
+                               [[0.02], [0.02]])
+    drawn = []
+    real_errorbar = figures.require("matplotlib.axes").Axes.errorbar
+
+    def spy(self, x, y, yerr=None, **kw):  # type: ignore[no-untyped-def]
+        drawn.append(np.asarray(y) + np.asarray(yerr)[1])
+        return real_errorbar(self, x, y, yerr=yerr, **kw)
+
+    monkeypatch.setattr(figures.require("matplotlib.axes").Axes, "errorbar", spy)
+    summary = [{"point": i, "pixel.theta_on": v, "runs": 3, "mean_excess_fraction": m, "std_excess_fraction": 0.05}
+               for i, (v, m) in enumerate([(0.2, 0.99), (0.3, 0.5)])]
+    result = SweepResult(grid={"pixel.theta_on": [0.2, 0.3]}, objective="detect", metrics=("excess_fraction",),
+                         headline=("excess_fraction",), runs=3, seeds=[0, 1, 2], rows=[], summary=summary)
+    figures.plot_sweep(result, tmp_path / "s.png")
+    assert drawn and max(float(d.max()) for d in drawn) == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("sampler, runs_per_trial", [("nm", 2), ("ls", 2), ("ls", 1)])
@@ -1211,3 +1240,22 @@ def test_limiting_magnitude_is_undetermined_where_noise_fires_most_pixels(tmp_pa
     # noise fires a pixel before the target's centre enters it.
     assert all(r["mean_latency_median_s"] >= 0.0 for r in result.sweep.summary)
     assert tune.draw_limiting_magnitude(result, tmp_path).is_file()
+
+
+def test_fit_announces_and_writes_the_recordings_duration(tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    # The real recording spans 2,359,945 us (the DAVIS recording) and has no
+    # duration_s: the fit simulates that span, so its estimate speaks of it, not of the
+    # scenario's 0.3 s, and best.toml says 2.359945, not 2.3599449999999997.
+    real = simulate(noise_scenario(), seed=5, num_threads=1, duration_s=0.05)
+    events = real.events.copy()
+    events["t"][-1] = events["t"][0] + 2_359_945
+    meta = {"width": 24, "height": 16}
+    scen = noise_scenario()
+    scen["sensor"] = dict(scen["sensor"], width=24, height=16)
+    result = tune.fit(events, meta, scen, params=["theta_on"], budget=1, workers=0, progress=True, sampler="random")
+    err = capsys.readouterr().err
+    assert "for 2.35995 s of sensor time" in err and "for 0.3 s" not in err
+    assert result.duration_s == 2.359945
+    text = (result.write(tmp_path)["best_toml"]).read_text()
+    assert "duration_s = 2.359945\n" in text

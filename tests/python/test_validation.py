@@ -314,7 +314,7 @@ def truth_and_events():
         rows.append((y * 25_000 + 1000, 30, y, 1))  # 1 ms late
     rows += [
         (500_000, 100, 100, 1),  # nowhere near a track
-        (1_500_000, 10, 5, 1),  # 0.5 s after slow crossed (10, 5): beyond max_abs_delay_s
+        (1_500_000, 10, 5, 1),  # 0.5 s after slow crossed (10, 5): beyond max_delay_s
         (800_000, 10, 8, 0),  # 3 px from the slow track: beyond radius_px
         (300_000, 60, 60, 1),  # on the stationary source
     ]
@@ -324,7 +324,10 @@ def truth_and_events():
 
 def test_timing_bias_on_constructed_tracks():
     truth, ev = truth_and_events()
-    tab = validation.timing_bias(ev, truth, radius_px=1.0, max_abs_delay_s=0.1)
+    tab, counts = validation.timing_attribution(ev, truth, radius_px=1.0, max_delay_s=0.1)
+    # unexplained: the late one; off track: the one far from every track, the one 3 px from the
+    # slow one and the one on the still source (no crossing)
+    assert counts == {"events": ev.size, "attributed": 71, "unexplained": 1, "off_track": 3}
     assert tab.size == 17 + 17 + 37
     assert np.all(np.diff(tab["t_us"]) >= 0)
     slow_on = tab[(tab["target"] == "slow") & (tab["p"] == 1)]
@@ -341,9 +344,11 @@ def test_timing_bias_on_constructed_tracks():
     np.testing.assert_allclose(fast["speed_px_s"], 40.0)
     np.testing.assert_allclose(slow_on["flux_ph_s"], 1e4 * (1 + slow_on["x"] / 10.0))
     np.testing.assert_allclose(fast["flux_ph_s"], 1e6)
-    # a wider radius takes the event 3 px off the track; no limit on |delay| takes the late one
-    wide = validation.timing_bias(ev, truth, radius_px=3.0, max_abs_delay_s=None)
-    assert wide.size == tab.size + 2
+    # A wider radius crosses the pixel 3 px off the track, but 0.2 s after its event: a cause
+    # comes first, so that event stays unexplained; no limit on the delay takes the late one.
+    wide, wide_counts = validation.timing_attribution(ev, truth, radius_px=3.0, max_delay_s=None)
+    assert wide.size == tab.size + 1 and 800_000 not in wide["t_us"]
+    assert wide_counts["unexplained"] == 1 and wide_counts["off_track"] == 2
     late = wide[wide["t_us"] == 1_500_000]
     assert late["delay_s"][0] == pytest.approx(0.5)
 
@@ -359,6 +364,47 @@ def test_timing_bias_picks_the_nearest_of_repeated_crossings():
     tab = validation.timing_bias(ev, {"pendulum": out_and_back})
     np.testing.assert_allclose(tab["t_true_s"], [0.5, 1.5])
     np.testing.assert_allclose(tab["delay_s"], [0.02, -0.01], atol=1e-9)
+
+
+def test_timing_delays_come_from_the_crossing_that_caused_them_whatever_the_window():
+    # A source circling at 1 turn/s (radius 20 px, 126 px/s) crosses 16 pixels once a turn.
+    # Each crossing causes an ON event 10 ms after it and OFF events 0.2, 0.4, 0.6 and 0.7 s
+    # after it: the last two nearer in time to the next pass than to their own.
+    t = np.arange(0.0, 5.0005, 0.001)
+    track = {"t_s": t, "x_px": 50 + 20 * np.cos(2 * np.pi * t), "y_px": 50 + 20 * np.sin(2 * np.pi * t),
+             "flux_ph_s": np.full(t.size, 1e6)}
+    rows, expected = [], []
+    for j in range(16):
+        px = round(50 + 20 * np.cos(2 * np.pi * j / 16))
+        py = round(50 + 20 * np.sin(2 * np.pi * j / 16))
+        t_c = (np.arctan2(py - 50, px - 50) / (2 * np.pi)) % 1.0  # closest approach: radial
+        for k in range(4):
+            for delay, p in [(-0.003, 1), (0.01, 1), (0.2, 0), (0.4, 0), (0.6, 0), (0.7, 0)]:
+                rows.append((round((t_c + k + delay) * 1e6), px, py, p))
+                expected.append(round((t_c + k + delay) * 1e6) * 1e-6 - (t_c + k))
+        rows.append((round((t_c + 4.2) * 1e6), px, py, 0))  # 0.2 s after a pass the track ends before
+        expected.append(0.2)
+        if t_c > 0.3:
+            rows.append((round((t_c - 0.3) * 1e6), px, py, 0))  # before the first pass: no cause
+    ev = np.array(rows, dtype=EVENT_DTYPE)
+    ev = ev[np.argsort(ev["t"], kind="stable")]
+    tables = {}
+    for window in (0.8, 1.5, 3.0, None):
+        tab, counts = validation.timing_attribution(ev, {"disc": track}, radius_px=1.0, max_delay_s=window)
+        tables[window] = tab
+        assert counts["unexplained"] == ev.size - len(expected) and counts["attributed"] == len(expected)
+    for window in (1.5, 3.0, None):  # the same table once the window covers the slowest delay
+        assert np.array_equal(tables[window], tables[0.8])
+    np.testing.assert_allclose(np.sort(tables[0.8]["delay_s"]), np.sort(expected), atol=1e-5)  # the polygon vs the circle: 5 us
+    off = {r["group"]: r for r in validation.timing_bias_summary(tables[0.8], by="polarity")}
+    # per pixel: 0.2 s five times, 0.4, 0.6 and 0.7 s four times each: median 0.4 s (the
+    # nearest-in-time rule gave the 0.6 and 0.7 s ones to the next pass, at -0.4 and -0.3 s)
+    assert off["OFF"]["p50_s"] == pytest.approx(0.4, abs=1e-5)
+    assert off["ON"]["p50_s"] == pytest.approx((0.01 - 0.003) / 2, abs=1e-5)
+    # A window shorter than the slowest delay leaves the rest unexplained, never given to the next pass.
+    short, counts = validation.timing_attribution(ev, {"disc": track}, radius_px=1.0, max_delay_s=0.5)
+    assert short["delay_s"].min() >= -0.0031 and short["delay_s"].max() <= 0.5
+    assert counts["unexplained"] == ev.size - len(expected) + 16 * 4 * 2
 
 
 def test_timing_bias_summary():

@@ -8,6 +8,8 @@
 // deep in rng.hpp. MSVC reports __cplusplus as 199711L unless /Zc:__cplusplus; _MSVC_LANG is right.
 #if defined(_MSVC_LANG) ? (_MSVC_LANG < 201703L) : (__cplusplus < 201703L)
 #error "evstwin needs C++17 or newer: compile with -std=c++17 (or target_compile_features(... cxx_std_17))"
+// A missing header is fatal to GCC and Clang, which go on after #error (31 more errors, 149 lines).
+#include "evstwin: stopped at the line above"
 #endif
 
 #if defined(_OPENMP) && !defined(EVSTWIN_NO_OPENMP)

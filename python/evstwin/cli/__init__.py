@@ -7,15 +7,20 @@ the Python API, grouped by what the user is doing.
     evstwin characterize PRESET                                      (cli.characterize)
 
 Errors are one line on stderr (``evstwin: error: ...``) and exit status 2; nothing is
-written then.
+written then. Ctrl-C is one line (``evstwin: interrupted``) and exit status 130, at any
+moment after start-up: an output folder is then either complete or absent
+(:func:`._common.staged_folder`), and a sweep keeps its finished rows for ``--resume``.
 """
 
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
+import signal
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from .._core import __version__
 from .._extras import MissingExtraError
@@ -25,7 +30,8 @@ from . import characterize, recordings, simulate, tuning
 def build_parser() -> argparse.ArgumentParser:
     """The whole ``evstwin`` argument parser; each command module registers its own."""
     ap = argparse.ArgumentParser(
-        prog="evstwin", description="Physics-based digital twin of event cameras (DAVIS346, IMX636) for SSA."
+        prog="evstwin", description="Physics-based digital twin of event cameras (DAVIS346, IMX636, Prophesee Gen3 VGA) for "
+                                    "space-situational awareness."
     )
     ap.add_argument("--version", action="version", version=f"evstwin {__version__}")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -36,17 +42,20 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+INTERRUPTED = "evstwin: interrupted"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns the exit status (0 ok, 1 some jobs failed, 2 bad input or a
     missing extra, 130 interrupted)."""
     ap = build_parser()
-    args = ap.parse_args(argv)
     try:
+        args = ap.parse_args(argv)
         status = int(args.func(args) or 0)
         sys.stdout.flush()
         return status
-    except KeyboardInterrupt:
-        print("evstwin: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        print(f"{INTERRUPTED}{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
         return 130
     except BrokenPipeError:
         # `evstwin scenarios | head -2`: the reader left; not an error of ours. Point stdout
@@ -64,10 +73,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
 
 
+def run() -> NoReturn:
+    """The ``evstwin`` console command: :func:`main` on ``sys.argv``, then exit with its
+    status. A Ctrl-C that comes once the command has returned (its output complete), while
+    the interpreter shuts down, is held rather than raised in a finaliser, where Python
+    would print "Exception ignored in ..." and exit 0: the exit is then status 130 and one
+    line, like a Ctrl-C during the command."""
+    late: list[int] = []
+
+    def _late_interrupt() -> None:  # registered first, so it runs after every other atexit
+        if late:
+            print(INTERRUPTED, file=sys.stderr)
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    stream.flush()
+                except (OSError, ValueError):
+                    pass
+            os._exit(130)
+
+    atexit.register(_late_interrupt)
+    status = main()
+    signal.signal(signal.SIGINT, lambda signum, frame: late.append(signum))
+    sys.exit(status)
+
+
 def _one_line(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
         return f"{exc.filename}: {exc.strerror}"
     return " ".join(str(exc).split("\n")).strip() or type(exc).__name__
 
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "run"]

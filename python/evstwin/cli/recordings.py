@@ -17,6 +17,7 @@ from ._common import (
     check_output_file,
     parse_roi,
     region_args,
+    staged_folder,
 )
 
 
@@ -31,8 +32,10 @@ def register(sub: Any) -> None:
     p.add_argument("--out", required=True, help="output folder for the PNGs (created; must be empty or new)")
     p.add_argument("--t0", type=float, default=0.0,
                    help="start of the frames and x-y-t figures after the recording's first event [s] (default 0)")
-    p.add_argument("--window", type=float, default=0.033,
-                   help="length of each of the three frames [s] (default 0.033, the paper's Fig. 5)")
+    p.add_argument("--window", type=float,
+                   help="length of each of the three frames [s] (default: from the recording, so that a frame "
+                        "holds about 0.02 events per pixel, at most a third of what follows --t0; the paper's "
+                        "Fig. 5 used 0.033)")
     add_size(p)
     add_force(p)
     p.set_defaults(func=cmd_show)
@@ -61,8 +64,10 @@ def register(sub: Any) -> None:
     p.add_argument("--radius-px", type=float, default=1.0,
                    help="attribute events within this distance of the track [px] (default 1)")
     p.add_argument("--max-delay-s", type=float, default=0.3,
-                   help="longest delay attributed to a crossing [s] (default 0.3); keep it below the time "
-                        "between two passes")
+                   help="longest delay after a crossing attributed to it [s] (default 0.3): an event goes to its "
+                        "pixel's latest crossing whose source had come within --radius-px; later events, and "
+                        "events before any crossing, are counted as unexplained. The result stops changing once "
+                        "this covers the slowest response")
     add_force(p)
     p.set_defaults(func=cmd_timing)
 
@@ -93,13 +98,18 @@ def cmd_info(args: argparse.Namespace) -> int:
 def cmd_show(args: argparse.Namespace) -> int:
     from ..validation import show
 
-    if not args.window > 0:
+    if args.window is not None and not args.window > 0:
         raise ValueError(f"--window must be > 0 s; got {args.window}")
     if not args.t0 >= 0:
         raise ValueError(f"--t0 must be >= 0 s; got {args.t0}")
     check_output_dir(args.out, args.force)
-    for name, path in show(args.file, args.out, window_s=args.window, t_offset_s=args.t0, size=args.size).items():
-        print(f"{name}: {path}")
+    notes: list[str] = []
+    with staged_folder(args.out) as stage:
+        outputs = show(args.file, stage.path, window_s=args.window, t_offset_s=args.t0, size=args.size, notes=notes)
+    for note in notes:
+        print(note, file=sys.stderr)
+    for name, path in outputs.items():
+        print(f"{name}: {stage.final_of(path)}")
     return 0
 
 
@@ -154,38 +164,40 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if not all(_is_event_file(sim) for sim in args.sims):
         source = "--duration" if args.duration is not None else "the real recording's span; --duration to change"
         print(f"simulating {duration_s:.6g} s per run ({source})", file=sys.stderr)
-    out.mkdir(parents=True, exist_ok=True)
-    # Scenario SIMs are simulated (--runs seeds each, in parallel processes, a progress bar
-    # counting finished runs) and written beside the figures, so every number in
-    # compare.json points at a file.
-    runs: list[list[Path]] = [[] for _ in range(args.runs)]
-    labels: list[str] = []  # what each SIM is called in the Monte Carlo summary
-    for sim in args.sims:
-        labels.append(sim if _is_event_file(sim) else f"{sim} ({args.runs} seeds)")
-        if _is_event_file(sim):
-            for r in runs:
-                r.append(Path(sim))
-            continue
-        start = time.perf_counter()
-        results = run_many(sim, seeds=range(args.runs), duration_s=duration_s, sets=sets, progress=True)
-        stem = Path(sim).stem if sim.endswith(".toml") else sim
-        for seed, res in enumerate(results):
-            path = out / f"{stem}_seed{seed}.h5"
-            write_events(path, res.events, res.meta)
-            runs[seed].append(path)
-        print(f"simulated {sim}: {args.runs} run(s) of {duration_s:.6g} s in {time.perf_counter() - start:.1f} s",
-              file=sys.stderr)
-    comparison = compare_files(args.real, runs[0], out, bin_width=args.bin_width, size=args.size, roi=roi, mask=mask)
-    report = comparison.to_json_dict()
-    report["simulated_duration_s"] = duration_s
-    print(comparison.to_text())
-    if args.runs > 1:
-        summary = compare_runs((real_rec, dict(real_meta, path=args.real)), runs, labels, out,
-                               bin_width=args.bin_width, roi=roi, mask=mask)
-        report["monte_carlo"] = summary.to_json_dict()
-        print(summary.to_text())
-    with open(out / "compare.json", "w", encoding="utf-8") as fh:
-        json.dump(report, fh, indent=1, allow_nan=False)
+    with staged_folder(out) as stage:  # whole or not at all: Ctrl-C leaves no folder
+        # Scenario SIMs are simulated (--runs seeds each, in parallel processes, a progress bar
+        # counting finished runs) and written beside the figures, so every number in
+        # compare.json points at a file.
+        runs: list[list[Path]] = [[] for _ in range(args.runs)]
+        labels: list[str] = []  # what each SIM is called in the Monte Carlo summary
+        for sim in args.sims:
+            labels.append(sim if _is_event_file(sim) else f"{sim} ({args.runs} seeds)")
+            if _is_event_file(sim):
+                for r in runs:
+                    r.append(Path(sim))
+                continue
+            start = time.perf_counter()
+            results = run_many(sim, seeds=range(args.runs), duration_s=duration_s, sets=sets, progress=True)
+            stem = Path(sim).stem if sim.endswith(".toml") else sim
+            for seed, res in enumerate(results):
+                path = stage.path / f"{stem}_seed{seed}.h5"
+                write_events(path, res.events, res.meta)
+                runs[seed].append(path)
+            print(f"simulated {sim}: {args.runs} run(s) of {duration_s:.6g} s in {time.perf_counter() - start:.1f} s",
+                  file=sys.stderr)
+        comparison = compare_files(args.real, runs[0], stage.path, bin_width=args.bin_width, size=args.size, roi=roi, mask=mask)
+        report = comparison.to_json_dict()
+        report["simulated_duration_s"] = duration_s
+        texts = [comparison.to_text()]
+        if args.runs > 1:
+            summary = compare_runs((real_rec, dict(real_meta, path=args.real)), runs, labels, stage.path,
+                                   bin_width=args.bin_width, roi=roi, mask=mask)
+            report["monte_carlo"] = summary.to_json_dict()
+            texts.append(summary.to_text())
+        with open(stage.path / "compare.json", "w", encoding="utf-8") as fh:
+            json.dump(report, fh, indent=1, allow_nan=False)
+    for text in texts:
+        print(stage.relocated(text))
     print(f"wrote {out / 'compare.json'} and the figures in {out}")
     return 0
 
@@ -207,9 +219,10 @@ def cmd_timing(args: argparse.Namespace) -> int:
     if not args.max_delay_s > 0:
         raise ValueError(f"--max-delay-s must be > 0 s; got {args.max_delay_s}")
     out = check_output_dir(args.out, args.force)
-    _, text, png = timing_report(args.files, out, radius_px=args.radius_px, max_delay_s=args.max_delay_s)
+    with staged_folder(out) as stage:
+        _, text, png = timing_report(args.files, stage.path, radius_px=args.radius_px, max_delay_s=args.max_delay_s)
     print(text)
-    print(f"wrote {png} and {out / 'timing_bias.json'}")
+    print(f"wrote {stage.final_of(png)} and {out / 'timing_bias.json'}")
     return 0
 
 

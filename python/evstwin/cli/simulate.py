@@ -14,7 +14,9 @@ def register(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True, help="event file: .h5, .npz, .txt, .csv, .aedat4, .raw, .dat, .es")
     p.add_argument("--duration", type=float, help="sensor time [s] (default: the scenario's)")
     p.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
-    p.add_argument("--threads", type=int, help="engine threads (default: all cores)")
+    p.add_argument("--threads", type=int,
+                   help="engine threads (default: the cores this process may use, less those other processes keep "
+                        "busy as it starts; the events are the same for any count)")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                    help="override one scenario value, e.g. pixel.theta_on=0.25 (repeatable)")
     p.add_argument("--labels", action="store_true",

@@ -26,7 +26,7 @@ from ..tune import (
     sweep,
 )
 from ..tune.limits import Setup
-from ._common import add_force, add_region, add_size, check_output_dir, region_args
+from ._common import add_force, add_region, add_size, check_output_dir, region_args, resumable, staged_folder
 
 
 def register(subparsers: Any) -> None:
@@ -235,8 +235,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         mask_hot=mask_hot,
         intervals=args.intervals,
     )
-    paths = result.write(out)
-    paths.update(draw_fit(result, out))
+    with staged_folder(out) as stage:  # whole or not at all: Ctrl-C leaves no folder
+        paths = result.write(stage.path)
+        paths.update(draw_fit(result, stage.path))
+    paths = {k: stage.final_of(v) for k, v in paths.items()}
     print(result.to_text())
     print(
         f"wrote {paths['best_toml']} (evstwin simulate {paths['best_toml']} -o OUT), {paths['history']}, "
@@ -267,27 +269,28 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         check_output_dir(args.out, args.force)
         if args.force:  # overwrite: the old table would otherwise be taken for one to resume
             (Path(args.out) / "sweep.csv").unlink(missing_ok=True)
-    result = sweep(
-        args.scenario,
-        grid,
-        objective=args.objective,
-        runs=args.runs,
-        out_dir=args.out,
-        resume=args.resume,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        real=args.real,
-        target=args.target,
-        duration_s=args.duration,
-        seed=args.seed,
-        sets=args.sets,
-        progress=not args.no_progress,
-        roi=roi,
-        mask_pixels=pixels,
-        mask_hot=mask_hot,
-    )
-    if result.csv_path is not None:
-        draw_sweep(result)
+    with resumable(args.out, math.prod(len(v) for v in grid.values()) * args.runs):
+        result = sweep(
+            args.scenario,
+            grid,
+            objective=args.objective,
+            runs=args.runs,
+            out_dir=args.out,
+            resume=args.resume,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            real=args.real,
+            target=args.target,
+            duration_s=args.duration,
+            seed=args.seed,
+            sets=args.sets,
+            progress=not args.no_progress,
+            roi=roi,
+            mask_pixels=pixels,
+            mask_hot=mask_hot,
+        )
+        if result.csv_path is not None:
+            draw_sweep(result)
     print(result.to_text())
     print(f"wrote {result.csv_path}, {result.summary_path} and {result.figure_path}")
     return 1 if result.failed else 0
@@ -315,27 +318,28 @@ def _cmd_limiting(args: argparse.Namespace) -> int:
         check_output_dir(args.out, args.force)
         if args.force:
             (Path(args.out) / "sweep.csv").unlink(missing_ok=True)
-    result = limiting_magnitude(
-        args.scenario,
-        rates,
-        mags,
-        runs=args.runs,
-        criterion=(metric.strip(), threshold),
-        out_dir=args.out,
-        resume=args.resume,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        seed=args.seed,
-        sets=args.sets,
-        duration_s=args.duration,
-        progress=not args.no_progress,
-        setup=setup,
-        pointing=args.pointing,
-        declination_deg=args.declination_deg,
-    )
-    draw_limiting_magnitude(result, args.out)
-    if result.sweep.csv_path is not None:
-        draw_sweep(result.sweep)
+    with resumable(args.out, len(rates) * len(mags) * args.runs):
+        result = limiting_magnitude(
+            args.scenario,
+            rates,
+            mags,
+            runs=args.runs,
+            criterion=(metric.strip(), threshold),
+            out_dir=args.out,
+            resume=args.resume,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            seed=args.seed,
+            sets=args.sets,
+            duration_s=args.duration,
+            progress=not args.no_progress,
+            setup=setup,
+            pointing=args.pointing,
+            declination_deg=args.declination_deg,
+        )
+        draw_limiting_magnitude(result, args.out)
+        if result.sweep.csv_path is not None:
+            draw_sweep(result.sweep)
     print(result.to_text())
     print(f"wrote {result.table_path}, {result.figure_path} and the sweep in {args.out}")
     return 1 if result.sweep.failed else 0

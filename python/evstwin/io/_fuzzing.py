@@ -34,7 +34,6 @@ from .writer import write_events
 OUTCOMES = ("ok", "error", "crash", "hang", "bad")
 KINDS = ("flip", "truncate", "splice")
 
-TESTS_DATA = Path(__file__).resolve().parents[3] / "tests" / "data"
 REAL_CUTS = {"aedat4 (DAVIS346 cut)": "davis346_road_cut.aedat4", "raw (IMX636 EVT3 cut)": "imx636_cut_evt3.raw"}
 
 
@@ -48,9 +47,11 @@ def sample_events(n: int = 40, seed: int = 0) -> np.ndarray:
     return events
 
 
-def write_samples(directory: Path) -> dict[str, Path]:
+def write_samples(directory: Path, data_dir: Path | None = None) -> dict[str, Path]:
     """A small file of every format evstwin writes and reads (label -> path), with a scenario
-    and ground truth where the format holds them, plus the real cuts in tests/data if present."""
+    and ground truth where the format holds them, plus the real cuts (:data:`REAL_CUTS`) in
+    ``data_dir``, the repository's tests/data (given by the caller, who knows where the
+    repository is: an installed package does not)."""
     events = sample_events()
     meta = {
         "width": 16,
@@ -70,9 +71,9 @@ def write_samples(directory: Path) -> dict[str, Path]:
         "dat": write_events(directory / "s.dat", events, plain),
         "es": write_events(directory / "s.es", events, plain),
     }
-    for label, name in REAL_CUTS.items():
-        if (TESTS_DATA / name).is_file():
-            files[label] = TESTS_DATA / name
+    if data_dir is not None:
+        for label, name in REAL_CUTS.items():
+            files[label] = Path(data_dir) / name
     return files
 
 

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from .._signals import children_without_sigint
 from ..sensor import EVENT_DTYPE
 from ._common import LABELED_DTYPE, EventSource, FileFormat, decoded, decoding, one_line
 
@@ -161,7 +162,9 @@ class _Child:
         reader, writer = ctx.Pipe(duplex=False)
         process = ctx.Process(target=_child_main, args=(writer, fmt.name, str(path), job), daemon=True)
         try:
-            with _start_lock, _main_module_hidden():  # one start at a time: __main__ is swapped
+            # One start at a time (__main__ is swapped); the child (and the forkserver it may
+            # start) never sees a terminal's Ctrl-C: the parent stops it.
+            with _start_lock, _main_module_hidden(), children_without_sigint():
                 process.start()
         finally:
             writer.close()  # the child holds the only writing end: its death is our EOF

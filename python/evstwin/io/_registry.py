@@ -32,6 +32,8 @@ def supported_write_suffixes() -> tuple[str, ...]:
 
 def format_for(path: Path, action: str) -> FileFormat:
     """The format of ``path`` for ``action`` ('read' or 'write'), or ValueError naming the suffix."""
+    if action == "read" and path.is_dir():
+        raise ValueError(f"cannot read events: {str(path)!r} is a folder, not an event file")
     fmt = FORMATS.get(path.suffix.lower())
     usable = supported_read_suffixes() if action == "read" else supported_write_suffixes()
     if fmt is None or (fmt.open_source if action == "read" else fmt.open_encoder) is None:

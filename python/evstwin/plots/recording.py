@@ -15,9 +15,11 @@ from ..analysis import KINDS
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.colors import to_rgb
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 else:
     to_rgb = require("matplotlib.colors").to_rgb
     Figure = require("matplotlib.figure").Figure
+    MaxNLocator = require("matplotlib.ticker").MaxNLocator
 if TYPE_CHECKING:  # pragma: no cover
     pass
 from .style import (
@@ -176,8 +178,12 @@ def fig_count_histograms(
     for r, k in enumerate(KINDS):
         for c, (label, h) in enumerate(hists):
             ax = axes[r, c]
-            e = np.asarray(edges[k])
+            e = np.asarray(edges[k], dtype=np.float64)
             f = np.asarray(h[k], dtype=np.float64)
+            per_count = value_unit == "events" and _one_per_count(e)
+            if per_count:  # one bin per count: centred on it, integer ticks
+                e = e - 0.5
+                ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             ax.stairs(f, e, fill=True, color=KIND_COLOURS[k], alpha=0.85)
             if log_y:
                 positive = f[f > 0]
@@ -190,10 +196,17 @@ def fig_count_histograms(
             if c == 0:
                 ax.set_ylabel("fraction of pixels")
             ax.grid(True, alpha=0.3)
-    w = float(np.asarray(edges[KINDS[0]])[1] - np.asarray(edges[KINDS[0]])[0])
+    e0 = np.asarray(edges[KINDS[0]], dtype=np.float64)
+    w = float(e0[1] - e0[0])
     what = "count" if value_unit == "events" else "rate"
-    fig.suptitle(f"Per-pixel event {what} distribution (bin width {w:.4g} {unit})", fontsize=11)
+    binning = "one bin per count" if value_unit == "events" and _one_per_count(e0) else f"bin width {w:.4g} {unit}"
+    fig.suptitle(f"Per-pixel event {what} distribution ({binning})", fontsize=11)
     return fig
+
+
+def _one_per_count(edges: np.ndarray) -> bool:
+    """Edges 0, 1, 2, ...: bins of one count each."""
+    return edges.size >= 2 and bool(np.all(np.diff(edges) == 1.0)) and bool(np.all(edges == np.round(edges)))
 
 
 def plot_count_histograms(

@@ -18,6 +18,7 @@ else:
     Figure = require("matplotlib.figure").Figure
 if TYPE_CHECKING:  # pragma: no cover
     pass
+from ..validation.timing import SAME_VALUE_TOLERANCE, same_value_groups
 from .style import DPI, MAX_SCATTER_POINTS, OFF_COLOUR, ON_COLOUR, PathLike, save, subsample
 
 
@@ -74,6 +75,8 @@ def fig_timing_bias(
             )
         if v.size:
             lo, hi = float(v.min()), float(v.max())
+            if same_value_groups(np.array([lo, hi]))[-1] == 0:  # one value, to SAME_VALUE_TOLERANCE
+                lo = hi = float(np.median(v))
             if log and lo > 0:
                 edges = np.geomspace(lo, hi, n_bins + 1) if hi > lo else np.array([lo / 1.01, hi * 1.01])
             else:
@@ -92,12 +95,14 @@ def fig_timing_bias(
                 ax.set_xlim(lo - 0.5 * abs(lo or 1.0), hi + 0.5 * abs(hi or 1.0))
                 ax.set_xticks([lo])
                 ax.set_xticklabels([f"{lo:.4g}"])
-        if log and v.size and v.min() > 0 and v.max() > v.min():  # one brightness: linear axis
+                ax.set_xlabel(f"{xlabel} (one value, to {100 * SAME_VALUE_TOLERANCE:g} %)")
+        if log and v.size and lo > 0 and hi > lo:  # one brightness: linear axis
             ax.set_xscale("log")
-        elif v.size and v.max() > v.min():
+        elif v.size and hi > lo:
             ax.ticklabel_format(axis="x", useOffset=False)  # 1e-12+7.88 helps nobody
         ax.axhline(0.0, color="grey", linewidth=0.6)
-        ax.set_xlabel(xlabel)
+        if not ax.get_xlabel():
+            ax.set_xlabel(xlabel)
         ax.grid(True, alpha=0.3)
     handles, labels = axes[0].get_legend_handles_labels()
     if handles:  # one legend for both panels, below them

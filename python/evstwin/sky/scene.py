@@ -249,7 +249,8 @@ def _attitude(ctx: _Context, p: dict[str, Any], sats: list[_Satellite], t: np.nd
         sat = _pointing_target(p, sats)
         at = float(p.get("at_s", 0.0))
         if mode != "target" and not 0.0 <= at <= ctx.t_end:
-            raise ValueError(f"pointing.at_s must be in [0, {ctx.t_end:g}] s (the run); got {at!r}")
+            raise ValueError(f"pointing.at_s must be in [0, {ctx.t_end:g}] s (the run); got {at!r}: aim within the "
+                             f"run (--set pointing.at_s=SECONDS) or simulate past it (--duration over {at:g})")
         return orbit.observe(sat.elements, ctx.site, ctx.start, times if mode == "target" else [at],
                              ctx.ut1_utc_s).direction
 

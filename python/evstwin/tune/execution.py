@@ -85,8 +85,11 @@ _WORKER_CONTEXT: _Context | None = None
 
 
 def _install_context(ctx: _Context) -> None:
+    from .._signals import ignore_sigint
+
     global _WORKER_CONTEXT
     _WORKER_CONTEXT = ctx
+    ignore_sigint()  # the parent stops the workers on Ctrl-C (kill)
 
 
 def _run_installed_job(overrides: dict[str, Any], seed: int) -> dict[str, float]:
@@ -97,6 +100,14 @@ def _run_installed_job(overrides: dict[str, Any], seed: int) -> dict[str, float]
 
 def _error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}"
+
+
+def _submit(pool: Any, job: _Job) -> Any:
+    """``pool.submit`` of one job; a worker it starts never sees a terminal's Ctrl-C."""
+    from .._signals import children_without_sigint
+
+    with children_without_sigint():
+        return pool.submit(_run_installed_job, job.overrides, job.seed)
 
 
 class LocalExecutor:
@@ -125,15 +136,18 @@ class LocalExecutor:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
+        from .._signals import children_without_sigint
+
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         self.close()
         self._children_before = set(multiprocessing.active_children())
-        self._pool = ProcessPoolExecutor(
-            max_workers=self.workers,
-            mp_context=multiprocessing.get_context(method),
-            initializer=_install_context,
-            initargs=(ctx,),
-        )
+        with children_without_sigint():  # and the workers started at the submits (_submit)
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=multiprocessing.get_context(method),
+                initializer=_install_context,
+                initargs=(ctx,),
+            )
         self._token = ctx.token
         return self._pool
 
@@ -157,7 +171,7 @@ class LocalExecutor:
             # machine), and a Ctrl-C landing then must stop them too, not leave the interpreter
             # waiting at exit for jobs of a minute or more.
             for i, j in enumerate(jobs):
-                futures[pool.submit(_run_installed_job, j.overrides, j.seed)] = i
+                futures[_submit(pool, j)] = i
             while futures:
                 done, _ = wait(list(futures), return_when=FIRST_COMPLETED)
                 retry: list[int] = []
@@ -206,7 +220,7 @@ class LocalExecutor:
                     futures.clear()
                     pool = self._new_pool(ctx)
                 for i in retry:
-                    futures[pool.submit(_run_installed_job, jobs[i].overrides, jobs[i].seed)] = i
+                    futures[_submit(pool, jobs[i])] = i
             ok = True
         finally:
             if not ok:  # Ctrl-C, or the caller stopped early: no worker may outlive us
@@ -219,25 +233,11 @@ class LocalExecutor:
         """Stop now: terminate the worker processes (their jobs are lost) and drop the pool.
         SIGINT that reaches only this process would otherwise leave the workers finishing
         their jobs, and the interpreter waiting for them at exit."""
-        import multiprocessing
+        from ..simulate import stop_workers
 
-        pool = self._pool
-        if pool is None:
+        if self._pool is None:
             return
-        # The pool's workers (no public handle on them) and any child started since the pool
-        # was made: a worker still being spawned when Ctrl-C came is not in the pool's table
-        # yet, and the interpreter joins every child at exit, job or no job.
-        processes = list(getattr(pool, "_processes", {}).values())
-        processes += [p for p in multiprocessing.active_children()
-                      if p not in processes and p not in self._children_before]
-        for proc in processes:
-            if proc.is_alive():
-                proc.terminate()
-        for proc in processes:
-            proc.join(timeout=5)
-            if proc.is_alive():
-                proc.kill()
-        pool.shutdown(wait=False)
+        stop_workers(self._pool, self._children_before)
         self._pool = None
         self._token = None
 

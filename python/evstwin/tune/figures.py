@@ -68,6 +68,38 @@ _LABELS = {
     "noise_rate_per_px_hz": "noise rate\n(events/s per pixel)",
     "distance": "comparison distance",
 }
+_FIELDS = {
+    "wx_arcsec_s": "angular rate along x (arcsec/s)",
+    "wy_arcsec_s": "angular rate along y (arcsec/s)",
+    "vx_px_s": "velocity along x (px/s)",
+    "vy_px_s": "velocity along y (px/s)",
+    "magnitude": "magnitude (V)",
+    "flux_ph_s": "flux (photons/s)",
+    "x0_px": "start x (px)",
+    "y0_px": "start y (px)",
+    "x_px": "x (px)",
+    "y_px": "y (px)",
+    "radius_px": "circle radius (px)",
+    "period_s": "period (s)",
+    "focal_length_m": "focal length (m)",
+    "f_number": "f-number",
+    "extra_blur_sigma_px": "extra blur, sigma (px)",
+    "sky_mag_per_arcsec2": "sky brightness (V mag/arcsec^2)",
+    "photon_rate_ph_s": "background (photons/s per pixel)",
+    "rate_hz": "sampling rate (Hz)",
+    "duration_s": "duration (s)",
+}
+"""Names a user reads for the last part of a scenario key (``targets.0.wx_arcsec_s``)."""
+_SECTIONS = {"optics": "optics", "background": "background", "sampling": "sampling", "sensor": "sensor",
+             "pixel": "pixel", "star_field": "star field", "biases": "bias"}
+_BOUNDS: dict[str, tuple[float, float]] = {
+    "track_fraction": (0.0, 1.0), "chance_fraction": (0.0, 1.0), "active_px_fraction": (0.0, 1.0),
+    "fraction": (0.0, 1.0), "excess_fraction": (-np.inf, 1.0),
+    "snr": (0.0, np.inf), "distance": (0.0, np.inf), "track_px": (0.0, np.inf), "sim_events": (0.0, np.inf),
+    "total_rel_error": (-1.0, np.inf), "on_off_ratio_rel_error": (-1.0, np.inf),
+}
+"""What each metric can be, where less than the real line (error bars are clipped to it):
+shares lie in [0, 1], rates and counts are >= 0, relative errors >= -1."""
 _UNITS = (("_e_per_s", "e-/s"), ("_arcsec_s", "arcsec/s"), ("_px_s", "px/s"), ("_ph_s", "photons/s"),
           ("_hz", "Hz"), ("_px", "px"), ("_s", "s"), ("_m", "m"))
 
@@ -77,11 +109,38 @@ def readable(key: str) -> str:
     "ON threshold theta_on (log units)"); unknown names get the unit their suffix says."""
     if key in _LABELS:
         return _LABELS[key]
-    name = key.split(".")[-1]
+    parts = key.split(".")
+    name = parts[-1]
+    where = ""
+    if len(parts) >= 3 and parts[0] in ("targets", "stars") and parts[1].isdigit():
+        where = f"{'target' if parts[0] == 'targets' else 'star'} {parts[1]}: "
+    elif len(parts) == 2 and parts[0] in _SECTIONS:
+        where = f"{_SECTIONS[parts[0]]}: " if name not in _FIELDS else ""
+    if name in _FIELDS:
+        return where + _FIELDS[name]
     for suffix, unit in _UNITS:
         if name.endswith(suffix):
-            return f"{name[: -len(suffix)].replace('_', ' ')} ({unit})"
-    return name.replace("_", " ")
+            return f"{where}{name[: -len(suffix)].replace('_', ' ')} ({unit})"
+    return where + name.replace("_", " ")
+
+
+def metric_bounds(metric: str) -> tuple[float, float]:
+    """The range a metric can take (``_BOUNDS``; rates ``*_hz`` and ``*_per_s`` are >= 0)."""
+    if metric in _BOUNDS:
+        return _BOUNDS[metric]
+    if metric.endswith(("_hz", "_per_s")):
+        return 0.0, np.inf
+    return -np.inf, np.inf
+
+
+def clipped_error(mean: np.ndarray, std: np.ndarray, metric: str) -> np.ndarray:
+    """Asymmetric error bars (2, n) of mean +- std, cut where the metric cannot go (a share's
+    bar stops at 1.0, a rate's at 0): a missing std is no bar."""
+    lo, hi = metric_bounds(metric)
+    e = np.where(np.isfinite(std), std, 0.0)
+    below = np.clip(np.minimum(e, mean - lo), 0.0, None)
+    above = np.clip(np.minimum(e, hi - mean), 0.0, None)
+    return np.vstack([np.where(np.isfinite(below), below, 0.0), np.where(np.isfinite(above), above, 0.0)])
 
 
 def _axis_values(values: Sequence[Any]) -> tuple[np.ndarray, bool, list[str]]:
@@ -92,8 +151,9 @@ def _axis_values(values: Sequence[Any]) -> tuple[np.ndarray, bool, list[str]]:
 
 
 def plot_sweep(result: SweepResult, path: PathLike) -> Path:
-    """Headline metrics (mean, error bar = sample std) against the first grid parameter, one
-    line per value of the other parameters (the second's, in a 2-D grid)."""
+    """Headline metrics (mean, error bar = sample std, cut at what the metric can be) against
+    the first grid parameter, one line per value of the other parameters (the second's, in a
+    2-D grid)."""
     Figure = require("matplotlib.figure").Figure
 
     from .. import plots
@@ -118,7 +178,7 @@ def plot_sweep(result: SweepResult, path: PathLike) -> Path:
             y = np.array([r[f"mean_{m}"] for r in rs], dtype=float)[order]
             e = np.array([r[f"std_{m}"] for r in rs], dtype=float)[order]
             label = ", ".join(f"{readable(k)} = {v}" for k, v in zip(rest, gkey)) or None
-            ax.errorbar(x, y, yerr=np.where(np.isfinite(e), e, 0.0), marker="o", ms=4, capsize=3, label=label)
+            ax.errorbar(x, y, yerr=clipped_error(y, e, m), marker="o", ms=4, capsize=3, label=label)
         if numeric and np.all(xs_all > 0) and xs_all.max() / xs_all.min() > 50:
             ax.set_xscale("log")
         if not numeric:

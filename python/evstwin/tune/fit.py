@@ -491,7 +491,7 @@ def fit(
     executor = make_executor(scheduler, workers)
     if progress:
         print(announce(f"fit ({sampler}, up to {budget} trials x {runs_per_trial} seed(s))", budget * runs_per_trial,
-                       build(objective.prepare(base)), executor), file=sys.stderr)
+                       build(objective.prepare(base), duration_s=objective.duration_s), executor), file=sys.stderr)
     bar = _bar(budget, f"fit ({sampler})", progress, unit="trial")
     best = [math.inf]
     residuals: dict[int, np.ndarray] = {}  # trial number -> chi-square residuals ('ls' reads them)

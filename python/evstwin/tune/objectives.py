@@ -17,7 +17,8 @@ def _duration_of(events: np.ndarray, meta: Mapping[str, Any]) -> float:
         return float(d)
     if events.size == 0:
         raise ValueError("the real recording has no events and no duration_s")
-    return (int(events["t"][-1]) - int(events["t"][0])) * 1e-6
+    # A division, correctly rounded: 2359945 us is 2.359945 s, where * 1e-6 gave 2.3599449999999997.
+    return (int(events["t"][-1]) - int(events["t"][0])) / 1e6
 
 
 class Objective:

@@ -289,7 +289,8 @@ def sweep(
     ctx = _Context(scenario=base, objective=obj)
     executor = make_executor(scheduler, workers) if jobs else None
     if progress and jobs:
-        print(announce(f"sweep ({obj.name})", len(jobs), build(obj.prepare(base)), executor, job_seconds),
+        print(announce(f"sweep ({obj.name})", len(jobs), build(obj.prepare(base), duration_s=obj.duration_s), executor,
+                       job_seconds),
               file=sys.stderr)
     bar = _bar(len(points) * runs, f"sweep ({obj.name})", progress, initial=len(done))
     try:

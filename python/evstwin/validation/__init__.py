@@ -34,7 +34,13 @@ from .comparison import DISTANCE_FORMULA, Comparison, PathLike, Recording, SimCo
 from .montecarlo import MonteCarloSummary, aggregate
 from .noise import NoiseCalibration, calibrate_noise
 from .report import compare_files, compare_runs, format_info, info, show, timing_report
-from .timing import TruthTrack, format_timing_bias_summary, timing_bias, timing_bias_summary
+from .timing import (
+    TruthTrack,
+    format_timing_bias_summary,
+    timing_attribution,
+    timing_bias,
+    timing_bias_summary,
+)
 
 __all__ = [
     "Comparison",
@@ -55,6 +61,7 @@ __all__ = [
     "info",
     "nice_bin_s",
     "show",
+    "timing_attribution",
     "timing_bias",
     "timing_bias_summary",
     "timing_report",

@@ -9,7 +9,8 @@ rate) plus the events of the figures' time slice: memory does not grow with its 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -186,17 +187,20 @@ def scan_recording(
     path: PathLike,
     size: tuple[int, int] | None,
     t_offset_s: float,
-    span_s: float,
+    span_s: float | None,
     *,
     chunk: int | None = None,
     rate_bin_us: int | None = None,
     roi: RoiLike | None = None,
+    span_events: Callable[[Mapping[str, Any]], int] | None = None,
 ) -> tuple[analysis.CountedRecording, dict[str, Any], np.ndarray]:
     """One pass over a recording, ``chunk`` events (default :data:`READ_CHUNK`) at a time:
     its :class:`~evstwin.analysis.CountedRecording` (event-rate bins of ``rate_bin_us``,
     default chosen as it goes), its meta (with the size found from the events where the file
     has none), and the events of the figures' slice [first + t_offset_s, first + t_offset_s +
     span_s), preceded by the first event (the figures measure their offset from it).
+    ``span_s`` None: the slice is instead the first ``span_events(meta)`` events from
+    first + t_offset_s (memory bounded whatever the recording's length).
 
     roi: cut every chunk to this rectangle of the file's sensor and shift it to the ROI's
     coordinates (the result is a ``w x h`` recording; ``meta['roi']`` says which), after
@@ -216,6 +220,7 @@ def scan_recording(
             cut = r
         meta["width"], meta["height"] = r.width, r.height
     rec = analysis.CountedRecording.empty(meta.get("width"), meta.get("height"), rate_bin_us)
+    wanted = span_events(meta) if span_s is None and span_events is not None else 0
     parts: list[np.ndarray] = []
     lo = hi = 0
     first_us: int | None = None  # the whole recording's span, before the cut
@@ -230,11 +235,16 @@ def scan_recording(
             continue
         if rec.t_start_us is None:
             lo = int(ev["t"][0]) + round(t_offset_s * 1e6)
-            hi = lo + round(span_s * 1e6)
+            hi = lo + round((span_s or 0.0) * 1e6)
             if int(ev["t"][0]) < lo:
                 parts.append(ev[:1])
         rec.add(ev)
-        if span_s > 0:
+        if span_s is None:
+            if wanted > 0:
+                take = ev[ev["t"] >= lo][:wanted]
+                parts.append(take)
+                wanted -= len(take)
+        elif span_s > 0:
             parts.append(ev[(ev["t"] >= lo) & (ev["t"] < hi)])
     meta = dict(stream.meta)  # with the size found from the events where the file has none
     meta.setdefault("path", str(path))
@@ -294,28 +304,73 @@ def _info_text(meta: Mapping[str, Any], rec: analysis.CountedRecording, duration
     return "\n".join(lines)
 
 
+FRAME_EVENTS_PER_PIXEL = 0.02
+""":func:`show`'s default frame length holds about this many events per pixel of the sensor
+(at least :data:`FRAME_EVENTS_MIN`): 1,800 on a DAVIS346, where the paper's 33 ms held a
+handful of a slow GEO target's events."""
+FRAME_EVENTS_MIN = 1000
+SMALL_COUNTS = 20
+"""Per-pixel counts up to this are drawn one bin per count (centred on it) by :func:`show`;
+above, the paper's 2-event bins."""
+
+
 def show(
     path: PathLike,
     out_dir: PathLike,
-    bin_width: float = 2,
+    bin_width: float | None = None,
     *,
-    window_s: float = 0.033,
+    window_s: float | None = None,
     n_windows: int = 3,
     t_offset_s: float = 0.0,
     rate_bin_s: float | None = None,
     size: tuple[int, int] | None = None,
+    notes: list[str] | None = None,
 ) -> dict[str, str]:
     """Draw one recording's figures into ``out_dir``: frames.png, xyt.png, histograms.png and
-    event_rate.png (options as in :func:`compare_files`). Returns {figure: path}."""
+    event_rate.png (options as in :func:`compare_files`). Returns {figure: path}.
+
+    window_s: each frame's length [s]; None: from the recording, so that a frame holds about
+        :data:`FRAME_EVENTS_PER_PIXEL` events per pixel where it starts (a rounded length,
+        the frames together at most what is left of the recording after ``t_offset_s``).
+    bin_width: the count histograms' bin width [events]; None: one bin per count up to
+        :data:`SMALL_COUNTS`, else the paper's 2.
+    t_offset_s: must start before the recording's last event (ValueError otherwise).
+    notes: where given, the choices made for the defaults are appended, as sentences."""
     from .. import plots
 
-    rec, meta, events = scan_recording(path, size, t_offset_s, window_s * n_windows,
-                                       rate_bin_us=None if rate_bin_s is None else analysis._bin_us(rate_bin_s))
+    def frame_events(meta: Mapping[str, Any]) -> int:
+        pixels = int(meta.get("width") or 0) * int(meta.get("height") or 0)
+        return n_windows * max(FRAME_EVENTS_MIN, round(FRAME_EVENTS_PER_PIXEL * pixels))
+
+    rec, meta, events = scan_recording(path, size, t_offset_s, None if window_s is None else window_s * n_windows,
+                                       rate_bin_us=None if rate_bin_s is None else analysis._bin_us(rate_bin_s),
+                                       span_events=frame_events)
+    span = _span_s(rec) or 0.0
+    last_us = 0 if rec.t_start_us is None else rec.t_end_us - rec.t_start_us
+    if t_offset_s > 0 and round(t_offset_s * 1e6) > last_us:
+        raise ValueError(f"--t0 {t_offset_s:g} s is past the end of {path}: its events span {last_us / 1e6:.6g} s "
+                         f"from the first; give --t0 below that")
+    if window_s is None and rec.t_start_us is None:  # no events: nothing to choose from
+        window_s = 0.033
+    if window_s is None:
+        assert rec.t_start_us is not None
+        lo = rec.t_start_us + round(t_offset_s * 1e6)
+        after = events[events["t"] >= lo]
+        left_s = max(span - t_offset_s, 1e-6)
+        n = after.size  # the span that holds them at their rate: n events over n - 1 gaps
+        reach_s = (int(after["t"][-1]) - lo) * 1e-6 * n / (n - 1) if n >= frame_events(meta) else left_s
+        window_s = _round_down_nice(max(min(reach_s, left_s) / n_windows, 1e-6))
+        events = events[events["t"] < lo + round(window_s * n_windows * 1e6)]
+        if notes is not None:
+            notes.append(f"frames: {n_windows} of {window_s:g} s from --t0 (about {FRAME_EVENTS_PER_PIXEL:g} events "
+                         f"per pixel each, at most the recording's span; --window to change)")
     width, height = rec.width, rec.height
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     recs = [(_label(str(meta["path"])), events)]
     counts = rec.pixel_counts()
+    if bin_width is None:
+        bin_width = 1 if int(counts["total"].max(initial=0)) <= SMALL_COUNTS else 2
     hists = {}
     edges = {}
     for k in KINDS:
@@ -325,6 +380,12 @@ def show(
                                  [rec.event_rate(bin_s)], _span_s(rec))
     outputs["histograms"] = plots.plot_count_histograms(edges, [(recs[0][0], hists)], out / "histograms.png")
     return {k: str(v) for k, v in outputs.items()}
+
+
+def _round_down_nice(x: float) -> float:
+    """``x`` (> 0) rounded down to two significant digits (0.0166 -> 0.016, 3.33 -> 3.3)."""
+    step = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return float(f"{math.floor(x / step * (1 + 1e-12)) * step:.12g}")
 
 
 def _recording_figures(
@@ -364,36 +425,49 @@ def timing_report(
     labels: Sequence[str] | None = None,
 ) -> tuple[dict[str, Any], str, Path]:
     """Event-timing bias of simulated files with ground truth (``.h5``/``.npz``): the
-    :func:`timing_bias` table of each file, summarised per target, polarity, flux and speed
-    with ON and OFF apart, written to ``out_dir/timing_bias.json`` and drawn as
+    :func:`timing_attribution` table of each file, summarised per target, polarity, flux and
+    speed with ON and OFF apart, with the events no crossing explains (count and share, key
+    'events'), written to ``out_dir/timing_bias.json`` and drawn as
     ``timing_bias.png`` (one file) or ``timing_by_setting.png`` (one row per file, called
     ``labels[i]``, default the file's name and the thresholds its scenario sets). Every file is read and checked before ``out_dir``
     is created. Returns (report, text, figure path)."""
     from .. import plots
     from ..io import read_events
-    from .timing import format_timing_bias_summary, timing_bias, timing_bias_summary
+    from .timing import (
+        format_timing_bias_summary,
+        format_unexplained,
+        timing_attribution,
+        timing_bias_summary,
+    )
 
     if not radius_px > 0:
         raise ValueError(f"radius_px must be > 0 px; got {radius_px}")
     if not max_delay_s > 0:
         raise ValueError(f"max_delay_s must be > 0 s; got {max_delay_s}")
     tables: list[tuple[str, np.ndarray]] = []
+    all_counts: list[dict[str, int]] = []
     for i, path in enumerate(files):
         events, meta = read_events(path)
         truth = meta.get("truth") or {}
         if not truth:
             raise ValueError(f"{path} holds no ground truth (/truth): simulate to .h5 or .npz first")
         label = labels[i] if labels is not None else _setting_label(path, meta)
-        tables.append((label, timing_bias(events, truth, radius_px=radius_px, max_abs_delay_s=max_delay_s)))
+        table, counts = timing_attribution(events, truth, radius_px=radius_px, max_delay_s=max_delay_s)
+        tables.append((label, table))
+        all_counts.append(counts)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {}
     text: list[str] = []
-    for label, table in tables:
-        rows = {by: timing_bias_summary(table, by=by, split_polarity=True) for by in ("target", "polarity", "flux", "speed")}
+    for (label, table), counts in zip(tables, all_counts):
+        rows: dict[str, Any] = {by: timing_bias_summary(table, by=by, split_polarity=True)
+                                for by in ("target", "polarity", "flux", "speed")}
+        on_track = counts["attributed"] + counts["unexplained"]
+        rows["events"] = dict(counts, unexplained_share=counts["unexplained"] / on_track if on_track else 0.0,
+                              radius_px=radius_px, max_delay_s=max_delay_s)
         report[label] = rows
-        text.append(f"== {label}: {len(table)} events attributed to a crossing")
-        text.extend(format_timing_bias_summary(r, by=by) + "\n" for by, r in rows.items())
+        text.append(f"== {label}: {format_unexplained(counts, max_delay_s)}")
+        text.extend(format_timing_bias_summary(r, by=by) + "\n" for by, r in rows.items() if by != "events")
     if len(tables) == 1:
         png = plots.plot_timing_bias(tables[0][1], out / "timing_bias.png")
         report = report[tables[0][0]]

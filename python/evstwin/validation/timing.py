@@ -14,13 +14,15 @@ TruthTrack = Mapping[str, np.ndarray]
 
 def _crossings(
     name_index: int, track: TruthTrack, radius_px: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Closest approaches of one sampled track to every pixel centre within radius_px.
 
     The track is linear between samples. A pixel's closest approach on a segment is the foot
     of the perpendicular from its centre; it counts when it falls inside the segment
     (0 <= u < 1) and lies within radius_px. Stationary segments have no crossing.
-    Returns (x, y, t_s, distance_px, flux_ph_s, speed_px_s, target index) arrays.
+    Returns (x, y, t_s, distance_px, flux_ph_s, speed_px_s, target index, lead_s) arrays;
+    lead_s is how long before its closest approach the source came within radius_px of the
+    pixel centre (sqrt(radius^2 - distance^2) / speed).
     """
     t = np.asarray(track["t_s"], dtype=np.float64)
     xs = np.asarray(track["x_px"], dtype=np.float64)
@@ -39,7 +41,7 @@ def _crossings(
     seg = np.nonzero((len2 > 0) & (dt > 0))[0]
     empty = np.zeros(0)
     if seg.size == 0:
-        return (empty.astype(np.int64),) * 2 + (empty,) * 4 + (empty.astype(np.int64),)  # type: ignore[return-value]
+        return (empty.astype(np.int64),) * 2 + (empty,) * 4 + (empty.astype(np.int64), empty)  # type: ignore[return-value]
     xmin = np.floor(np.minimum(x0, x1)[seg] - radius_px).astype(np.int64)
     xmax = np.ceil(np.maximum(x0, x1)[seg] + radius_px).astype(np.int64)
     ymin = np.floor(np.minimum(y0, y1)[seg] - radius_px).astype(np.int64)
@@ -59,103 +61,126 @@ def _crossings(
     tc = t[s] + u * dt[s]
     fc = flux[s] + u * (flux[s + 1] - flux[s])
     speed = np.sqrt(len2[s]) / dt[s]
-    return px, py, tc, dist, fc, speed, np.full(px.size, name_index, dtype=np.int64)
+    lead = np.sqrt(np.maximum(radius_px * radius_px - dist * dist, 0.0)) / speed
+    return px, py, tc, dist, fc, speed, np.full(px.size, name_index, dtype=np.int64), lead
+
+
+TIMING_DTYPE_FIELDS = [("t_us", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1"), ("t_true_s", "<f8"),
+                      ("delay_s", "<f8"), ("distance_px", "<f8"), ("flux_ph_s", "<f8"), ("speed_px_s", "<f8")]
 
 
 def timing_bias(
     events: np.ndarray,
     truth: Mapping[str, TruthTrack],
     radius_px: float = 1.0,
-    max_abs_delay_s: float | None = 0.1,
+    max_delay_s: float | None = 0.3,
 ) -> np.ndarray:
-    """Delay of each event after the true crossing of a source over its pixel.
+    """Delay of each event after the crossing of a source over its pixel that caused it:
+    the table of :func:`timing_attribution` (its counts dropped)."""
+    return timing_attribution(events, truth, radius_px, max_delay_s)[0]
+
+
+def timing_attribution(
+    events: np.ndarray,
+    truth: Mapping[str, TruthTrack],
+    radius_px: float = 1.0,
+    max_delay_s: float | None = 0.3,
+) -> tuple[np.ndarray, dict[str, int]]:
+    """Delay of each event after the crossing of a source over its pixel that caused it, and
+    how many events no crossing explains.
 
     truth: target name -> {'t_s', 'x_px', 'y_px', 'flux_ph_s'}: the sampled track [s, px] of
         the source centre (pixel (x, y) covers [x - 0.5, x + 0.5] x [y - 0.5, y + 0.5], its
         centre at integer coordinates) and its photon flux [photons/s] (scalar or per
         sample). The track is linear between samples.
-    radius_px: an event is attributed to a crossing of its pixel when the track's closest
-        approach to the pixel centre is within this distance [px] (default 1 px).
-    max_abs_delay_s: ... and when |delay| <= this [s] (default 0.1 s; None: no limit). Keep it
-        below the time between two passes of a source over one pixel.
+    radius_px: a source crosses a pixel when its track passes within this distance of the
+        pixel centre [px] (default 1 px); it lights the pixel from when it comes that close.
+    max_delay_s: the longest delay after the closest approach attributed to a crossing [s]
+        (default 0.3 s; None: until the pixel's next crossing).
 
-    The true crossing time is when the interpolated track passes closest to the pixel centre;
-    each event takes the crossing of its pixel nearest in time (any target), and its delay is
-    event time - crossing time [s] (negative: the event came first). Events with no crossing
-    are left out; so are crossings by a stationary source (no crossing time).
+    A crossing's time is when the interpolated track passes closest to the pixel centre. An
+    event is caused by the pixel's latest crossing whose source had come within
+    ``radius_px`` of the pixel centre by the event's time (any target): causes come first, so
+    an event is never given to a later pass, and its delay (event time - crossing time [s])
+    is at least minus the time the source takes from that radius to its closest approach.
+    An event more than ``max_delay_s`` after that crossing, or before any, is unexplained;
+    so is an event on a pixel no moving source crossed. Since a later crossing takes over
+    from the time its source comes close, the table stops changing once ``max_delay_s``
+    covers the slowest response (or the time between passes, whichever is shorter).
 
-    Returns a structured array, one row per attributed event, sorted by event time: target
-    (name), t_us, x, y, p (the event), t_true_s, delay_s, distance_px (closest approach),
-    flux_ph_s and speed_px_s (of the source at the crossing).
+    Returns (table, counts). The table has one row per attributed event, sorted by event
+    time: target (name), t_us, x, y, p (the event), t_true_s, delay_s, distance_px (closest
+    approach), flux_ph_s and speed_px_s (of the source at the crossing). counts: 'events'
+    (all), 'attributed', 'unexplained' (on a crossed pixel, but before its first crossing
+    or more than ``max_delay_s`` after one) and 'off_track' (on pixels no source crossed).
     """
     events = analysis._check_events(events)
     names = list(truth.keys())
     parts = [_crossings(i, truth[n], float(radius_px)) for i, n in enumerate(names)]
     name_len = max([len(str(n)) for n in names] + [1])
-    dtype = np.dtype(
-        [
-            ("target", f"U{name_len}"),
-            ("t_us", "<i8"),
-            ("x", "<u2"),
-            ("y", "<u2"),
-            ("p", "u1"),
-            ("t_true_s", "<f8"),
-            ("delay_s", "<f8"),
-            ("distance_px", "<f8"),
-            ("flux_ph_s", "<f8"),
-            ("speed_px_s", "<f8"),
-        ]
-    )
+    dtype = np.dtype([("target", f"U{name_len}"), *TIMING_DTYPE_FIELDS])
+    counts = {"events": int(events.size), "attributed": 0, "unexplained": 0, "off_track": int(events.size)}
     if not parts or events.size == 0:
-        return np.zeros(0, dtype=dtype)
-    cx, cy, ct, cd, cf, cs, ci = (np.concatenate([p[j] for p in parts]) for j in range(7))
+        return np.zeros(0, dtype=dtype), counts
+    cx, cy, ct, cd, cf, cs, ci, cl = (np.concatenate([p[j] for p in parts]) for j in range(8))
     if ct.size == 0:
-        return np.zeros(0, dtype=dtype)
+        return np.zeros(0, dtype=dtype), counts
     ex = events["x"].astype(np.int64)
     ey = events["y"].astype(np.int64)
     et_s = events["t"].astype(np.int64) * 1e-6
     width = int(max(cx.max(), ex.max())) + 1
     ckey = cy * width + cx
     ekey = ey * width + ex
-    # One sorted int64 key per (pixel, time [us]), so that searchsorted finds, for each
-    # event, the crossings of its pixel just before and after it.
-    t0 = min(float(ct.min()), float(et_s.min()))
-    ct_us = np.floor((ct - t0) * 1e6).astype(np.int64)
+    # One sorted int64 key per (pixel, time [us]) of each crossing's start (its source within
+    # radius_px of the pixel centre), so that searchsorted finds, for each event, the latest
+    # crossing of its pixel that had started by then.
+    t_start = ct - cl
+    t0 = min(float(t_start.min()), float(et_s.min()))
+    cs_us = np.floor((t_start - t0) * 1e6).astype(np.int64)
     et_us = np.floor((et_s - t0) * 1e6).astype(np.int64)
-    span = int(max(ct_us.max(), et_us.max())) + 2
+    span = int(max(cs_us.max(), et_us.max())) + 2
     if int(max(ckey.max(), ekey.max())) + 1 > (2**62) // span:
         raise ValueError("time span x sensor size too large for the crossing index")
-    ccomp = ckey * span + ct_us
+    ccomp = ckey * span + cs_us
     order = np.argsort(ccomp, kind="stable")
-    ccomp, ckey, ct = ccomp[order], ckey[order], ct[order]
-    ecomp = ekey * span + et_us
-    hi = np.searchsorted(ccomp, ecomp, side="right")
-    lo = hi - 1
-    nc = ccomp.size
-    lo_ok = (lo >= 0) & (ckey[np.clip(lo, 0, nc - 1)] == ekey)
-    hi_ok = (hi < nc) & (ckey[np.clip(hi, 0, nc - 1)] == ekey)
-    d_lo = np.where(lo_ok, np.abs(et_s - ct[np.clip(lo, 0, nc - 1)]), np.inf)
-    d_hi = np.where(hi_ok, np.abs(et_s - ct[np.clip(hi, 0, nc - 1)]), np.inf)
-    pick = np.where(d_hi < d_lo, hi, lo)
-    best = np.minimum(d_lo, d_hi)
-    ok = np.isfinite(best)
-    if max_abs_delay_s is not None:
-        ok &= best <= max_abs_delay_s
+    ccomp_sorted, ckey_sorted = ccomp[order], ckey[order]
+    before = np.searchsorted(ccomp_sorted, ekey * span + et_us, side="right") - 1
+    nc = ccomp_sorted.size
+    crossed_pixels = np.unique(ckey)
+    on_track = np.isin(ekey, crossed_pixels)
+    has = (before >= 0) & (ckey_sorted[np.clip(before, 0, nc - 1)] == ekey)
+    c_all = order[np.clip(before, 0, nc - 1)]
+    delay_all = et_s - ct[c_all]
+    ok = has & (delay_all >= -cl[c_all] - 1e-6)  # started, to the microsecond of the key
+    if max_delay_s is not None:
+        ok &= delay_all <= max_delay_s
     ev = np.nonzero(ok)[0]
-    c = order[pick[ev]]
+    c = c_all[ev]
     out = np.zeros(ev.size, dtype=dtype)
     out["target"] = np.asarray(names, dtype=object)[ci[c]].astype(str) if ev.size else []
     out["t_us"] = events["t"][ev]
     out["x"] = events["x"][ev]
     out["y"] = events["y"][ev]
     out["p"] = events["p"][ev]
-    t_true = np.concatenate([p[2] for p in parts])[c]
-    out["t_true_s"] = t_true
-    out["delay_s"] = et_s[ev] - t_true
+    out["t_true_s"] = ct[c]
+    out["delay_s"] = delay_all[ev]
     out["distance_px"] = cd[c]
     out["flux_ph_s"] = cf[c]
     out["speed_px_s"] = cs[c]
-    return out
+    counts.update(attributed=int(ev.size), unexplained=int(on_track.sum()) - int(ev.size),
+                  off_track=int((~on_track).sum()))
+    return out, counts
+
+
+def format_unexplained(counts: Mapping[str, int], max_delay_s: float | None) -> str:
+    """One line: how many events a crossing explains, and how many it does not (count and
+    share of the events on crossed pixels)."""
+    on_track = counts["attributed"] + counts["unexplained"]
+    share = counts["unexplained"] / on_track if on_track else 0.0
+    window = "" if max_delay_s is None else f" or over {max_delay_s:g} s after one"
+    return (f"{counts['attributed']} events attributed to a crossing; {counts['unexplained']} "
+            f"({100 * share:.1f} % of the {on_track} on crossed pixels) unexplained: before the "
+            f"pixel's first crossing{window}; {counts['off_track']} on pixels no source crossed")
 
 
 def _bin_edges(values: np.ndarray, bins: int | Sequence[float] | np.ndarray, log: bool) -> np.ndarray:
@@ -172,12 +197,30 @@ def _bin_edges(values: np.ndarray, bins: int | Sequence[float] | np.ndarray, log
     return np.linspace(lo, hi, n + 1)
 
 
-def _rounded(values: np.ndarray) -> np.ndarray:
-    """``values`` to 9 significant digits, so a value computed twice is one value."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = 10.0 ** (8 - np.floor(np.log10(np.abs(values))))
-    scale[~np.isfinite(scale)] = 1.0
-    return np.round(values * scale) / scale
+SAME_VALUE_TOLERANCE = 1e-3
+"""Fluxes or speeds within this share of each other are one value in the timing summary and
+figure: a source's speed in pixels changes in its last digits along a track (geo-stare's
+7.8828..7.8830 px/s), and a group or axis tick per digit helps nobody."""
+
+
+def same_value_groups(values: np.ndarray, tolerance: float = SAME_VALUE_TOLERANCE) -> np.ndarray:
+    """A group number per value (0, 1, ... in increasing order of value): sorted values go in
+    one group while each is within ``tolerance`` (relative) of the group's smallest."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return np.zeros(0, np.int64)
+    order = np.argsort(v, kind="stable")
+    s = v[order]
+    group = np.zeros(s.size, np.int64)
+    start, g = s[0], 0
+    for i in range(1, s.size):  # over distinct values in practice: a handful of targets
+        if s[i] - start > tolerance * max(abs(start), abs(s[i])):
+            g += 1
+            start = s[i]
+        group[i] = g
+    out = np.empty_like(group)
+    out[order] = group
+    return out
 
 
 def timing_bias_summary(
@@ -192,8 +235,9 @@ def timing_bias_summary(
     by: 'target' (one group per name), 'polarity' (ON, OFF), 'flux' (``bins`` log-spaced
         flux bins [photons/s] between the smallest and largest, or explicit edges) or 'speed'
         (``bins`` linear speed bins [px/s], or edges). Bins are [lo, hi), the last [lo, hi];
-        a flux or speed taking no more than ``bins`` values (to 9 significant digits) has one
-        group per value, named by it (a single speed is one row, not a 7.883..7.883 bin).
+        a flux or speed taking no more than ``bins`` values (values within
+        :data:`SAME_VALUE_TOLERANCE` of each other are one) has one group per value, named by
+        its median (a single speed is one row, not a 7.883..7.883 bin).
     split_polarity: one row per group and polarity (key ``polarity``, 'ON'/'OFF'): ON and OFF
         delays differ by an order of magnitude in the dark, and a median of both describes
         neither.
@@ -214,11 +258,12 @@ def timing_bias_summary(
     else:
         col = "flux_ph_s" if by == "flux" else "speed_px_s"
         vals = np.asarray(table[col], dtype=np.float64)
-        distinct, which = np.unique(_rounded(vals),
-                                    return_inverse=True)
-        # A few values (at most ``bins``): one group each.
-        if np.ndim(bins) == 0 and distinct.size <= int(bins):  # type: ignore[arg-type]
-            groups = [(float(np.median(vals[which == i])), which == i) for i in range(distinct.size)]
+        distinct, inverse = np.unique(vals, return_inverse=True)
+        which = same_value_groups(distinct)[inverse]
+        n_groups = int(which.max()) + 1 if which.size else 0
+        # A few values (at most ``bins``, those within SAME_VALUE_TOLERANCE one): one group each.
+        if np.ndim(bins) == 0 and n_groups <= int(bins):  # type: ignore[arg-type]
+            groups = [(float(np.median(vals[which == i])), which == i) for i in range(n_groups)]
         else:
             edges = _bin_edges(vals, bins, log=(by == "flux"))
             idx = np.searchsorted(edges, vals, side="right") - 1
