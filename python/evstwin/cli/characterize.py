@@ -4,13 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
-import tempfile
-from pathlib import Path
 from typing import Any
 
-from ._common import add_force, check_output_dir
+from ._common import add_force, check_output_dir, staged_folder
 
 
 def register(sub: Any) -> None:
@@ -63,25 +59,11 @@ def run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     text = result.to_text()
-    # Written whole or not at all: into a sibling folder, moved into place at the end.
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    umask = os.umask(0)
-    os.umask(umask)
-    tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; the final folder is an ordinary one
-    try:
-        (tmp / "characterize.txt").write_text(text + "\n")
-        (tmp / "characterize.json").write_text(json.dumps(result.to_dict(), indent=1, allow_nan=True) + "\n")
+    with staged_folder(out) as stage:  # written whole or not at all
+        (stage.path / "characterize.txt").write_text(text + "\n")
+        (stage.path / "characterize.json").write_text(json.dumps(result.to_dict(), indent=1, allow_nan=True) + "\n")
         if not args.no_figure:
-            plot_characterization(result, tmp / "characterize.png")
-        if out.exists():
-            for f in tmp.iterdir():
-                f.replace(out / f.name)
-            tmp.rmdir()
-        else:
-            tmp.rename(out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+            plot_characterization(result, stage.path / "characterize.png")
     print(text)
     print(f"wrote {out}/characterize.txt, characterize.json" + ("" if args.no_figure else " and characterize.png"))
     return 0
