@@ -291,8 +291,8 @@ def scenario_keys() -> list[ScenarioKey]:
     """Every key of ``evstwin.scenario.SCHEMA`` (and of each target kind), with its documentation."""
     from evstwin import readout, scenario, targets
     from evstwin.optics import Optics
-    from evstwin.presets import BiasSet
     from evstwin.pixel import PixelParams
+    from evstwin.presets import BiasSet
     from evstwin.sky import atmosphere, scene
 
     blocks = _module_doc_blocks(scenario.__doc__ or "")

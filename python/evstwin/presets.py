@@ -7,7 +7,7 @@ into pixel parameters:
 * thresholds (paper eq. 8-9, Nozaki & Delbruck 2017): ``theta_on = k ln(I_ON / I_diff)``,
   ``theta_off = k ln(I_diff / I_OFF)`` with ``k = kappa_n C2 / (kappa_p^2 C1)``. The paper's
   text says k ~ 1/14, but every threshold printed in its Tables 1 and 2 is reproduced (to
-  0.1 %) by ``k = 0.0659`` (~1/15.17), the default here (DESIGN.md point 5);
+  0.1 %) by ``k = 0.0659`` (~1/15.17), the default here (docs/development/decisions.md, "Thresholds");
 * refractory period from I_refr (a charge model, calibrated; see ``refractory_from_bias``);
 * source-follower cutoff from I_sf (subthreshold g_m / 2 pi C, calibrated; see
   ``cutoff_from_bias``).
@@ -34,7 +34,7 @@ from .readout import ReadoutParams
 
 K_THRESHOLD_DAVIS346 = 0.0659
 """kappa_n C2 / (kappa_p^2 C1) of eq. 8-9 that reproduces all six thresholds of the paper's
-Tables 1-2 (e.g. 0.0659 ln(0.85 uA / 235.3 nA) = 0.0846). DESIGN.md point 5."""
+Tables 1-2 (e.g. 0.0659 ln(0.85 uA / 235.3 nA) = 0.0846). The documentation's "decisions and measured dead ends", "Thresholds"."""
 K_THRESHOLD_TEXT = 1.0 / 14.0
 """The paper's text approximation of the same factor (sec. 2.4, after its ref. [13])."""
 
@@ -119,7 +119,7 @@ def dark_rate_eq3(
     fill_factor: float = 0.22,
     **constants: float,
 ) -> float:
-    """Mean dark-electron rate [e-/s] of eq. 1 and 3 (the ``physics`` model of DESIGN.md):
+    """Mean dark-electron rate [e-/s] of eq. 1 and 3 (the ``physics`` dark-current model):
     ``J = (e D_h / (L_h N_d) + e D_e / (L_e N_a)) n_i^2 + e W n_i / tau_g`` over the
     photodiode area ``pitch^2 * fill_factor``, divided by e.
 
@@ -249,7 +249,7 @@ class BiasSet:
         return dataclasses.asdict(self)
 
 
-_PAPER = "the paper (seed/000_b4027d5028f39ede)"
+_PAPER = "the paper (Event-based Vision Sensor Physics-Based Digital Twin for Tuning SSA Use)"
 
 FAST_PR_SLOW_SF_BALANCED_TH = BiasSet(
     i_pr_a=15.0e-6,
@@ -424,12 +424,15 @@ IMX636_READOUT = ReadoutParams(
 )
 """IMX636 readout: 1.066 Gev/s (the sensor's), 1 us timestamps, FIFO assumed."""
 
-DAVIS346_RECORDING = "../shared/data/davis346_road.aedat4 (iniVation DAVIS346, 2.36 s of a road in daylight)"
+DAVIS346_RECORDING = (
+    "davis346_road.aedat4 (iniVation DAVIS346, 2.36 s of a road in daylight; the aedat 2.3.0 package's "
+    "tests/data/test_data.aedat4 on PyPI)"
+)
 """The real DAVIS346 recording the preset's background was measured on."""
 DAVIS346_BACKGROUND_SOURCE = (
     f"{DAVIS346_RECORDING}, its static upper half (y < 120, 41,520 pixels): 289 events, all ON, "
     "2.95e-3 +- 0.18e-3 Hz per pixel, log-normal spread sigma 1.51 +- 0.14, 0 OFF (an OFF rate "
-    "below 3.1e-5 Hz at 95 %), no hot pixel (evstwin calibrate-noise ../shared/data/davis346_road.aedat4 "
+    "below 3.1e-5 Hz at 95 %), no hot pixel (evstwin calibrate-noise davis346_road.aedat4 "
     "--roi 0,0,346,120)"
 )
 """Where the DAVIS346 preset's leak and background figures come from."""
@@ -477,7 +480,7 @@ DAVIS346 = SensorPreset(
         f"{_PAPER}, sec. 2.4: F 0.25, I_max 3.16 nA (its leak 0.1 Hz and R_n 0.05 Hz: the run scenarios)",
         DAVIS346_BACKGROUND_SOURCE,
         "Nozaki & Delbruck (2017), IEEE Trans. Electron Devices (the paper's ref. [15]): eq. 8-9",
-        "DESIGN.md point 5: k = 0.0659 reproduces all of the paper's threshold values",
+        "k = 0.0659 reproduces all of the paper's threshold values",
     ),
     assumptions=(
         "refractory 1 ms from I_refr = 4.7 nA via the calibrated Q = 4.7 pC (REFRACTORY_CHARGE_C)",
@@ -493,7 +496,7 @@ DAVIS346 = SensorPreset(
 )
 """The paper's DAVIS346 with its Table 1 biases (theta 0.2060 / 0.0930, 1 ms, 10 Hz)."""
 
-IMX636_RECORDING = "../shared/data/imx636_pointsource_evt3.raw (faery's tests/data/evt3.raw, Prophesee EVK4)"
+IMX636_RECORDING = "imx636_pointsource_evt3.raw (faery's tests/data/evt3.raw, Prophesee EVK4)"
 """The real IMX636 recording the preset's background figures were measured on."""
 IMX636_THETA = math.log(1.25)
 """The IMX636 preset's ON and OFF thresholds [ln units]: a 25 % contrast step (an assumption)."""
