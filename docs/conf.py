@@ -43,7 +43,12 @@ html_theme_options = {
     "navigation_with_keys": False,
     "footer_start": ["copyright"],
     "footer_end": [],
-    "secondary_sidebar_items": ["page-toc"],
+    # the generated tables are wide: they get the whole width
+    "secondary_sidebar_items": {
+        "index": ["page-toc"], "getting-started": ["page-toc"], "guides/*": ["page-toc"],
+        "explanation/*": ["page-toc"], "development/*": ["page-toc"], "reference/index": ["page-toc"],
+        "reference/python-api": ["page-toc"], "reference/generated/*": [],
+    },
 }
 html_sidebars = {"index": []}
 html_show_sourcelink = False

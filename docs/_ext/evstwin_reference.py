@@ -214,7 +214,7 @@ def _module_doc_blocks(doc: str) -> dict[str, str]:
         if m:
             current = m.group(1) or m.group(2)
             blocks[current] = blocks.get(current, "") + " " + line
-        elif current and line.startswith(" "):
+        elif current and (line.startswith(" ") or (current.startswith("__") and line.strip())):
             blocks[current] += " " + line
         else:
             current = None
@@ -224,29 +224,38 @@ def _module_doc_blocks(doc: str) -> dict[str, str]:
     return {k: " ".join(v.split()) for k, v in blocks.items()}
 
 
+def _clause_end(text: str, i: int, seps: tuple[str, ...]) -> int:
+    """The end of the clause from ``i``: the first separator outside parentheses and brackets."""
+    depth = 0
+    for j in range(i, len(text)):
+        c = text[j]
+        if c in "([{":
+            depth += 1
+        elif c in ")]}":
+            depth = max(0, depth - 1)
+        elif depth == 0 and any(text.startswith(sep, j) for sep in seps):
+            return j + 1
+    return len(text)
+
+
 def _sentence_naming(text: str, key: str) -> str:
     """The clause of ``text`` that names ``key`` in double backticks: from the key to the next
-    ';' or '. ' outside parentheses (or the whole sentence when the key is named inside one)."""
+    ', ', '; ' or '. ' outside parentheses; where that says nothing but names (an enumeration
+    of keys), the whole sentence."""
     for pattern in (rf"``{re.escape(key)}``", rf"``{re.escape(key)} ?=", rf"``\[{re.escape(key)}\]``"):
         m = re.search(pattern, text)
         if m:
             break
     else:
         return ""
-    cuts = [text.rfind(sep, 0, m.start()) for sep in (". ", "; ")]
-    start = max([c + 2 for c in cuts if c >= 0] + [0])
-    depth = 0
-    end = len(text)
-    for i in range(m.start(), len(text)):
-        c = text[i]
-        if c == "(":
-            depth += 1
-        elif c == ")":
-            depth = max(0, depth - 1)
-        elif depth == 0 and (c == ";" or (c == "." and text[i + 1: i + 2] in (" ", ""))):
-            end = i + 1
-            break
-    clause = text[start:end].strip()
+    end = _clause_end(text, m.start(), (", ", "; ", ". "))
+    clause = text[m.start():end].strip().rstrip(",;")
+    words = [w for w in re.sub(r"``[^`]*``", " ", clause).split() if re.search(r"[a-z]{2}", w)]
+    if len(words) < 3:
+        cuts = [text.rfind(sep, 0, m.start()) for sep in (". ", "; ")]
+        start = max([c + 2 for c in cuts if c >= 0] + [0])
+        end = _clause_end(text, m.start(), (". ", ";"))
+        clause = text[start:end].strip()
     return clause.replace("``", "`")
 
 
@@ -267,6 +276,8 @@ KEY_NOTES: dict[str, str] = {
                           "`radii_m`.",
     "star_field.path": "A table `{t_s, dx_px, dy_px}` of the field's offset [px] on top of its drift "
                        "(`evstwin.targets.FieldPath`): every field-frame target and random star follows it.",
+    "targets.t_s": "Times [s] of a position table, strictly increasing, with `x_px` and `y_px` arrays of "
+                   "the same length (`evstwin.targets.TabulatedTarget`).",
     "targets.period_s": "Time of one turn [s]; instead of `angular_rate_rad_s`.",
 }
 
@@ -318,6 +329,9 @@ def scenario_keys() -> list[ScenarioKey]:
             return optics[key].doc, "`Optics` field docstring", optics[key].default
         if table == "biases" and key in biases:
             return biases[key].doc, "`BiasSet` field docstring", dataclasses.MISSING
+        path = f"{table}.{key}" if table else key
+        if path in KEY_NOTES:
+            return KEY_NOTES[path], "this page", dataclasses.MISSING
         texts = [(blocks.get(table or "__top__", ""), "`evstwin.scenario` docstring")]
         if table in ("site", "pointing", "star_field", "targets", ""):
             texts.append((sky_blocks.get(table or "start_utc", ""), "`evstwin.sky.scene` docstring"))
@@ -334,9 +348,6 @@ def scenario_keys() -> list[ScenarioKey]:
             if s:
                 return s, source, sampling_defaults.get(key, dataclasses.MISSING) if table == "sampling" \
                     else dataclasses.MISSING
-        path = f"{table}.{key}" if table else key
-        if path in KEY_NOTES:
-            return KEY_NOTES[path], "this page", dataclasses.MISSING
         if table == "targets" and key in target_fields:
             return target_fields[key], "the target's signature", dataclasses.MISSING
         return "", "", dataclasses.MISSING
@@ -374,8 +385,6 @@ def scenario_keys() -> list[ScenarioKey]:
 
 
 def scenario_markdown() -> str:
-    from evstwin import scenario
-
     keys = scenario_keys()
     lines = ["# Scenario keys", "",
              "Generated from the scenario schema (`evstwin.scenario.SCHEMA`): every key a scenario TOML",
@@ -385,8 +394,9 @@ def scenario_markdown() -> str:
              "`evstwin.sky.atmosphere`). The unit is in the key's name (`_s` seconds, `_hz` hertz,",
              "`_px` pixels, `_ph_s` photons/s...); limits are stated in the descriptions and checked",
              "when a scenario is loaded, a bad value being one `ScenarioError` line naming the key.",
-             "Defaults shown are the code's; a preset sets its own `[pixel]` values.", "",
-             "## What a scenario is", "", "```text", (scenario.__doc__ or "").strip(), "```", ""]
+             "Defaults shown are the code's; a preset sets its own `[pixel]` values. How the tables",
+             "fit together, with examples: [simulate my lens and camera](../../guides/simulate-lens-camera.md).",
+             ""]
     by_table: dict[str, list[ScenarioKey]] = {}
     for k in keys:
         by_table.setdefault(k.table, []).append(k)
