@@ -418,10 +418,11 @@ def _preset_value_md(name: str, value: Any, depth: int) -> list[str]:
 
     if isinstance(value, PixelParams):
         base = PixelParams()
-        rows = [f"| `{f.name}` | {code(fmt_value(getattr(value, f.name)))} | {unit_of(f.name)} |"
-                + (" (the paper's)" if getattr(value, f.name) == getattr(base, f.name) else "")
+        rows = [f"| `{f.name}` | {code(fmt_value(getattr(value, f.name)))} | {unit_of(f.name)} | "
+                f"{'' if getattr(value, f.name) == getattr(base, f.name) else 'yes'} |"
                 for f in dataclasses.fields(value)]
-        return [f"**{name}** (`PixelParams`):", "", "| field | value | unit |", "|---|---|---|", *rows, ""]
+        return [f"**{name}** (`PixelParams`; the last column marks a value other than the paper's pixel):", "",
+                "| field | value | unit | set by the preset |", "|---|---|---|---|", *rows, ""]
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         out = [f"**{name}** (`{type(value).__name__}`):", ""]
         scalars = []
@@ -465,10 +466,15 @@ def presets_markdown() -> str:
     lines.append("")
     for name, p in presets.PRESETS.items():
         lines += [f"(preset-{name.replace('_', '-')})=", f"## `{name}`", ""]
-        for f in dataclasses.fields(p):
-            if f.name in ("name",):
-                continue
-            lines += _preset_value_md(f.name, getattr(p, f.name), 0)
+        fields = [f for f in dataclasses.fields(p) if f.name != "name"]
+        scalar = [f for f in fields if not isinstance(getattr(p, f.name), (tuple, list))
+                  and not dataclasses.is_dataclass(getattr(p, f.name))]
+        lines += ["| field | value | unit |", "|---|---|---|"]
+        lines += [f"| `{f.name}` | {one_line(fmt_value(getattr(p, f.name)))} | {unit_of(f.name)} |" for f in scalar]
+        lines.append("")
+        for f in fields:
+            if f not in scalar:
+                lines += _preset_value_md(f.name, getattr(p, f.name), 0)
     if getattr(presets, "BIAS_SETS", None):
         lines += ["## Bias sets", "", "`[sensor] bias_set = NAME`; the thresholds follow from eq. 8-9.", "",
                   "| name | I_on [A] | I_off [A] | I_diff [A] | I_pr [A] | I_sf [A] | I_refr [A] | source |",
