@@ -127,18 +127,34 @@ def cli_options(parser: argparse.ArgumentParser, command: str) -> list[CliOption
 
 
 def cli_markdown() -> str:
+    import os
+
     from evstwin.cli import build_parser
 
-    ap = build_parser()
+    # argparse wraps usage lines at the terminal's width: the same width wherever it is built
+    saved = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"
+    try:
+        return _cli_markdown(build_parser())
+    finally:
+        if saved is None:
+            del os.environ["COLUMNS"]
+        else:
+            os.environ["COLUMNS"] = saved
+
+
+def _cli_markdown(ap: argparse.ArgumentParser) -> str:
     lines = ["# Command line", "",
              "Generated from `evstwin.cli.build_parser()`: every command and option, with the help",
              "text the parser prints (`evstwin COMMAND --help`). `python -m evstwin` is the same command.",
              "", "```text", ap.format_usage().strip(), "```", ""]
     for name, help_text, p in cli_commands():
+        options = cli_options(p, name)
         lines += [f"## `evstwin {name}`", "", help_text[:1].upper() + help_text[1:] + ".", "",
-                  "```text", p.format_usage().strip(), "```", "",
-                  "| argument | meaning | default |", "|---|---|---|"]
-        for o in cli_options(p, name):
+                  "```text", p.format_usage().strip(), "```", ""]
+        if options:
+            lines += ["| argument | meaning | default |", "|---|---|---|"]
+        for o in options:
             default = "" if o.required or o.default in (None, False, argparse.SUPPRESS, []) else fmt_value(o.default)
             choices = f" One of: {', '.join(map(str, o.choices))}." if o.choices else ""
             meta = f" `{o.metavar}`" if o.metavar and o.names.startswith("-") else ""
