@@ -27,14 +27,15 @@ exclude_patterns = ["_build", "README.md"]
 nitpicky = False
 suppress_warnings: list[str] = []
 
-autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": False}
+autodoc_default_options = {"members": True}
 autodoc_typehints = "description"
 autodoc_member_order = "bysource"
 autodoc_preserve_defaults = True
 
 html_theme = "pydata_sphinx_theme"
 html_title = f"evstwin {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["evstwin.css"]
 html_theme_options = {
     "navbar_align": "left",
     "show_toc_level": 2,
@@ -59,7 +60,7 @@ def _docstring_as_text(app, what, name, obj, options, lines):  # noqa: ANN001
     if not lines:
         return
     text = list(lines)
-    lines[:] = ["::", ""] + ["   " + line for line in text] + [""]
+    lines[:] = [".. code-block:: text", "   :class: evstwin-docstring", ""] + ["   " + line for line in text] + [""]
 
 
 def setup(app):  # noqa: ANN001, ANN201
