@@ -45,6 +45,14 @@ def figures(workers: int) -> list[Figure]:
             ("simulate", "mcreynolds-run3", "-o", "run3.h5", "--duration", "2", "--no-progress"),
             ("timing", "run1.h5", "mc.h5", "run3.h5", "--out", "timing3"),
         ), "timing3/timing_by_setting.png"),
+        Figure("geo_stare_frames.png", (
+            ("simulate", "geo-stare", "-o", "geo.h5", "--duration", "5", "--no-progress"),
+            ("show", "geo.h5", "--out", "geo", "--window", "1"),
+        ), "geo/frames.png"),
+        Figure("leo_pass_xyt.png", (
+            ("simulate", "leo-pass", "-o", "iss.h5", "--duration", "10", "--set", "pointing.at_s=5", "--no-progress"),
+            ("show", "iss.h5", "--out", "iss", "--window", "3"),
+        ), "iss/xyt.png"),
         Figure("limiting_magnitude.png", (
             ("limiting-magnitude", "--out", "lim", "--workers", w, "--no-progress"),
         ), "lim/limiting_magnitude.png"),
