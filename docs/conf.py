@@ -49,7 +49,7 @@ html_theme_options = {
         "reference/python-api": ["page-toc"], "reference/generated/*": [],
     },
 }
-html_sidebars = {"index": []}
+html_sidebars = {"index": [], "getting-started": []}
 html_show_sourcelink = False
 
 
