@@ -1,7 +1,7 @@
 """Pixel parameters: the Python face of the C++ ``evstwin::PixelParams``.
 
 Every default is read from the C++ struct, the one place it is written; the docstring of
-each field gives its unit and its source in the paper (../shared/seed, "the paper").
+each field gives its unit and its source in the paper (*Event-based Vision Sensor Physics-Based Digital Twin for Tuning SSA Use*, "the paper").
 """
 
 from __future__ import annotations

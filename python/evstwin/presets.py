@@ -7,7 +7,7 @@ into pixel parameters:
 * thresholds (paper eq. 8-9, Nozaki & Delbruck 2017): ``theta_on = k ln(I_ON / I_diff)``,
   ``theta_off = k ln(I_diff / I_OFF)`` with ``k = kappa_n C2 / (kappa_p^2 C1)``. The paper's
   text says k ~ 1/14, but every threshold printed in its Tables 1 and 2 is reproduced (to
-  0.1 %) by ``k = 0.0659`` (~1/15.17), the default here (DESIGN.md point 5);
+  0.1 %) by ``k = 0.0659`` (~1/15.17), the default here (docs/development/decisions.md, "Thresholds");
 * refractory period from I_refr (a charge model, calibrated; see ``refractory_from_bias``);
 * source-follower cutoff from I_sf (subthreshold g_m / 2 pi C, calibrated; see
   ``cutoff_from_bias``).
@@ -35,7 +35,7 @@ from .spectra import QECurve, silicon_absorption_per_m, silicon_qe_curve
 
 K_THRESHOLD_DAVIS346 = 0.0659
 """kappa_n C2 / (kappa_p^2 C1) of eq. 8-9 that reproduces all six thresholds of the paper's
-Tables 1-2 (e.g. 0.0659 ln(0.85 uA / 235.3 nA) = 0.0846). DESIGN.md point 5."""
+Tables 1-2 (e.g. 0.0659 ln(0.85 uA / 235.3 nA) = 0.0846). The documentation's "decisions and measured dead ends", "Thresholds"."""
 K_THRESHOLD_TEXT = 1.0 / 14.0
 """The paper's text approximation of the same factor (sec. 2.4, after its ref. [13])."""
 
@@ -137,7 +137,7 @@ def dark_rate_eq3(
     fill_factor: float = 0.22,
     **constants: float,
 ) -> float:
-    """Mean dark-electron rate [e-/s] of eq. 1 and 3 (the ``physics`` model of DESIGN.md):
+    """Mean dark-electron rate [e-/s] of eq. 1 and 3 (the ``physics`` dark-current model):
     ``J = (e D_h / (L_h N_d) + e D_e / (L_e N_a)) n_i^2 + e W n_i / tau_g`` over the
     photodiode area ``pitch^2 * fill_factor``, divided by e.
 
@@ -267,7 +267,7 @@ class BiasSet:
         return dataclasses.asdict(self)
 
 
-_PAPER = "the paper (seed/000_b4027d5028f39ede)"
+_PAPER = "the paper (Event-based Vision Sensor Physics-Based Digital Twin for Tuning SSA Use)"
 
 FAST_PR_SLOW_SF_BALANCED_TH = BiasSet(
     i_pr_a=15.0e-6,
@@ -473,7 +473,7 @@ DAVIS346_RECORDING = (
 DAVIS346_BACKGROUND_SOURCE = (
     f"{DAVIS346_RECORDING}, its static upper half (y < 120, 41,520 pixels): 289 events, all ON, "
     "2.95e-3 +- 0.18e-3 Hz per pixel, log-normal spread sigma 1.51 +- 0.14, 0 OFF (an OFF rate "
-    "below 3.1e-5 Hz at 95 %), no hot pixel (evstwin calibrate-noise RECORDING --roi 0,0,346,120)"
+    "below 3.1e-5 Hz at 95 %), no hot pixel (evstwin calibrate-noise davis346_road.aedat4 --roi 0,0,346,120)"
 )
 """Where the DAVIS346 preset's leak and background figures come from."""
 

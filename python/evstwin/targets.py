@@ -8,7 +8,7 @@ Every target answers, for an array of times ``t_s`` [s]:
 * ``flux_ph_s(t_s)``: photons/s at the focal plane (before fill factor and QE);
 * ``max_speed_px_s(t0_s, t1_s)``: the largest speed on [t0, t1] [px/s], to choose the sample
   rate so that no target moves more than a fraction of a pixel between samples
-  (DESIGN.md point 10).
+  (docs/development/decisions.md, "Sampling never skips a track's pixels").
 
 Brightness is a constant flux [photons/s] or a ``LightCurve`` (a table of times and fluxes,
 or of magnitudes through an ``Optics``: a tumbling satellite). For a constant magnitude use

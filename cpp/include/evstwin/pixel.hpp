@@ -1,4 +1,5 @@
-// The physics of one event-sensor pixel (the paper's section 2; DESIGN.md for the traps).
+// The physics of one event-sensor pixel (the paper's section 2; the documentation's "pixel model"
+// and "decisions and measured dead ends" pages for the traps).
 //
 // Signal chain, per sample interval (t0, t1]:
 //   photons/s on the pixel -> photodiode current I = e (QE * ff * lambda + dark)   eq. 1-2, 4
@@ -10,7 +11,7 @@
 //      period, leak of the reference (eq. 10-11) and statistical shot noise (eq. 12-15).
 //
 // All levels are in natural-log units of current: the factors U_T/kappa and C1/C2 cancel
-// once the thresholds are in those units (DESIGN.md point 3).
+// once the thresholds are in those units (docs/development/decisions.md, "Log units throughout").
 #pragma once
 
 #include <cmath>
