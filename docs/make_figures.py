@@ -59,10 +59,17 @@ def figures(workers: int) -> list[Figure]:
         Figure("limiting_magnitude_setup.png", (
             ("limiting-magnitude", "--preset", "imx636", "--focal-length-mm", "200", "--f-number", "2.8",
              "--sky-mag", "21", "--seeing-arcsec", "2", "--pointing", "staring",
-             "--rates-arcsec-s", "3,10,30,100,300,1000", "--magnitudes", "6:13:1",
-             "--set", "pixel.absorption_per_m=2e5", "--set", "pixel.depletion_width_m=2e-6",
+             "--jitter-rms-arcsec", "1", "--rates-arcsec-s", "3,10,30,100,300,1000", "--magnitudes", "6:13:1",
              "--workers", w, "--no-progress", "--out", "lim-setup"),
         ), "lim-setup/limiting_magnitude.png"),
+        Figure("limiting_magnitude_gen3_validation.png", (
+            ("limiting-magnitude", "--preset", "prophesee_gen3_vga", "--focal-length-mm", "85", "--f-number", "1.4",
+             "--sky-mag", "20.3", "--pointing", "sidereal", "--rates-arcsec-s", "15.04", "--magnitudes", "8:11:0.25",
+             "--runs", "3", "--duration", "20", "--workers", w, "--no-progress", "--out", "lim-gen3"),
+        ), "lim-gen3/limiting_magnitude.png"),
+        Figure("characterize_imx636.png", (
+            ("characterize", "imx636", "--out", "bench-imx636", "--no-progress"),
+        ), "bench-imx636/characterize.png"),
         Figure("compare_frames.png", (
             ("compare", "{rec}", "mcreynolds", "--out", "cmp", "--duration", "2.36", "--runs", "2"),
         ), "cmp/frames.png", needs="davis346_road.aedat4"),
