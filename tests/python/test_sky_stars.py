@@ -4,6 +4,7 @@ size follows from the optics (star_field.distribution = 'all-sky')."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -111,3 +112,19 @@ def test_bad_star_field_values_get_one_line(table: dict, words: list[str]) -> No
     assert "\n" not in text
     for w in words:
         assert w in text
+
+
+def test_leo_pass_says_how_fast_its_stars_drift() -> None:
+    # The scenario's text gives the stars' drift across its field; 0.1 px/s was the rate at
+    # the equator, not at this field's declination.
+    import re
+
+    from evstwin.scenario import build
+
+    text = (Path(__file__).resolve().parents[2] / "python" / "evstwin" / "scenarios" / "leo-pass.toml").read_text()
+    lo, hi, median = (float(v) for v in re.search(r"(\d\.\d+)-(\d\.\d+) px/s across this field, median (\d\.\d+)",
+                                                   text).groups())
+    scene = build("leo-pass", duration_s=40.0)
+    speeds = np.array([t.max_speed_px_s(0.0, 40.0) for t in scene.targets[1:]])
+    assert speeds.min() == pytest.approx(lo, abs=6e-4) and speeds.max() == pytest.approx(hi, abs=6e-4)
+    assert np.median(speeds) == pytest.approx(median, abs=6e-4)
