@@ -21,7 +21,7 @@ The tables mirror the Python objects:
 ``[optics]``      ``Optics`` fields (``focal_length_m``, ``f_number``, ``extra_blur_sigma_px``...),
                   and the PSF shape: ``psf = "gaussian"`` (default) | ``"airy"`` | ``"moffat"``
                   | ``"image"`` with its keys (``spider_*``, ``moffat_*``, ``psf_file*``,
-                  ``psf_subpixel``, ``psf_half_width_px``; README, "PSF shapes").
+                  ``psf_subpixel``, ``psf_half_width_px``; the lens-and-camera guide, "PSF shapes").
 ``[sampling]``    ``rate_hz`` (the floor rate of the whole array), ``max_shift_px`` (default
                   0.25: no target moves further between samples), ``sparse`` (sub-sample only
                   the pixels near moving targets; default true), ``chunk_samples``,
@@ -268,7 +268,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, Any]:
     out.setdefault("duration_s", 1.0)
     out.setdefault("seed", 0)
     # Scenarios default to the photoreceptor pole on, as every built-in has it: without it the
-    # shot-noise events depend on the sampling (README, "Sampling and noise"). Written into
+    # shot-noise events depend on the sampling (the documentation's noise model page). Written into
     # the resolved scenario, so the file beside the events says which was used. PixelParams
     # keeps the paper's single pole for reproducing it.
     out.setdefault("pixel", {}).setdefault("pr_pole", True)

@@ -216,7 +216,7 @@ def add_region(p: argparse.ArgumentParser) -> None:
                    help="a text file of pixels to leave out, one 'x,y' or 'x y' a line ('#' comments)")
     p.add_argument("--mask-hot", action="store_true",
                    help="also leave out the real recording's hot pixels: counts improbable under a Poisson fit of "
-                        "the other pixels (at most 0.01 ordinary pixels flagged per recording; README, Validation)")
+                        "the other pixels (at most 0.01 ordinary pixels flagged per recording; the documentation's validation page)")
 
 
 def parse_roi(text: str) -> tuple[int, int, int, int]:

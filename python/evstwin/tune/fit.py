@@ -271,7 +271,7 @@ DISTANCES = ("compare", "chi2")
 Why least squares by default: on the full-size recovery benchmark (bench/bench_recovery.py:
 five parameters of the DAVIS346 ``mcreynolds`` scene, budget 60) it recovered 9 hidden
 settings of 10, CMA-ES on the chi-square none, Nelder-Mead 1 on ``compare``'s distance and 3 on
-the chi-square (the README's table "Recovery at full size"); it also recovers the small recovery problems of the tests that
+the chi-square (the fit guide's "Recovery at full size" (docs/guides/fit-twin.md)); it also recovers the small recovery problems of the tests that
 Nelder-Mead was chosen on (thresholds and dark rate of a 48 x 36 px scene, with the sampled
 and the continuous noise models, 1 or 2 seeds a trial; in trial runs, the tests keep 'nm'
 there). Nelder-Mead stays for the paper's
@@ -360,7 +360,7 @@ def fit(
         entries (required for keys without default bounds).
     budget: number of trials (each is runs_per_trial simulations). Least squares spends n + 1
         trials an iteration on n parameters and needs a handful of iterations (60 recover
-        five parameters in the README's benchmark); Nelder-Mead needs about 20-30 trials per
+        five parameters in the fit guide's benchmark); Nelder-Mead needs about 20-30 trials per
         fitted parameter. The default 40 suits up to about 4 parameters.
     runs_per_trial: seeds per trial (``seed .. seed + runs_per_trial - 1``, the same for every
         trial: common random numbers); the trial's value is the mean distance.
