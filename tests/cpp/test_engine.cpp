@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "check.hpp"
+#include "noise_reference.hpp"
 
 using namespace evstwin;
 
@@ -385,7 +386,7 @@ TEST(bridge_var_is_below_twice_q_yy_wherever_bridge_var_bounded_says_so) {
     CHECK(unbounded_bad > 0);     // outside the guard the closed forms do break it
 }
 
-TEST(leak_noise_hazard_integral_against_quadrature_of_its_rate) {
+TEST(leak_noise_hazard_against_quadrature_of_its_rate) {
     // The closed forms (E1 by A&S 5.1.56, erfc) against a fine Simpson rule over the rate the
     // header documents, for one pole, two comparable poles and a << b, and additivity.
     const double pi = 3.14159265358979323846;
@@ -405,14 +406,14 @@ TEST(leak_noise_hazard_integral_against_quadrature_of_its_rate) {
             double sum = rate(x1) + rate(hi);
             for (int i = 1; i < n; ++i) sum += (i % 2 ? 4 : 2) * rate(x1 + i * h);
             const double want = sd * sum * h / 3;
-            const double got = leak_noise_hazard_integral(x1 * sd, x0 * sd, sd, a, b);
+            const double got = LeakNoiseHazard(sd, a, b)(x1 * sd, x0 * sd);
             CHECK_NEAR(got, want, 2e-4 * want + 1e-12);
             const double mid = 0.5 * (x0 + x1) * sd;
-            CHECK_NEAR(leak_noise_hazard_integral(x1 * sd, mid, sd, a, b) + leak_noise_hazard_integral(mid, x0 * sd, sd, a, b),
+            CHECK_NEAR(LeakNoiseHazard(sd, a, b)(x1 * sd, mid) + LeakNoiseHazard(sd, a, b)(mid, x0 * sd),
                        got, 1e-9 * got + 1e-15);
         }
     }
-    CHECK(leak_noise_hazard_integral(0.01, 0.01, 1e-3, 10.0, 10.0) == 0.0);
+    CHECK(LeakNoiseHazard(1e-3, 10.0, 10.0)(0.01, 0.01) == 0.0);
 }
 
 TEST(brownian_bridge_crossing_probability_and_time_against_simulated_paths) {
@@ -1104,12 +1105,63 @@ TEST(build_without_openmp_or_one_thread_matches_two_threads) {
     CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
 }
 
+TEST(every_kernel_gives_the_same_events) {
+    // Kernel::Auto, PerPixel, Blocks and Vector on the same calls (run, then run_pixels on a
+    // patch, then run again, where the patch's pixels stand apart), for the sampled model, the
+    // continuous one and the continuous one with the pole (the last call's events follow from
+    // the state the others left): the same events.
+    for (int config = 0; config < 3; ++config) {
+        PixelParams p;  // all noise on
+        p.threshold_sigma = 0.04;
+        p.leak_rate_hz = 2.0;
+        p.shot_noise_rate_hz = 1.0;
+        p.noise_model = config == 0 ? NoiseModel::Sampled : NoiseModel::Continuous;
+        p.pr_pole = config == 2;
+        p.cutoff_hz = 2000.0;
+        const int w = 64, h = 16, n = 12;
+        std::vector<float> rate(static_cast<std::size_t>(n) * w * h);
+        // A fifth of the pixels blink (x3 every other sample: events at every sample), the rest
+        // sit at the common rate (the vector kernel's quiet pass).
+        for (std::size_t i = 0; i < rate.size(); ++i)
+            rate[i] = (i % 5 == 0 && (i / (w * h)) % 2 == 1) ? 6e6f : 2e6f;
+        if (p.pr_pole)  // 100 x the light: a pole of a few kHz, not ~30 Hz
+            for (float& r : rate) r *= 100.0f;
+        std::vector<double> t(n), tp(3);
+        for (int k = 0; k < n; ++k) t[k] = (k + 1) * 1e-3;
+        std::vector<std::uint32_t> patch;
+        for (std::uint32_t i = 100; i < 400; i += 3) patch.push_back(i);
+        std::vector<float> prate(3 * patch.size(), 3e6f);
+        for (int k = 0; k < 3; ++k) tp[k] = t[n - 1] + (k + 1) * 3e-4;
+        std::vector<double> t2(n);
+        for (int k = 0; k < n; ++k) t2[k] = t[n - 1] + (k + 1) * 1e-3;
+        std::vector<std::vector<Event>> got;
+        for (Kernel k : {Kernel::Auto, Kernel::PerPixel, Kernel::Blocks, Kernel::Vector}) {
+            Sensor s(w, h, p, 11, 1);
+            s.set_kernel(k);
+            CHECK(s.kernel() == k);
+            auto e = s.run(rate.data(), t.data(), n);
+            const auto e2 = s.run_pixels(patch.data(), patch.size(), prate.data(), tp.data(), 3);
+            const auto e3 = s.run(rate.data(), t2.data(), n);
+            e.insert(e.end(), e2.begin(), e2.end());
+            e.insert(e.end(), e3.begin(), e3.end());
+            got.push_back(e);
+        }
+        CHECK(got[0].size() > 500);
+        for (std::size_t k = 1; k < got.size(); ++k)
+            CHECK(got[k].size() == got[0].size() &&
+                  std::memcmp(got[k].data(), got[0].data(), got[0].size() * sizeof(Event)) == 0);
+    }
+    Sensor s(4, 4, PixelParams{}, 1, 1);
+    CHECK_THROWS(s.set_kernel(static_cast<Kernel>(7)));
+    CHECK(s.kernel() == Kernel::Auto);
+}
+
 TEST(samples_with_thousands_of_events_come_out_as_the_comparison_sort_orders_them) {
     // The event-heavy load's samples (thousands of events each, so the counting sort stages
     // them by coarse spans of time first) against run_pixels over every pixel in order, whose
     // events are sorted by (microsecond, pixel) with std::stable_sort: the same bytes, on one
-    // thread and on two, and time then pixel order within every interval. And against a run
-    // with a probe, which takes the per-pixel path (advance) for every pixel, without the
+    // thread and on two, and time then pixel order within every interval. And against
+    // Kernel::PerPixel, which takes the per-pixel path (advance) for every pixel, without the
     // block kernel's buffered emit (BufferedEmit: dozens of events a pass, each with its pixel).
     PixelParams p;  // all noise on
     p.threshold_sigma = 0.03;
@@ -1124,9 +1176,8 @@ TEST(samples_with_thousands_of_events_come_out_as_the_comparison_sort_orders_the
     const auto ea = a.run(rate.data(), t.data(), n);
     const auto eb = b.run(rate.data(), t.data(), n);
     const auto ec = c.run_pixels(all.data(), all.size(), rate.data(), t.data(), n);
-    const std::vector<std::uint32_t> probe = {77};
-    std::vector<TraceSample> trace;
-    const auto ed = d.run(rate.data(), t.data(), n, &probe, &trace);
+    d.set_kernel(Kernel::PerPixel);
+    const auto ed = d.run(rate.data(), t.data(), n);
     CHECK(ea.size() == ed.size() && std::memcmp(ea.data(), ed.data(), ea.size() * sizeof(Event)) == 0);
     CHECK(ea.size() > 2 * 2048 * (n - 1));  // samples far above STAGED_MIN_EVENTS (2048)
     CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);

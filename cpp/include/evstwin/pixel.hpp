@@ -1464,13 +1464,10 @@ struct PixelModel {
     /// fires where the budget runs out (exact for rates constant over an interval), so a
     /// sample costs two multiply-adds and no random number. If both fire in one interval, the
     /// earlier reaches the comparator and the later is dropped (rare: r dt is small).
-    EVSTWIN_ALWAYS_INLINE int background_event(PixelState& s, double current_a, const SampleConstants& c,
-                                               Philox4x32Key key, std::uint32_t pixel, double& t_noise) const {
-        background_spend(s, background_factor(current_a), c);
-        return background_fire(s, current_a, c, key, pixel, t_noise);
-    }
-
-    /// The first half of background_event: spend one interval of both clocks' budgets, f being
+    ///
+    /// background_spend (each interval) then background_fire (where a clock ran out).
+    ///
+    /// The first half: spend one interval of both clocks' budgets, f being
     /// background_factor() of the current. Returns whether a clock ran out (then
     /// background_fire has an event to place).
     EVSTWIN_ALWAYS_INLINE bool background_spend(PixelState& s, double f, const SampleConstants& c) const {
@@ -2890,7 +2887,7 @@ struct PixelModel {
         nzs[m] = nz1;
         nys[m] = ny1;
         CounterStream normals(key, pixel, s.n, PURPOSE_REFINE);
-        double piece_bridge = 0.0;  // the pieces' bridge variance: noise_coeffs(a, b, D, h)'s, from step 1
+        double piece_bridge = 0.0;  // the pieces' bridge variance: noise_coeffs_bridge's at (a, b, D, h), from step 1
         for (int step = m / 2; step >= 1; step /= 2) {
             // X_mid | X_0, X_1 for two halves of length T = step h: mean Phi X_0 + K (X_1 -
             // Phi^2 X_0), covariance Q - K Phi Q, with K = Q Phi^T (Phi Q Phi^T + Q)^-1.

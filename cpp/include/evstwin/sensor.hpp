@@ -97,27 +97,30 @@ inline EventStorage vector_storage(std::vector<Event>& out) {
 }
 }  // namespace detail
 
+/// Which code advances a Sensor's pixels (Sensor::set_kernel). Every choice gives the same
+/// events bit for bit (the tests check it); they differ in speed only.
+///   Auto:      the fastest that applies: the vector kernel (PixelModel::step_block_soa) on a
+///              block where it pays, else the array-of-structures kernel (step_block), else
+///              the per-pixel path (PixelModel::advance).
+///   PerPixel:  PixelModel::advance for every pixel and sample (the scalar reference).
+///   Blocks:    the array-of-structures kernel where it applies, never the vector one.
+///   Vector:    the vector kernel wherever it applies, also where Auto would judge it not to pay.
+/// A call with probe pixels (run()'s trace) takes the per-pixel path whatever the choice.
+enum class Kernel { Auto, PerPixel, Blocks, Vector };
+
+inline const char* kernel_name(Kernel k) {
+    switch (k) {
+        case Kernel::PerPixel: return "per_pixel";
+        case Kernel::Blocks: return "blocks";
+        case Kernel::Vector: return "vector";
+        default: return "auto";
+    }
+}
+
 class Sensor {
 public:
     /// Pixels per block: the unit of parallel work and of event bookkeeping.
     static constexpr std::size_t BLOCK = 256;
-    /// run()'s vector kernel takes a block where at least this many quarters of its pixels
-    /// advance at a sample (the others stand past it, sampled finely by run_pixels): it runs
-    /// over the whole block, so below that the array-of-structures kernel over the pixels
-    /// that advance costs less. Speed only: either gives the same events.
-    static constexpr std::size_t SOA_MIN_ACTIVE_QUARTERS = 2;
-    /// run() leaves the vector kernel for the rest of a call in a block where more than this
-    /// many quarters of its pixels took the per-pixel path at a sample (an event-heavy scene):
-    /// then copying them out of the arrays and back costs more than the vector pass saves.
-    /// Measured with bench/engine_driver.cpp (continuous 130 CUTOFF_HZ, one thread, user+sys):
-    /// a quarter, against the half it was, is as fast at 20-40 Hz (0.40 / 0.81-0.83 /
-    /// 0.91-0.94 s against 0.40 / 0.81-0.82 / 0.94-0.95 s) and faster at 45-60 Hz (1.00-1.01
-    /// against 1.06 s at 45 Hz, 1.04-1.06 against 1.15-1.16 s at 50 Hz); an eighth loses at
-    /// 20-30 Hz (0.45 / 0.84-0.85 s). Speed only: either kernel gives the same events.
-    static constexpr std::size_t SOA_MAX_BUSY_QUARTERS = 1;
-    /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
-    /// Speed only.
-    static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
     /// Shortest sample interval accepted [s]: below it 1/dt and the crossing times lose meaning.
     static constexpr double MIN_DT_S = 1e-12;
     /// Largest photon rate accepted [photons/s on a pixel]; with no dark current, positive
@@ -188,6 +191,15 @@ public:
         if (n < 1 || n > 0xFFFFFFFFull)
             throw std::invalid_argument("max_events must be in [1, 4294967295]; got max_events=" + std::to_string(n));
         max_events_ = n;
+    }
+
+    /// The code that advances the pixels (Kernel; Auto by default): the same events whichever.
+    Kernel kernel() const { return kernel_; }
+    void set_kernel(Kernel k) {
+        if (static_cast<int>(k) < 0 || static_cast<int>(k) > 3)
+            throw std::invalid_argument("kernel must be auto, per_pixel, blocks or vector; got " +
+                                        std::to_string(static_cast<int>(k)));
+        kernel_ = k;
     }
 
     void set_num_threads(int num_threads) {
@@ -486,6 +498,23 @@ public:
     }
 
 private:
+    /// run()'s vector kernel (Kernel::Auto) takes a block where at least this many quarters of its pixels
+    /// advance at a sample (the others stand past it, sampled finely by run_pixels): it runs
+    /// over the whole block, so below that the array-of-structures kernel over the pixels
+    /// that advance costs less. Speed only: either gives the same events.
+    static constexpr std::size_t SOA_MIN_ACTIVE_QUARTERS = 2;
+    /// run() (Kernel::Auto) leaves the vector kernel for the rest of a call in a block where more than this
+    /// many quarters of its pixels took the per-pixel path at a sample (an event-heavy scene):
+    /// then copying them out of the arrays and back costs more than the vector pass saves.
+    /// Measured with bench/engine_driver.cpp (continuous 130 CUTOFF_HZ, one thread, user+sys):
+    /// a quarter, against the half it was, is as fast at 20-40 Hz (0.40 / 0.81-0.83 /
+    /// 0.91-0.94 s against 0.40 / 0.81-0.82 / 0.94-0.95 s) and faster at 45-60 Hz (1.00-1.01
+    /// against 1.06 s at 45 Hz, 1.04-1.06 against 1.15-1.16 s at 50 Hz); an eighth loses at
+    /// 20-30 Hz (0.45 / 0.84-0.85 s). Speed only: either kernel gives the same events.
+    static constexpr std::size_t SOA_MAX_BUSY_QUARTERS = 1;
+    /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
+    /// Speed only.
+    static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
     /// The state after a call that stopped part-way (max_events, out of memory) is neither
     /// the old one nor the new one: refuse to build on it.
     void check_usable() const {
@@ -870,8 +899,9 @@ private:
         std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
         const auto sample_end_us = [&consts](std::size_t j) { return round_us(consts[j].t1); };
         BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
-        const bool kernel = !probe_slot && model_.has_block_kernel();
-        const bool soa_kernel = kernel && model_.has_soa_kernel();
+        const bool kernel = !probe_slot && kernel_ != Kernel::PerPixel && model_.has_block_kernel();
+        const bool soa_kernel = kernel && kernel_ != Kernel::Blocks && model_.has_soa_kernel();
+        const bool soa_always = kernel_ == Kernel::Vector;  // not Auto's judgement of where it pays
         std::uint32_t ids[BLOCK], active[BLOCK];
         for (std::size_t i = lo; i < hi; ++i) ids[i - lo] = static_cast<std::uint32_t>(i);
         // After a kernel step that skipped nobody, all stand at the next t0. So they do at the
@@ -967,7 +997,7 @@ private:
             }
             // The arrays pay while most of the block advances: the passes run over the held
             // pixels too, and are dropped for them.
-            if (eligible && soa_pays && (in_soa || SOA_MIN_ACTIVE_QUARTERS * (hi - lo) <= 4 * n_active)) {
+            if (eligible && soa_pays && (in_soa || soa_always || SOA_MIN_ACTIVE_QUARTERS * (hi - lo) <= 4 * n_active)) {
                 if (!in_soa) {
                     scratch.soa.load(state_.data() + lo, hi - lo);
                     if (n_active < hi - lo) {
@@ -982,7 +1012,7 @@ private:
                                                                  c, key_, scratch, emit, pixel, held_at, n_held);
                 soa_t = c.t1;
                 synced = n_held == 0;
-                if (4 * n_busy > SOA_MAX_BUSY_QUARTERS * (hi - lo)) {
+                if (!soa_always && 4 * n_busy > SOA_MAX_BUSY_QUARTERS * (hi - lo)) {
                     soa_pays = false;
                     leave_soa();
                 }
@@ -1032,7 +1062,7 @@ private:
         const std::size_t m = hi - lo;
         PixelState* local = pixel_states_.data() + lo;  // run_pixels_into() puts them back
         for (std::size_t j = 0; j < m; ++j) local[j] = state_[pixels[lo + j]];
-        const bool kernel = model_.has_block_kernel();
+        const bool kernel = kernel_ != Kernel::PerPixel && model_.has_block_kernel();
         // Usually every listed pixel stands at the same time (the previous base sample).
         bool same_start = kernel;
         for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
@@ -1049,7 +1079,7 @@ private:
         }
         ends[0] = static_cast<std::uint32_t>(out.size());
         std::size_t k = 1;
-        if (kernel && model_.has_soa_kernel() && n_samples > 1) {
+        if (kernel && kernel_ != Kernel::Blocks && model_.has_soa_kernel() && n_samples > 1) {
             // Every pixel now stands at t_s[0]: the rest of the samples on the block's arrays.
             scratch.soa.load(local, m);
             for (; k < n_samples; ++k) {
@@ -1395,6 +1425,7 @@ private:
     std::vector<double> hot_map_;
     std::vector<std::uint16_t> hot_chain_map_;  ///< per pixel, its hot_chains index (empty: all 0)
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;
+    Kernel kernel_ = Kernel::Auto;
     std::atomic<std::size_t> events_in_call_{0};
     bool stopped_ = false;
 };
