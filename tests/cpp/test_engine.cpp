@@ -292,7 +292,7 @@ TEST(noise_caches_filled_together_are_fill_noise_cache_bit_for_bit) {
     configs[4].dark_model = DarkModel::None;  // no noise: D = 0
     int checked = 0, eager = 0, lazy = 0, moved = 0, integrated = 0;
     for (const PixelParams& params : configs) {
-        const PixelModel model(params);
+        const BlockModel model(params);
         const double b = model.sf_rate();
         std::vector<double> rates;
         for (int e = 0; e <= 44; ++e) rates.push_back(std::pow(10.0, 0.25 * e));  // 1 to 1e11 photons/s
@@ -697,7 +697,7 @@ TEST(ziggurat_slow_path_decides_its_wedges_as_the_library_exp_does) {
 }
 
 TEST(batched_normals_are_sample_normals_bit_for_bit_at_every_simd_level) {
-    // PixelModel::batch_sample_normals (the block kernels' normals: a batch for the common
+    // BlockModel::batch_sample_normals (the block kernels' normals: a batch for the common
     // path, the slow ones alone in their stream finished without branches where their first
     // wedge test decides, either accepted or rejected with the stream's next word common, the
     // rest by normal_ziggurat_slow) against sample_normals, pixel by pixel, with one and with
@@ -705,7 +705,7 @@ TEST(batched_normals_are_sample_normals_bit_for_bit_at_every_simd_level) {
     // that the batch finishes its own way counted, so the comparison reaches them all.
     const Philox4x32Key key{21u, 22u};
     const std::size_t n = 256;
-    PixelModel::BlockScratch scratch;
+    BlockModel::BlockScratch scratch;
     scratch.resize(n);
     std::vector<std::uint32_t> w0(n), w1(n), ids(n);
     std::vector<double> g1(n), g2(n);
@@ -716,7 +716,7 @@ TEST(batched_normals_are_sample_normals_bit_for_bit_at_every_simd_level) {
     // is the same; g2 is left as it was (-7).
     const auto batch_differs = [&](std::uint64_t sample, bool second) {
         for (std::size_t j = 0; j < n; ++j) g2[j] = -7.0;
-        PixelModel::batch_sample_normals(
+        BlockModel::batch_sample_normals(
             n, [sample](std::size_t) { return sample; }, [&ids](std::size_t j) { return ids[j]; }, key, scratch,
             w0.data(), w1.data(), g1.data(), g2.data(), second);
         std::size_t differ = 0;
@@ -968,7 +968,7 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
             p.photon_shot_noise = false;
             p.dark_model = DarkModel::None;
         }
-        const PixelModel model(p);
+        const BlockModel model(p);
         CHECK(model.has_soa_kernel());
         const Philox4x32Key key{11u, 12u};
         const std::size_t n = 203;  // not a multiple of a vector
@@ -991,7 +991,7 @@ TEST(block_arrays_leave_every_pixel_as_the_per_pixel_path_does) {
         auto emit_got = [&](double t, Polarity pol, std::uint8_t) { got.push_back({t, pixel, static_cast<int>(pol)}); };
         PoissonSampler poisson;
         NoiseCache cache;
-        PixelModel::BlockScratch scratch;
+        BlockModel::BlockScratch scratch;
         BlockSoA h;
         // The first sample starts every pixel (as Sensor::run's does); then both paths.
         rates_at(0);

@@ -359,7 +359,7 @@ public:
         plan.t_before = last_t_;
         guarded_for_each_block(
             nblocks, npix * n_samples, rate_check,
-            [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+            [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
                 run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
                           probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
             },
@@ -462,7 +462,7 @@ public:
         try {
             guarded_for_each_block(
                 nblocks, total, no_check,
-                [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
                     const std::size_t lo = b * BLOCK, m = std::min(n_pixels, lo + BLOCK) - lo;
                     for (std::size_t k = 0; k < n_samples; ++k) {
                         const std::size_t i = first_bad_rate(photon_rate + k * n_pixels + lo, m);
@@ -531,7 +531,7 @@ private:
         try {
             for_each_block(
                 nblocks, updates, check,
-                [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
                     if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
                     fn(b, poisson, scratch);
                     note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
@@ -615,7 +615,7 @@ private:
             // (the single's implied barrier: input_bad final)
             const std::int64_t n_blocks_to_run = input_bad ? 0 : nb;
             PoissonSampler poisson;
-            PixelModel::BlockScratch scratch;
+            BlockModel::BlockScratch scratch;
 #if EVSTWIN_HAS_OPENMP
 #pragma omp for schedule(dynamic, 1)
 #endif
@@ -889,7 +889,7 @@ private:
     template <class Real>
     void run_block(std::size_t b, const Real* rate, std::size_t sample_stride, std::size_t n_samples,
                    const std::vector<SampleConstants>& consts,
-                   PoissonSampler& poisson, PixelModel::BlockScratch& scratch, const std::int32_t* probe_slot,
+                   PoissonSampler& poisson, BlockModel::BlockScratch& scratch, const std::int32_t* probe_slot,
                    std::size_t n_probe, TraceSample* trace) {
         const std::size_t npix = state_.size();
         const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
@@ -1019,7 +1019,7 @@ private:
             } else if (eligible) {
                 leave_soa();
                 const bool all = n_active == hi - lo;
-                model_.step_block(PixelModel::BlockView{state_.data() + lo, ids, all ? nullptr : active, n_active},
+                model_.step_block(BlockModel::BlockView{state_.data() + lo, ids, all ? nullptr : active, n_active},
                                   row + lo, c, key_, poisson, scratch, emit, pixel);
                 synced = all;
             } else if (!probe_slot) {
@@ -1046,7 +1046,7 @@ private:
     template <class Real>
     void run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
                          const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
-                         PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                         PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
         const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
         TakenEvents taken(block_events_[b], block_full_t_[b]);
         std::vector<RawEvent>& out = taken.out;
@@ -1067,7 +1067,7 @@ private:
         bool same_start = kernel;
         for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
         if (same_start) {
-            model_.step_block(PixelModel::BlockView{local, pixels + lo, nullptr, m}, rate + lo,
+            model_.step_block(BlockModel::BlockView{local, pixels + lo, nullptr, m}, rate + lo,
                               model_.constants(local[0].t, t_s[0]), key_, poisson, scratch, emit, pixel);
         } else {
             for (std::size_t j = 0; j < m; ++j) {
@@ -1094,7 +1094,7 @@ private:
             emit.start_sample(k);
             const Real* row = rate + k * n_pixels + lo;
             if (kernel) {
-                model_.step_block(PixelModel::BlockView{local, pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
+                model_.step_block(BlockModel::BlockView{local, pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
                                   scratch, emit, pixel);
             } else {
                 for (std::size_t j = 0; j < m; ++j) {
@@ -1398,7 +1398,7 @@ private:
             if (b.capacity() > (std::size_t{1} << 17)) std::vector<std::int64_t>().swap(b);
     }
 
-    PixelModel model_;
+    BlockModel model_;
     int width_, height_;
     std::uint64_t seed_;
     Philox4x32Key key_;
