@@ -129,14 +129,14 @@ struct PixelModel {
                 c.sf_decay = 1.0 - u;
             } else {
                 c.sf_decay = std::exp(-u);
-                c.sf_ramp = u > 1e-12 ? -std::expm1(-u) / u : 1.0;
+                c.sf_ramp = detail::low_pass_ramp(u);
             }
         }
         return c;
     }
 
     /// Mean electron rate of a pixel receiving `photon_rate` photons/s.
-    double mean_electron_rate(double photon_rate) const { return e_per_photon * photon_rate + dark_mean_e_per_s; }
+    EVSTWIN_ALWAYS_INLINE double mean_electron_rate(double photon_rate) const { return e_per_photon * photon_rate + dark_mean_e_per_s; }
 
     /// The properties of one pixel that do not change in a run (a pure function of seed and
     /// pixel): thresholds with their mismatch, leak and background rates with their spread,
@@ -453,10 +453,11 @@ struct PixelModel {
     /// background_fire has an event to place).
     EVSTWIN_ALWAYS_INLINE bool background_spend(PixelState& s, double f, const SampleConstants& c) const {
         const double r_on = s.bg_on_hz * f, r_off = s.bg_off_hz * f;
-        const double on = s.bg_clock_on - r_on * c.dt, off = s.bg_clock_off - r_off * c.dt;
+        const double on = detail::clock_spent(s.bg_clock_on, r_on, c.dt);
+        const double off = detail::clock_spent(s.bg_clock_off, r_off, c.dt);
         s.bg_clock_on = on;
         s.bg_clock_off = off;
-        return !((on > 0.0) & (off > 0.0));
+        return detail::clock_ran_out(on, off);
     }
 
     /// The second half: after background_spend, the event of a clock that ran out (its polarity,
@@ -535,17 +536,9 @@ struct PixelModel {
         // linear between samples; eq. 7 (forward Euler on the previous input) on request.
         double z = x;
         if (p.pr_pole) {
-            const double u = 2.0 * PI * p.pr_cutoff_ref_hz * (current_a / p.pr_ref_current_a) * c.dt;
-            z = first_order_exact(s.z, s.x, x, u);
+            z = first_order_exact(s.z, s.x, x, pole_rate(current_a) * c.dt);
         }
-        double y;
-        if (!has_filter) {
-            y = z;
-        } else if (euler) {
-            y = c.sf_ramp * s.z + c.sf_decay * s.y;
-        } else {
-            y = z + (s.y - s.z) * c.sf_decay - (z - s.z) * c.sf_ramp;
-        }
+        const double y = detail::source_follower(has_filter, euler, s.y, s.z, z, c.sf_decay, c.sf_ramp);
 
         // Statistical shot noise, eq. 12-15.
         double t_noise = 0.0;
@@ -560,9 +553,7 @@ struct PixelModel {
 
     /// y(t1) of tau y' = in - y for an input linear from in0 to in1 over u = dt / tau.
     static double first_order_exact(double y0, double in0, double in1, double u) {
-        const double decay = std::exp(-u);
-        const double ramp = u > 1e-12 ? -std::expm1(-u) / u : 1.0;
-        return in1 + (y0 - in0) * decay - (in1 - in0) * ramp;
+        return detail::low_pass_exact(y0, in0, in1, std::exp(-u), detail::low_pass_ramp(u));
     }
 
     /// ln(n + 1/2) of an electron count n (see step()); a table for the small counts of the
@@ -700,25 +691,19 @@ struct PixelModel {
         const double x = cache.x, D = cache.D;
         const NoiseCoeffs& k = cache.k;
         // Noise-free chain: pole (rate set by the mean current) and source follower.
-        z = pole ? x + (s.z - s.x) * cache.pole_decay - (x - s.x) * cache.pole_ramp : x;
-        const double yd0 = s.y - s.ny;
-        double yd;
-        if (!filter)
-            yd = z;
-        else if (eul)
-            yd = c.sf_ramp * s.z + c.sf_decay * yd0;
-        else
-            yd = z + (yd0 - s.z) * c.sf_decay - (z - s.z) * c.sf_ramp;
+        z = pole ? detail::low_pass_exact(s.z, s.x, x, cache.pole_decay, cache.pole_ramp) : x;
+        const double yd = detail::source_follower(filter, eul, s.y - s.ny, s.z, z, c.sf_decay, c.sf_ramp);
         nz = 0.0;
         ny = 0.0;
         if (D > 0.0) {
             // Without the pole z is x, with no noise of its own (as init_state starts it): nz
             // stays 0, the bits phi_zz * s.nz + l_zz * g1 gave (the one-pole coefficients leave
             // phi_zz and l_zz at 0, noise.hpp), without the two multiplies.
-            nz = pole ? k.phi_zz * s.nz + k.l_zz * g1 : 0.0;
+            nz = pole ? detail::noise_z_next(k.phi_zz, k.l_zz, s.nz, g1) : 0.0;
             // Without the pole its rate a is 0: the 1-D process of the source follower.
-            ny = (pole && cache.a > 0.0 && filter) ? k.phi_yz * s.nz + k.phi_yy * s.ny + k.l_yz * g1 + k.l_yy * g2
-                                                   : k.phi_yy * s.ny + k.l_yy * g1;
+            ny = (pole && cache.a > 0.0 && filter)
+                     ? detail::noise_y_next(k.phi_yz, k.phi_yy, k.l_yz, k.l_yy, s.nz, s.ny, g1, g2)
+                     : detail::noise_y_next(k.phi_yy, k.l_yy, s.ny, g1);
         }
         y = yd + ny;
     }
@@ -759,10 +744,10 @@ struct PixelModel {
     /// probability above 1e-6 (exp(-13.8)). leak_g: leak_slope() of the sample.
     EVSTWIN_ALWAYS_INLINE bool crossing_plausible(const PixelState& s, double y1, const SampleConstants& c,
                                                   double leak_g, double bridge_var) const {
-        const double g = (y1 - s.y) * c.inv_dt + leak_g;
-        const double d0 = s.y - s.ref, d1 = d0 + g * c.dt;
+        const double g = detail::comparator_slope(s.y, y1, leak_g, c.inv_dt);
+        const double d0 = s.y - s.ref, d1 = detail::comparator_end(s.y, s.ref, g, c.dt);
         const double th_on = s.theta_on, th_off = s.theta_off;
-        if (!(d0 < th_on && d0 > -th_off && d1 < th_on && d1 > -th_off)) return true;
+        if (!detail::inside_levels(d0, d1, th_on, th_off)) return true;
         const double lim = 2.0 * 13.8 * bridge_var;
         return (th_on - d0) * (th_on - d1) < lim || (th_off + d0) * (th_off + d1) < lim;
     }
@@ -785,11 +770,11 @@ struct PixelModel {
         if (decided ? (pre->known & pre->fires) : bridge_var > 0.0) {
             const double t_start = std::max(c.t0, s.refr_until);
             if (decided || t_start < c.t1) {
-                const double g = (y - s.y) * c.inv_dt + leak_g;
-                const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
-                const double d_end = (s.y - s.ref) + g * c.dt;
+                const double g = detail::comparator_slope(s.y, y, leak_g, c.inv_dt);
+                const double d_start = detail::comparator_end(s.y, s.ref, g, t_start - c.t0);
+                const double d_end = detail::comparator_end(s.y, s.ref, g, c.dt);
                 const double th_on = s.theta_on, th_off = s.theta_off;
-                if (decided || ((d_start < th_on) & (d_start > -th_off) & (d_end < th_on) & (d_end > -th_off))) {
+                if (decided || detail::inside_levels(d_start, d_end, th_on, th_off)) {
                     // The variance rate of the bridge that has this middle variance over dt.
                     const double sigma2 = 4.0 * bridge_var * c.inv_dt;
                     const double span = c.t1 - t_start;
@@ -923,8 +908,8 @@ struct PixelModel {
                 ydi = yd1;
             } else {
                 xi = s.x + (x1 - s.x) * (static_cast<double>(i) / m);
-                zi = xi + (z_prev - x_prev) * pole_decay - (xi - x_prev) * pole_ramp;
-                ydi = zi + (yd_prev - z_prev) * sf_decay - (zi - z_prev) * sf_ramp;
+                zi = detail::low_pass_exact(z_prev, x_prev, xi, pole_decay, pole_ramp);
+                ydi = detail::low_pass_exact(yd_prev, z_prev, zi, sf_decay, sf_ramp);
             }
             SampleConstants piece = c;
             piece.t0 = i == 1 ? c.t0 : c.t0 + (i - 1) * h;
@@ -974,14 +959,13 @@ struct PixelModel {
     EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, double ny1, const SampleConstants& c, double leak_g,
                                        int noise_pol, double t_noise, Emit& emit) const {
         const double th_on = s.theta_on, th_off = s.theta_off, refr = p.refractory_s;
-        const double g = (y1 - s.y) * c.inv_dt + leak_g;  // d(d)/dt
+        const double g = detail::comparator_slope(s.y, y1, leak_g, c.inv_dt);  // d(d)/dt
         double tb = c.t0;
         double db = s.y - s.ref;  // d(tb)
         // Fast path: no noise event, not refractory, and the line stays inside both thresholds.
-        const double d1 = db + g * c.dt;
-        // Evaluated without short-circuits: one well-predicted branch instead of six.
-        const bool quiet = (noise_pol < 0) & (s.refr_until <= tb) & (db < th_on) & (db > -th_off) & (d1 < th_on) &
-                           (d1 > -th_off);
+        const double d1 = detail::comparator_end(s.y, s.ref, g, c.dt);
+        // Evaluated without short-circuits: one well-predicted branch instead of several.
+        const bool quiet = (noise_pol < 0) & (s.refr_until <= tb) & detail::inside_levels(db, d1, th_on, th_off);
         if (quiet) {
             s.ref = y1 - d1;
             return;

@@ -363,12 +363,11 @@ struct BlockModel : PixelModel {
     EVSTWIN_ALWAYS_INLINE bool quiet_in_interval(const PixelState& s, double y1, const NoiseCache& cache,
                                                  const SampleConstants& c, bool clock_ran_out, double& d1) const {
         const double th_on = s.theta_on, th_off = s.theta_off;
-        const double g = (y1 - s.y) * c.inv_dt + leak_slope(s, cache.leak_hz);
+        const double g = detail::comparator_slope(s.y, y1, leak_slope(s, cache.leak_hz), c.inv_dt);
         const double db = s.y - s.ref;
-        d1 = db + g * c.dt;
-        const double on0 = th_on - db, off0 = th_off + db;
-        return !clock_ran_out & (s.next_hot_t > c.t1) & (s.refr_until <= c.t0) & (std::min(on0, off0) > 0.0) &
-               (std::min(on0 * (th_on - d1), off0 * (th_off + d1)) > cache.bridge_bound);
+        d1 = detail::comparator_end(s.y, s.ref, g, c.dt);
+        return !clock_ran_out & (s.next_hot_t > c.t1) & (s.refr_until <= c.t0) &
+               detail::bridge_quiet(db, d1, th_on, th_off, cache.bridge_bound);
     }
 
     /// What continuous_finish() leaves of a pixel that quiet_in_interval() found quiet: the new
@@ -541,12 +540,11 @@ struct BlockModel : PixelModel {
                                               double leak_hz, double bvar, const SampleConstants& c,
                                               BridgeBatch& bb) const {
         const double t_start = std::max(c.t0, s.refr_until);
-        const double g = (y1 - s.y) * c.inv_dt + leak_slope(s, leak_hz);
-        const double d_start = (s.y - s.ref) + g * (t_start - c.t0);
-        const double d_end = (s.y - s.ref) + g * c.dt;
+        const double g = detail::comparator_slope(s.y, y1, leak_slope(s, leak_hz), c.inv_dt);
+        const double d_start = detail::comparator_end(s.y, s.ref, g, t_start - c.t0);
+        const double d_end = detail::comparator_end(s.y, s.ref, g, c.dt);
         const double th_on = s.theta_on, th_off = s.theta_off;
-        const bool inside = (bvar > 0.0) & (t_start < c.t1) & (d_start < th_on) & (d_start > -th_off) &
-                            (d_end < th_on) & (d_end > -th_off);
+        const bool inside = (bvar > 0.0) & (t_start < c.t1) & detail::inside_levels(d_start, d_end, th_on, th_off);
         const double sigma2 = 4.0 * bvar * c.inv_dt;
         const double span = c.t1 - t_start;
         const std::size_t m = bb.m;
@@ -850,9 +848,10 @@ struct BlockModel : PixelModel {
             busy[j] = 0;
             if (!has_mid) continue;
             const double s_y = now.y[j], ref = now.ref[j], th_on = h.theta_on[j], th_off = h.theta_off[j];
-            const double g = (next.y[j] - s_y) * c.inv_dt + leak_slope(h.leak_spread[j], th_on, th_off, common.leak_hz);
-            const double d_start = (s_y - ref) + g * (t_start - c.t0);
-            const double d_end = (s_y - ref) + g * c.dt;
+            const double g =
+                detail::comparator_slope(s_y, next.y[j], leak_slope(h.leak_spread[j], th_on, th_off, common.leak_hz), c.inv_dt);
+            const double d_start = detail::comparator_end(s_y, ref, g, t_start - c.t0);
+            const double d_end = detail::comparator_end(s_y, ref, g, c.dt);
             e_on[m] = (th_on - d_start) * (th_on - d_end) / (2.0 * mid);
             e_off[m] = (th_off + d_start) * (th_off + d_end) / (2.0 * mid);
             at[m] = static_cast<std::uint32_t>(j);
@@ -912,7 +911,7 @@ struct BlockModel : PixelModel {
                 const std::uint32_t px = v.ids[at(j)];
                 const std::uint64_t sample = st[at(j)].n;
                 const auto more = [&] { return CounterStream(key, px, sample, PURPOSE_POISSON_EXTRA); };
-                const double mu = (e_per_photon * static_cast<double>(rate[at(j)]) + dark_mean_e_per_s) * c.dt;
+                const double mu = mean_electron_rate(static_cast<double>(rate[at(j)])) * c.dt;
                 const double k = static_cast<double>(poisson.from_word(mu, count_word[j], more));
                 x[j] = log_count(k) + c.log_e_over_dt;
                 cur[j] = k * c.e_over_dt;
@@ -954,16 +953,16 @@ struct BlockModel : PixelModel {
                     decay = scratch.pr_decay[slot];
                     ramp = scratch.pr_ramp[slot];
                 } else {
-                    const double u = 2.0 * PI * p.pr_cutoff_ref_hz * (cur[j] / p.pr_ref_current_a) * c.dt;
+                    const double u = pole_rate(cur[j]) * c.dt;
                     decay = std::exp(-u);
-                    ramp = u > 1e-12 ? -std::expm1(-u) / u : 1.0;
+                    ramp = detail::low_pass_ramp(u);
                     if (tabled) {
                         scratch.pr_decay[slot] = decay;
                         scratch.pr_ramp[slot] = ramp;
                         scratch.pr_known[slot] = 1;
                     }
                 }
-                z[j] = x[j] + (si.z - si.x) * decay - (x[j] - si.x) * ramp;
+                z[j] = detail::low_pass_exact(si.z, si.x, x[j], decay, ramp);
             }
         } else {
             z = x;  // no pole: the source follower's input is the log itself
@@ -971,14 +970,7 @@ struct BlockModel : PixelModel {
         // Filter, noise decision and the quiet test: branch-free arithmetic.
         for (std::size_t j = 0; j < n; ++j) {
             PixelState& si = st[at(j)];
-            double yi;
-            if (!has_filter) {
-                yi = z[j];
-            } else if (euler) {
-                yi = c.sf_ramp * si.z + c.sf_decay * si.y;
-            } else {
-                yi = z[j] + (si.y - si.z) * c.sf_decay - (z[j] - si.z) * c.sf_ramp;
-            }
+            const double yi = detail::source_follower(has_filter, euler, si.y, si.z, z[j], c.sf_decay, c.sf_ramp);
             y[j] = yi;
             bool noise = false;
             if (shot) {
@@ -989,11 +981,10 @@ struct BlockModel : PixelModel {
             const double th_on = si.theta_on, th_off = si.theta_off;
             const double lg = leak_slope(si, leak_rate_hz(static_cast<double>(rate[at(j)])));
             leak[j] = lg;
-            const double g = (yi - si.y) * c.inv_dt + lg;
+            const double g = detail::comparator_slope(si.y, yi, lg, c.inv_dt);
             const double db = si.y - si.ref;
-            const double d1 = db + g * c.dt;
-            const bool quiet = !noise & (si.refr_until <= c.t0) & (db < th_on) & (db > -th_off) & (d1 < th_on) &
-                               (d1 > -th_off);
+            const double d1 = detail::comparator_end(si.y, si.ref, g, c.dt);
+            const bool quiet = !noise & (si.refr_until <= c.t0) & detail::inside_levels(db, d1, th_on, th_off);
             busy[j] = !quiet;
             if (quiet) si.ref = yi - d1;
         }

@@ -84,18 +84,17 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         const double s_z = sz[j], s_y = sy[j], s_ny = sny[j];
         // continuous_levels(): the pole (if any), the exact source follower, the noise.
         double z = x;
-        if constexpr (pole) z = x + (s_z - sx[j]) * pole_decay - (x - sx[j]) * pole_ramp;
-        const double yd0 = s_y - s_ny;
-        const double yd = z + (yd0 - s_z) * sf_decay - (z - s_z) * sf_ramp;
+        if constexpr (pole) z = low_pass_exact(s_z, sx[j], x, pole_decay, pole_ramp);
+        const double yd = low_pass_exact(s_y - s_ny, s_z, z, sf_decay, sf_ramp);
         double nz = 0.0, ny = 0.0;
         if constexpr (Noise) {
             // With the pole its rate is > 0 wherever there is noise: the two-pole system.
             // Without it z carries no noise (continuous_levels): nz stays 0, unwritten.
             if constexpr (pole) {
-                nz = phi_zz * snz[j] + l_zz * g1[j];
-                ny = phi_yz * snz[j] + phi_yy * s_ny + l_yz * g1[j] + l_yy * g2[j];
+                nz = noise_z_next(phi_zz, l_zz, snz[j], g1[j]);
+                ny = noise_y_next(phi_yz, phi_yy, l_yz, l_yy, snz[j], s_ny, g1[j], g2[j]);
             } else {
-                ny = phi_yy * s_ny + l_yy * g1[j];
+                ny = noise_y_next(phi_yy, l_yy, s_ny, g1[j]);
             }
         }
         const double y = yd + ny;
@@ -104,25 +103,20 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
         bool ran_out = false;
         if constexpr (Background) {
             // background_spend()'s (bg_on_hz bg_factor) dt, the product in brackets made once.
-            on = son[j] - bon[j] * dt;
-            off = soff[j] - boff[j] * dt;
-            ran_out = !((on > 0.0) & (off > 0.0));
+            on = clock_spent(son[j], bon[j], dt);
+            off = clock_spent(soff[j], boff[j], dt);
+            ran_out = clock_ran_out(on, off);
         }
         // The quiet test (step_block_continuous()).
         const double th_on = th_on_a[j], th_off = th_off_a[j];
-        const double g = (y - s_y) * inv_dt + leak_g[j];
+        const double g = comparator_slope(s_y, y, leak_g[j], inv_dt);
         const double db = s_y - sref[j];
-        const double d1 = db + g * dt;
-        const double on0 = th_on - db, off0 = th_off + db;
+        const double d1 = comparator_end(s_y, sref[j], g, dt);
         const bool plain = (static_cast<double>(rate[j]) == common) & !ran_out & (hot[j] > t1) & (refr[j] <= t0);
-        const double on1 = th_on - d1, off1 = th_off + d1;
-        const bool between0 = std::min(on0, off0) > 0.0;
-        const bool quiet = plain & between0 & (std::min(on0 * on1, off0 * off1) > bridge_bound);
-        // Not quiet, but the line stays between the levels (compare_bridged()'s test, db and d1
-        // inside (-theta_off, theta_on)): only the bridge's draw can make it fire. Written with
-        // the differences above (a - b > 0 exactly when a > b; on0, off0 are NaN together, as
-        // on1, off1 are), so the same verdicts with fewer comparisons.
-        const bool bridge = bridge_stage & plain & between0 & (std::min(on1, off1) > 0.0);
+        const bool quiet = plain & bridge_quiet(db, d1, th_on, th_off, bridge_bound);
+        // Not quiet, but the line stays between the levels (compare_bridged()'s test): only the
+        // bridge's draw can make it fire.
+        const bool bridge = bridge_stage & plain & inside_levels(db, d1, th_on, th_off);
         oref[j] = y - d1;
         if constexpr (pole) ox[j] = x;  // else z is x (BlockSoA::sf_only)
         oz[j] = z;
