@@ -12,6 +12,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <type_traits>
 #include <vector>
 
@@ -59,6 +60,22 @@ struct PixelState {
     /// Continuous model: what is left of the exponential budgets of eq. 12's ON and OFF clocks.
     double bg_clock_on = 0.0, bg_clock_off = 0.0;
 };
+
+/// Every field of a PixelState, in declaration order, as a tuple of references: the one list
+/// of them (tests compare states field by field through it). Made by a structured binding,
+/// which needs exactly as many names as the struct has fields: a field added to PixelState
+/// and not here fails to compile.
+template <class State>
+auto state_fields(State& s) {
+    static_assert(std::is_same<std::remove_const_t<State>, PixelState>::value, "state_fields takes a PixelState");
+    auto& [x, z, y, ref, refr_until, theta_on, theta_off, t, n, spare_words, spare_sample, nz, ny, level_at_event,
+           noise_at_event, leak_spread, bg_on_hz, bg_off_hz, hot_hz, next_hot_t, hot_event_t, hot_switch_t, hot_last_t,
+           hot_count, hot_switches, hot_pol, hot_active, hot_chain, bg_clock_on, bg_clock_off] = s;
+    return std::tie(x, z, y, ref, refr_until, theta_on, theta_off, t, n, spare_words, spare_sample, nz, ny,
+                    level_at_event, noise_at_event, leak_spread, bg_on_hz, bg_off_hz, hot_hz, next_hot_t, hot_event_t,
+                    hot_switch_t, hot_last_t, hot_count, hot_switches, hot_pol, hot_active, hot_chain, bg_clock_on,
+                    bg_clock_off);
+}
 
 /// CounterStream(key, pixel, sample, purpose) whose first block of four words a Philox batch
 /// has already computed (`first`; nullptr: none, the stream computes it as usual). The same
