@@ -41,7 +41,10 @@ namespace evstwin {
 
 /// Parameters turned into the numbers the hot loop needs.
 struct PixelModel {
-    PixelParams p;
+    /// The parameters, fixed at construction (checked by validate()): the numbers below are
+    /// derived from them once, so a changed copy would leave those stale. A new PixelModel
+    /// takes new parameters.
+    const PixelParams p;
     double e_per_photon = 0;  ///< electrons per photon arriving on the pixel
     double dark_mean_e_per_s = 0;
     bool has_filter = false;
