@@ -24,7 +24,7 @@ int main() {
     std::vector<std::uint32_t> c0(block), c1(block), c2(block), r0(block), r1(block), r2(block), r3(block);
     std::vector<std::uint32_t> ids(block);
     std::vector<double> g1(block), g2(block);
-    PixelModel::BlockScratch scratch;
+    BlockModel::BlockScratch scratch;
     scratch.resize(block);
     const Philox4x32Key key{{0x1234u, 0x5678u}};
     double sum = 0.0;
@@ -40,7 +40,7 @@ int main() {
                              r2.data(), r3.data());
             for (int half = 0; half < 2; ++half) {
                 const std::uint64_t sample = static_cast<std::uint64_t>(s + half);
-                PixelModel::batch_sample_normals(
+                BlockModel::batch_sample_normals(
                     block, [sample](std::size_t) { return sample; }, [&ids](std::size_t j) { return ids[j]; }, key,
                     scratch, half ? r2.data() : r0.data(), half ? r3.data() : r1.data(), g1.data(), g2.data(), false);
                 sum += g1[static_cast<std::size_t>(s) % block];

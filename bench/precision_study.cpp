@@ -66,6 +66,7 @@ namespace {
 
 using evstwin::BlockSoA;
 using evstwin::NoiseCache;
+using evstwin::BlockModel;
 using evstwin::PixelModel;
 using evstwin::PixelParams;
 using evstwin::PixelState;
@@ -112,12 +113,12 @@ void keep(const T& v) {
 /// the background, then `warm` samples of the engine's own step_block_soa (events, clocks and
 /// leak phases as they stand in a run).
 struct EngineBlock {
-    PixelModel model{reference_pixel()};
+    BlockModel model{reference_pixel()};
     evstwin::Philox4x32Key key = evstwin::key_from_seed(1);
     std::vector<PixelState> st = std::vector<PixelState>(BLOCK);
     std::vector<std::uint32_t> ids = std::vector<std::uint32_t>(BLOCK);
     std::vector<float> rate = std::vector<float>(BLOCK, static_cast<float>(BACKGROUND));
-    PixelModel::BlockScratch scratch;
+    BlockModel::BlockScratch scratch;
     std::uint32_t pixel = 0;
     std::size_t events = 0, k = 0;
 
@@ -725,7 +726,7 @@ void speed() {
         c0[j] = 12345u;
         c2[j] = static_cast<std::uint32_t>(j);
     }
-    PixelModel::BlockScratch scratch;
+    BlockModel::BlockScratch scratch;
     scratch.resize(BLOCK);
     const evstwin::Philox4x32Key key = evstwin::key_from_seed(7);
     evstwin::philox4x32_batch(c0.data(), c1.data(), c2.data(), evstwin::PURPOSE_SAMPLE, key, BLOCK, r0.data(), r1.data(),
@@ -761,7 +762,7 @@ void speed() {
             for (int half = 0; half < 2; ++half) {
                 const std::uint64_t sample = 2u * static_cast<std::uint64_t>(pair) + static_cast<std::uint64_t>(half);
                 if (with_slow)
-                    PixelModel::batch_sample_normals(
+                    BlockModel::batch_sample_normals(
                         BLOCK, [sample](std::size_t) { return sample; }, ids, key, scratch, half ? r2.data() : r0.data(),
                         half ? r3.data() : r1.data(), gd.data(), g2.data(), false);
                 else

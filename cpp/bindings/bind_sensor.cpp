@@ -242,6 +242,16 @@ void register_sensor(py::module_& m) {
         .def_readonly_static("MAX_THREADS", &Sensor::MAX_THREADS)
         .def_readonly_static("MAX_PIXELS", &Sensor::MAX_PIXELS)
         .def_readonly_static("STATE_BYTES_PER_PIXEL", &Sensor::STATE_BYTES_PER_PIXEL)
+        .def_property(
+            "kernel", [](const Sensor& s) { return std::string(evstwin::kernel_name(s.kernel())); },
+            [](Sensor& s, const std::string& name) {
+                for (evstwin::Kernel k : {evstwin::Kernel::Auto, evstwin::Kernel::PerPixel, evstwin::Kernel::Blocks,
+                                          evstwin::Kernel::Vector})
+                    if (name == evstwin::kernel_name(k)) return s.set_kernel(k);
+                throw py::value_error("kernel must be 'auto', 'per_pixel', 'blocks' or 'vector'; got kernel='" + name + "'");
+            },
+            "The code that advances the pixels: 'auto' (the fastest that applies), 'per_pixel' (the scalar "
+            "reference), 'blocks' or 'vector'. The same events whichever.")
         .def_property("num_threads", &Sensor::num_threads,
                       [](Sensor& s, std::optional<int> n) { s.set_num_threads(threads_arg(n)); });
 }

@@ -73,6 +73,7 @@ class Sensor:
     last_time_s: float
     num_threads: int
     max_events: int
+    kernel: str  # 'auto', 'per_pixel', 'blocks' or 'vector': the same events whichever
     DEFAULT_MAX_EVENTS: int
     MAX_THREADS: int
     MAX_PIXELS: int

@@ -53,10 +53,10 @@ struct NoiseCoeffs {
     double q_yy = 0;
 };
 
-/// What noise_coeffs() computes from the source follower's rate b and the interval T alone:
+/// What noise_coeffs_interval() and noise_coeffs_bridge() compute from the source follower's rate b and the interval T alone:
 /// the same for every pixel, so a NoiseCache keeps it per T and the coefficients of a new
 /// photon rate cost the pole's terms only (with the default single low-pass, no exp at all).
-/// Each value is the expression noise_coeffs() and ou2_covariance() would evaluate: the same bits.
+/// Each value is the expression those and ou2_covariance() would evaluate: the same bits.
 struct SfTerms {
     double b = -1.0, T = -1.0;
     double exp_bT = 0, exp_bh = 0;      ///< exp(-b T), exp(-b (T / 2))
@@ -78,7 +78,7 @@ inline SfTerms sf_terms(double b, double T) {
 }
 
 /// The photoreceptor pole's own terms at (a, T), when the caller has computed them already
-/// (PixelModel's noise-free chain: exp(-a T) and one_minus_exp_over(a T)). noise_coeffs()
+/// (PixelModel's noise-free chain: exp(-a T) and one_minus_exp_over(a T)). noise_coeffs_interval()
 /// needs the same two values: exp(-a T) is Phi's phi_zz, and one_minus_exp_over(2 a (T / 2))
 /// is one_minus_exp_over(a T) bit for bit (2 a and T / 2 are exact, so is their product's
 /// rounding the same as a T's). Used only where a is the caller's a (not moved off b).
@@ -197,7 +197,7 @@ inline void noise_interval_end(NoiseCoeffs& k, const NoiseIntervalStage& stage, 
 }
 
 /// Exact coefficients of the noise over an interval T, all but the two-pole system's
-/// bridge_var (noise_coeffs_bridge() adds it; noise_coeffs() does both).
+/// bridge_var (noise_coeffs_bridge() adds it).
 ///   pole_rate_per_s: a = 2 pi f_pr (0 = no photoreceptor pole)
 ///   sf_rate_per_s:   b = 2 pi f_sf (0 = no source follower)
 ///   D: white-noise intensity of ln I [1/s]. At least one of a, b must be > 0.
@@ -241,15 +241,6 @@ inline void noise_coeffs_bridge(NoiseCoeffs& k, double a, double b, double D, do
         const double iy = (Mzz * Pyy - Mzy * Pzy) / det;  // (M^-1 P)_{y,y}
         k.bridge_var = std::max(0.0, hyy - (Pzy * iz + Pyy * iy));
     }
-}
-
-/// Exact coefficients of the noise over an interval T (noise_coeffs_interval() and
-/// noise_coeffs_bridge(): arguments as there).
-inline NoiseCoeffs noise_coeffs(double a, double b, double D, double T, const SfTerms* sf = nullptr,
-                                const PoleTerms* pole = nullptr) {
-    NoiseCoeffs k = noise_coeffs_interval(a, b, D, T, sf, pole);
-    noise_coeffs_bridge(k, a, b, D, T, sf, pole);
-    return k;
 }
 
 /// Stationary covariance of (n_z, n_y): the noise a pixel has carried since long before t = 0.
@@ -324,9 +315,6 @@ private:
     }
     double sd_, c_, k_, held_, cross_;
 };
-inline double leak_noise_hazard_integral(double l1, double l0, double sd, double a, double b) {
-    return LeakNoiseHazard(sd, a, b)(l1, l0);
-}
 
 /// Probability that a Brownian bridge whose distance to a level is u0 > 0 and u1 > 0 at the
 /// ends of an interval, with variance `mid_var` at the middle, touches the level in between:

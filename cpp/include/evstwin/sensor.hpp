@@ -27,6 +27,7 @@
 
 #include "config.hpp"
 #include "event.hpp"
+#include "kernels/block_model.hpp"
 #include "pixel.hpp"
 #include "rng.hpp"
 
@@ -97,27 +98,30 @@ inline EventStorage vector_storage(std::vector<Event>& out) {
 }
 }  // namespace detail
 
+/// Which code advances a Sensor's pixels (Sensor::set_kernel). Every choice gives the same
+/// events bit for bit (the tests check it); they differ in speed only.
+///   Auto:      the fastest that applies: the vector kernel (PixelModel::step_block_soa) on a
+///              block where it pays, else the array-of-structures kernel (step_block), else
+///              the per-pixel path (PixelModel::advance).
+///   PerPixel:  PixelModel::advance for every pixel and sample (the scalar reference).
+///   Blocks:    the array-of-structures kernel where it applies, never the vector one.
+///   Vector:    the vector kernel wherever it applies, also where Auto would judge it not to pay.
+/// A call with probe pixels (run()'s trace) takes the per-pixel path whatever the choice.
+enum class Kernel { Auto, PerPixel, Blocks, Vector };
+
+inline const char* kernel_name(Kernel k) {
+    switch (k) {
+        case Kernel::PerPixel: return "per_pixel";
+        case Kernel::Blocks: return "blocks";
+        case Kernel::Vector: return "vector";
+        default: return "auto";
+    }
+}
+
 class Sensor {
 public:
     /// Pixels per block: the unit of parallel work and of event bookkeeping.
     static constexpr std::size_t BLOCK = 256;
-    /// run()'s vector kernel takes a block where at least this many quarters of its pixels
-    /// advance at a sample (the others stand past it, sampled finely by run_pixels): it runs
-    /// over the whole block, so below that the array-of-structures kernel over the pixels
-    /// that advance costs less. Speed only: either gives the same events.
-    static constexpr std::size_t SOA_MIN_ACTIVE_QUARTERS = 2;
-    /// run() leaves the vector kernel for the rest of a call in a block where more than this
-    /// many quarters of its pixels took the per-pixel path at a sample (an event-heavy scene):
-    /// then copying them out of the arrays and back costs more than the vector pass saves.
-    /// Measured with bench/engine_driver.cpp (continuous 130 CUTOFF_HZ, one thread, user+sys):
-    /// a quarter, against the half it was, is as fast at 20-40 Hz (0.40 / 0.81-0.83 /
-    /// 0.91-0.94 s against 0.40 / 0.81-0.82 / 0.94-0.95 s) and faster at 45-60 Hz (1.00-1.01
-    /// against 1.06 s at 45 Hz, 1.04-1.06 against 1.15-1.16 s at 50 Hz); an eighth loses at
-    /// 20-30 Hz (0.45 / 0.84-0.85 s). Speed only: either kernel gives the same events.
-    static constexpr std::size_t SOA_MAX_BUSY_QUARTERS = 1;
-    /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
-    /// Speed only.
-    static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
     /// Shortest sample interval accepted [s]: below it 1/dt and the crossing times lose meaning.
     static constexpr double MIN_DT_S = 1e-12;
     /// Largest photon rate accepted [photons/s on a pixel]; with no dark current, positive
@@ -188,6 +192,15 @@ public:
         if (n < 1 || n > 0xFFFFFFFFull)
             throw std::invalid_argument("max_events must be in [1, 4294967295]; got max_events=" + std::to_string(n));
         max_events_ = n;
+    }
+
+    /// The code that advances the pixels (Kernel; Auto by default): the same events whichever.
+    Kernel kernel() const { return kernel_; }
+    void set_kernel(Kernel k) {
+        if (static_cast<int>(k) < 0 || static_cast<int>(k) > 3)
+            throw std::invalid_argument("kernel must be auto, per_pixel, blocks or vector; got " +
+                                        std::to_string(static_cast<int>(k)));
+        kernel_ = k;
     }
 
     void set_num_threads(int num_threads) {
@@ -306,66 +319,7 @@ public:
     template <class Real>
     std::size_t run_into(const EventStorage& storage, const Real* photon_rate, const double* t_s,
                          std::size_t n_samples, const std::vector<std::uint32_t>* probe_pixels = nullptr,
-                         std::vector<TraceSample>* trace = nullptr, bool static_frame = false) {
-        const std::size_t npix = state_.size();
-        check_usable();
-        if (n_samples == 0) {
-            labels_.clear();
-            return 0;
-        }
-        check_times(t_s, n_samples);
-        // The rates are checked at the start of the call's parallel region (RateCheck), before
-        // any pixel moves.
-        RateCheck<Real> rate_check(*this, photon_rate, (static_frame ? 1 : n_samples) * npix);
-        const std::size_t sample_stride = static_frame ? 0 : npix;
-        const std::vector<SampleConstants> consts = sample_constants(t_s, n_samples);
-
-        std::vector<std::int32_t> probe_slot;
-        std::size_t n_probe = 0;
-        if (probe_pixels && trace && !probe_pixels->empty()) {
-            probe_slot.assign(npix, -1);
-            n_probe = probe_pixels->size();
-            for (std::size_t j = 0; j < n_probe; ++j) {
-                const std::uint32_t px = (*probe_pixels)[j];
-                if (px >= npix)
-                    throw std::invalid_argument("probe pixel index " + std::to_string(px) + " is outside the " +
-                                                std::to_string(npix) + "-pixel sensor");
-                if (probe_slot[px] >= 0)
-                    throw std::invalid_argument("probe pixels must not repeat; got pixel " + std::to_string(px) + " twice");
-                probe_slot[px] = static_cast<std::int32_t>(j);
-            }
-            trace->assign(n_samples * n_probe, TraceSample{});
-        }
-
-        const std::size_t nblocks = (npix + BLOCK - 1) / BLOCK;
-        start_call(nblocks, n_samples);
-
-        CollectPlan plan;
-        plan.storage = &storage;
-        plan.t_s = t_s;
-        plan.intervals_known = true;
-        plan.t_before = last_t_;
-        guarded_for_each_block(
-            nblocks, npix * n_samples, rate_check,
-            [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
-                run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
-                          probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
-            },
-            [&] { return collect_prepare(plan, true); },
-            [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
-        const std::size_t bad = rate_check.first_bad();
-        if (bad < rate_check.total) {
-            const std::size_t k = bad / npix, pix = bad % npix;
-            throw_bad_rate("photon_rate[" + std::to_string(k) + ", " + std::to_string(pix / width_) + ", " +
-                               std::to_string(pix % width_) + "]",
-                           static_cast<double>(photon_rate[bad]));
-        }
-
-        samples_ += n_samples;
-        last_t_ = t_s[n_samples - 1];
-        collect_finish();
-        return plan.total;
-    }
+                         std::vector<TraceSample>* trace = nullptr, bool static_frame = false);
 
     /// Advance only the listed pixels through their own sample times: the sparse second
     /// input for the pixels near a fast source, which need finer sampling than the rest.
@@ -386,106 +340,26 @@ public:
     /// run_pixels() with the events written into `storage` (as run_into); returns their number.
     template <class Real>
     std::size_t run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
-                                const Real* photon_rate, const double* t_s, std::size_t n_samples) {
-        check_usable();
-        if (n_pixels == 0 || n_samples == 0) {
-            labels_.clear();
-            return 0;
-        }
-        const std::size_t npix = state_.size();
-        std::vector<char> seen(npix, 0);
-        double latest = -std::numeric_limits<double>::infinity();
-        std::size_t latest_j = 0;
-        for (std::size_t j = 0; j < n_pixels; ++j) {
-            if (pixels[j] >= npix)
-                throw std::invalid_argument("pixels[" + std::to_string(j) + "]=" + std::to_string(pixels[j]) +
-                                            " is outside the " + std::to_string(npix) + "-pixel sensor");
-            if (seen[pixels[j]])
-                throw std::invalid_argument("pixels must not repeat; got pixel " + std::to_string(pixels[j]) + " twice");
-            seen[pixels[j]] = 1;
-            if (state_[pixels[j]].t > latest) {
-                latest = state_[pixels[j]].t;
-                latest_j = j;
-            }
-        }
-        for (std::size_t k = 0; k < n_samples; ++k) {
-            if (!std::isfinite(t_s[k]))
-                throw std::invalid_argument("t_s must be finite; got t_s[" + std::to_string(k) + "]=" + detail::fmt(t_s[k]));
-            if (!(std::fabs(t_s[k]) < 9.2e12))  // as run(): event times are int64 microseconds
-                throw std::invalid_argument("t_s must lie within +-9.2e12 s (int64 microseconds); got t_s[" +
-                                            std::to_string(k) + "]=" + detail::fmt(t_s[k]));
-            const double prev = k == 0 ? latest : t_s[k - 1];
-            if (!(t_s[k] > prev)) {
-                if (k == 0)
-                    throw std::invalid_argument("t_s must start after the last sample of every listed pixel; pixels[" +
-                                                std::to_string(latest_j) + "] is at " + detail::fmt(latest) +
-                                                " s; got t_s[0]=" + detail::fmt(t_s[0]));
-                throw std::invalid_argument("t_s must be strictly increasing; got t_s[" + std::to_string(k - 1) +
-                                            "]=" + detail::fmt(prev) + " and t_s[" + std::to_string(k) +
-                                            "]=" + detail::fmt(t_s[k]));
-            }
-            if (k > 0) check_dt(t_s[k] - prev, k);
-        }
-        for (std::size_t j = 0; j < n_pixels; ++j)
-            if (state_[pixels[j]].n > 0) check_dt(t_s[0] - state_[pixels[j]].t, 0);
-        std::vector<SampleConstants> consts(n_samples);
-        for (std::size_t k = 1; k < n_samples; ++k) consts[k] = model_.constants(t_s[k - 1], t_s[k]);
-        const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
-        start_call(nblocks, n_samples);
-        // The rates are checked block by block, each block's columns just before it steps them
-        // (they are then in the cache for its steps: a separate pass over the whole array read it
-        // from memory once more, 7 % of mcreynolds' run_pixels calls), and the blocks' new
-        // states wait in pixel_states_ until every block has passed: a bad value anywhere leaves
-        // every pixel as it was, and the error names the first one in the array.
-        const std::size_t total = n_samples * n_pixels;
-        std::vector<std::size_t> block_bad(nblocks, total);
-        if (pixel_states_.size() < n_pixels) pixel_states_.resize(n_pixels);
-        NoCheck no_check{total};
-        // The listed pixels need not be in increasing order: each sample's events are sorted
-        // by (t, pixel), not only by t.
-        CollectPlan plan;
-        plan.storage = &storage;
-        plan.t_s = t_s;
-        std::size_t bad = total;
-        try {
-            guarded_for_each_block(
-                nblocks, total, no_check,
-                [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
-                    const std::size_t lo = b * BLOCK, m = std::min(n_pixels, lo + BLOCK) - lo;
-                    for (std::size_t k = 0; k < n_samples; ++k) {
-                        const std::size_t i = first_bad_rate(photon_rate + k * n_pixels + lo, m);
-                        if (i < m) {
-                            block_bad[b] = k * n_pixels + lo + i;
-                            return;
-                        }
-                    }
-                    run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
-                },
-                [&]() -> std::size_t {
-                    bad = *std::min_element(block_bad.begin(), block_bad.end());
-                    if (bad < total) return 0;
-                    for (std::size_t j = 0; j < n_pixels; ++j) {
-                        state_[pixels[j]] = pixel_states_[j];
-                        block_synced_[pixels[j] / BLOCK] = 0;  // this block's pixels now stand apart
-                    }
-                    return collect_prepare(plan, false);
-                },
-                [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
-        } catch (...) {
-            // A block's error (max_events) before every block's rates were checked: a bad rate
-            // is still the error, and no pixel has moved (the states wait in pixel_states_).
-            bad = first_bad_rate(photon_rate, total);
-            if (bad >= total) throw;
-            stopped_ = false;
-        }
-        if (bad < total)
-            throw_bad_rate("photon_rate[" + std::to_string(bad / n_pixels) + ", " + std::to_string(bad % n_pixels) + "]",
-                           static_cast<double>(photon_rate[bad]));
-        collect_finish();
-        return plan.total;
-    }
+                                const Real* photon_rate, const double* t_s, std::size_t n_samples);
 
 private:
+    /// run()'s vector kernel (Kernel::Auto) takes a block where at least this many quarters of its pixels
+    /// advance at a sample (the others stand past it, sampled finely by run_pixels): it runs
+    /// over the whole block, so below that the array-of-structures kernel over the pixels
+    /// that advance costs less. Speed only: either gives the same events.
+    static constexpr std::size_t SOA_MIN_ACTIVE_QUARTERS = 2;
+    /// run() (Kernel::Auto) leaves the vector kernel for the rest of a call in a block where more than this
+    /// many quarters of its pixels took the per-pixel path at a sample (an event-heavy scene):
+    /// then copying them out of the arrays and back costs more than the vector pass saves.
+    /// Measured with bench/engine_driver.cpp (continuous 130 CUTOFF_HZ, one thread, user+sys):
+    /// a quarter, against the half it was, is as fast at 20-40 Hz (0.40 / 0.81-0.83 /
+    /// 0.91-0.94 s against 0.40 / 0.81-0.82 / 0.94-0.95 s) and faster at 45-60 Hz (1.00-1.01
+    /// against 1.06 s at 45 Hz, 1.04-1.06 against 1.15-1.16 s at 50 Hz); an eighth loses at
+    /// 20-30 Hz (0.45 / 0.84-0.85 s). Speed only: either kernel gives the same events.
+    static constexpr std::size_t SOA_MAX_BUSY_QUARTERS = 1;
+    /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
+    /// Speed only.
+    static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
     /// The state after a call that stopped part-way (max_events, out of memory) is neither
     /// the old one nor the new one: refuse to build on it.
     void check_usable() const {
@@ -502,7 +376,7 @@ private:
         try {
             for_each_block(
                 nblocks, updates, check,
-                [&](std::size_t b, PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
+                [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
                     if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
                     fn(b, poisson, scratch);
                     note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
@@ -564,72 +438,7 @@ private:
     /// value no block runs, nothing is prepared, and the caller throws (check.first_bad()).
     template <class Check, class Fn, class Prepare, class Part>
     void for_each_block(std::size_t nblocks, std::size_t updates, Check& check, Fn&& fn, Prepare&& prepare,
-                        Part&& part) {
-        std::exception_ptr error;
-        const std::int64_t nb = static_cast<std::int64_t>(nblocks);
-        const std::int64_t n_checks = static_cast<std::int64_t>(check.parts());
-        std::int64_t n_parts = 0;  // set by prepare(); read by every thread after the barrier that ends it
-        bool input_bad = false;    // set by one thread; read by every thread after the barrier that ends it
-#if EVSTWIN_HAS_OPENMP
-        const bool parallel = num_threads_ > 1 && nblocks > 1 && updates >= PARALLEL_MIN_UPDATES;
-#pragma omp parallel num_threads(num_threads_) if (parallel)
-#endif
-        {
-#if EVSTWIN_HAS_OPENMP
-#pragma omp for schedule(dynamic, 4)
-#endif
-            for (std::int64_t i = 0; i < n_checks; ++i) check.check_part(static_cast<std::size_t>(i));
-#if EVSTWIN_HAS_OPENMP
-#pragma omp single
-#endif
-            input_bad = check.first_bad() < check.total;
-            // (the single's implied barrier: input_bad final)
-            const std::int64_t n_blocks_to_run = input_bad ? 0 : nb;
-            PoissonSampler poisson;
-            PixelModel::BlockScratch scratch;
-#if EVSTWIN_HAS_OPENMP
-#pragma omp for schedule(dynamic, 1)
-#endif
-            for (std::int64_t b = 0; b < n_blocks_to_run; ++b) {
-                try {
-                    fn(static_cast<std::size_t>(b), poisson, scratch);
-                } catch (...) {
-#if EVSTWIN_HAS_OPENMP
-#pragma omp critical(evstwin_error)
-#endif
-                    if (!error) error = std::current_exception();
-                }
-            }
-            // (the loop's implied barrier: every block is done, `error` final)
-#if EVSTWIN_HAS_OPENMP
-#pragma omp single
-#endif
-            {
-                if (!error && !input_bad) {
-                    try {
-                        n_parts = static_cast<std::int64_t>(prepare());
-                    } catch (...) {
-                        error = std::current_exception();
-                    }
-                }
-            }
-            SortScratch sort;
-#if EVSTWIN_HAS_OPENMP
-#pragma omp for schedule(dynamic, 1)
-#endif
-            for (std::int64_t i = 0; i < n_parts; ++i) {
-                try {
-                    part(static_cast<std::size_t>(i), sort);
-                } catch (...) {
-#if EVSTWIN_HAS_OPENMP
-#pragma omp critical(evstwin_error)
-#endif
-                    if (!error) error = std::current_exception();
-                }
-            }
-        }
-        if (error) std::rethrow_exception(error);
-    }
+                        Part&& part);
 
     /// A block's working record of an event, 8 bytes (it was 16: the event-heavy load writes,
     /// counts and copies hundreds of MB of them a call): the low 32 bits of its microsecond
@@ -860,221 +669,15 @@ private:
     template <class Real>
     void run_block(std::size_t b, const Real* rate, std::size_t sample_stride, std::size_t n_samples,
                    const std::vector<SampleConstants>& consts,
-                   PoissonSampler& poisson, PixelModel::BlockScratch& scratch, const std::int32_t* probe_slot,
-                   std::size_t n_probe, TraceSample* trace) {
-        const std::size_t npix = state_.size();
-        const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
-        TakenEvents taken(block_events_[b], block_full_t_[b]);
-        std::vector<RawEvent>& out = taken.out;
-        std::uint32_t pixel = 0;
-        std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-        const auto sample_end_us = [&consts](std::size_t j) { return round_us(consts[j].t1); };
-        BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
-        const bool kernel = !probe_slot && model_.has_block_kernel();
-        const bool soa_kernel = kernel && model_.has_soa_kernel();
-        std::uint32_t ids[BLOCK], active[BLOCK];
-        for (std::size_t i = lo; i < hi; ++i) ids[i - lo] = static_cast<std::uint32_t>(i);
-        // After a kernel step that skipped nobody, all stand at the next t0. So they do at the
-        // first sample where the block's last call ended that way and nothing moved them since
-        // (block_synced_): then its states are not read here only to find that out.
-        bool synced = kernel && block_synced_[b] != 0;
-        // Whether scratch.soa holds this block's state (standing at soa_t), to be stored back
-        // before any other path touches it and at the end.
-        bool in_soa = false;
-        double soa_t = 0.0;
-        // Pixels in the arrays that stand past the samples so far (run_pixels sampled them
-        // finely; step_block_soa's held ones): their states stay in state_, untouched, until
-        // a sample starts at their time and they are taken into the arrays.
-        std::uint8_t held[BLOCK];
-        std::uint32_t held_at[BLOCK];
-        std::size_t n_held = 0;
-        // Where many of a block's pixels need the per-pixel path (an event-heavy scene;
-        // SOA_MAX_BUSY_QUARTERS), copying them out of the arrays and back costs more than the
-        // vector pass saves: the block goes on with the array-of-structures kernel for the rest
-        // of the call. The same events.
-        bool soa_pays = soa_kernel;
-        const auto leave_soa = [&] {
-            if (in_soa) scratch.soa.store(state_.data() + lo, hi - lo, soa_t, n_held ? held : nullptr);
-            in_soa = false;
-            n_held = 0;
-        };
-        for (std::size_t k = 0; k < n_samples; ++k) {
-            const SampleConstants& c = consts[k];
-            const Real* row = rate + k * sample_stride;
-            // The next sample's rates for this block: one row of a (samples, pixels) array, a
-            // whole frame (360 KB at DAVIS346) after this one, so the hardware prefetcher, which
-            // stays within a page, never asks for it and its first touch waited on memory.
-#if defined(__GNUC__) || defined(__clang__)
-            if (sample_stride != 0 && k + 1 < n_samples) {
-                const char* next = reinterpret_cast<const char*>(row + sample_stride + lo);
-                for (std::size_t line = 0; line < (hi - lo) * sizeof(Real); line += 64) __builtin_prefetch(next + line, 0, 2);
-                __builtin_prefetch(next + (hi - lo) * sizeof(Real) - 1, 0, 2);  // a row not 64-byte aligned
-            }
-#endif
-            emit.start_sample(k);
-            std::size_t n_active = hi - lo;
-            bool eligible = kernel && synced;
-            if (kernel && !synced && in_soa) {
-                // The arrays' pixels stand at c.t0 (soa_t); the held ones at their own times.
-                eligible = true;
-                for (std::size_t q = 0; q < n_held; ++q) {
-                    const PixelState& s = state_[lo + held_at[q]];
-                    eligible &= ((s.t == c.t0) & (s.n > 0)) | (s.t >= c.t1);
-                }
-                if (eligible) {
-                    // Those that stand at c.t0 now join the arrays.
-                    std::size_t still = 0;
-                    for (std::size_t q = 0; q < n_held; ++q) {
-                        const std::size_t j = held_at[q];
-                        if (state_[lo + j].t == c.t0) {
-                            scratch.soa.take(state_[lo + j], j, scratch.soa.now());
-                            held[j] = 0;
-                        } else {
-                            held_at[still++] = static_cast<std::uint32_t>(j);
-                        }
-                    }
-                    n_held = still;
-                    n_active = hi - lo - n_held;
-                } else {
-                    leave_soa();  // and scan the states below
-                }
-            }
-            if (kernel && !synced && !in_soa) {
-                // Eligible when every pixel either stands at t0 or has already passed t1 (a
-                // pixel sub-sampled by run_pixels): the latter are skipped.
-                eligible = true;
-                n_active = 0;
-                for (std::size_t i = lo; i < hi; ++i) {
-                    // The states come from memory here, at the call's first sample of a block
-                    // whose pixels may stand apart (block_synced_ clear: run_pixels moved some),
-                    // at a stride the hardware prefetcher follows only within a page: every
-                    // cache line of the record a few pixels ahead is asked for now, for load()
-                    // below. (Written out here: the same loop in a helper function in this
-                    // header left no prefetch instruction in a GCC 12 -O3 build.)
-#if defined(__GNUC__) || defined(__clang__)
-                    if (i + STATE_PREFETCH_AHEAD < hi) {
-                        const char* ahead = reinterpret_cast<const char*>(&state_[i + STATE_PREFETCH_AHEAD]);
-                        for (std::size_t line = 0; line < sizeof(PixelState); line += 64) __builtin_prefetch(ahead + line);
-                        __builtin_prefetch(ahead + sizeof(PixelState) - 1);  // where the record is not 64-byte aligned
-                    }
-#endif
-                    const PixelState& s = state_[i];
-                    const bool at_t0 = (s.t == c.t0) & (s.n > 0);
-                    eligible &= at_t0 | (s.t >= c.t1);
-                    active[n_active] = static_cast<std::uint32_t>(i - lo);
-                    n_active += at_t0;
-                }
-            }
-            // The arrays pay while most of the block advances: the passes run over the held
-            // pixels too, and are dropped for them.
-            if (eligible && soa_pays && (in_soa || SOA_MIN_ACTIVE_QUARTERS * (hi - lo) <= 4 * n_active)) {
-                if (!in_soa) {
-                    scratch.soa.load(state_.data() + lo, hi - lo);
-                    if (n_active < hi - lo) {
-                        std::fill(held, held + (hi - lo), std::uint8_t{1});
-                        for (std::size_t q = 0; q < n_active; ++q) held[active[q]] = 0;
-                        for (std::size_t j = 0; j < hi - lo; ++j)
-                            if (held[j]) held_at[n_held++] = static_cast<std::uint32_t>(j);
-                    }
-                }
-                in_soa = true;
-                const std::size_t n_busy = model_.step_block_soa(scratch.soa, state_.data() + lo, ids, hi - lo, row + lo,
-                                                                 c, key_, scratch, emit, pixel, held_at, n_held);
-                soa_t = c.t1;
-                synced = n_held == 0;
-                if (4 * n_busy > SOA_MAX_BUSY_QUARTERS * (hi - lo)) {
-                    soa_pays = false;
-                    leave_soa();
-                }
-            } else if (eligible) {
-                leave_soa();
-                const bool all = n_active == hi - lo;
-                model_.step_block(PixelModel::BlockView{state_.data() + lo, ids, all ? nullptr : active, n_active},
-                                  row + lo, c, key_, poisson, scratch, emit, pixel);
-                synced = all;
-            } else if (!probe_slot) {
-                leave_soa();
-                for (std::size_t i = lo; i < hi; ++i) {
-                    pixel = static_cast<std::uint32_t>(i);
-                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, scratch.noise, emit);
-                }
-            } else {
-                for (std::size_t i = lo; i < hi; ++i) {
-                    pixel = static_cast<std::uint32_t>(i);
-                    TraceSample* tr = probe_slot[i] >= 0 ? trace + k * n_probe + probe_slot[i] : nullptr;
-                    model_.advance(state_[i], static_cast<double>(row[i]), c, key_, pixel, poisson, scratch.noise, emit, tr);
-                }
-            }
-            ends[k] = static_cast<std::uint32_t>(out.size());
-        }
-        leave_soa();
-        block_synced_[b] = synced;
-    }
+                   PoissonSampler& poisson, BlockModel::BlockScratch& scratch, const std::int32_t* probe_slot,
+                   std::size_t n_probe, TraceSample* trace);
 
     /// The sparse counterpart of run_block: entries [lo, hi) of a pixel list, each with its
     /// own column of rates.
     template <class Real>
     void run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
                          const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
-                         PoissonSampler& poisson, PixelModel::BlockScratch& scratch) {
-        const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
-        TakenEvents taken(block_events_[b], block_full_t_[b]);
-        std::vector<RawEvent>& out = taken.out;
-        std::uint32_t pixel = 0;
-        std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-        const auto sample_end_us = [t_s](std::size_t j) { return round_us(t_s[j]); };
-        BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
-        emit.start_sample(0);
-        // The listed pixels' states are gathered into a contiguous block, advanced sample-major
-        // (each sample reads one contiguous stretch of its row of rates) and scattered back.
-        // The first interval starts at each pixel's own last sample; after it, every pixel
-        // stands at the same time and the block kernel applies.
-        const std::size_t m = hi - lo;
-        PixelState* local = pixel_states_.data() + lo;  // run_pixels_into() puts them back
-        for (std::size_t j = 0; j < m; ++j) local[j] = state_[pixels[lo + j]];
-        const bool kernel = model_.has_block_kernel();
-        // Usually every listed pixel stands at the same time (the previous base sample).
-        bool same_start = kernel;
-        for (std::size_t j = 0; j < m && same_start; ++j) same_start = local[j].t == local[0].t && local[j].n > 0;
-        if (same_start) {
-            model_.step_block(PixelModel::BlockView{local, pixels + lo, nullptr, m}, rate + lo,
-                              model_.constants(local[0].t, t_s[0]), key_, poisson, scratch, emit, pixel);
-        } else {
-            for (std::size_t j = 0; j < m; ++j) {
-                pixel = pixels[lo + j];
-                PixelState& s = local[j];
-                model_.advance(s, static_cast<double>(rate[lo + j]), model_.constants(s.t, t_s[0]), key_, pixel, poisson,
-                               scratch.noise, emit);
-            }
-        }
-        ends[0] = static_cast<std::uint32_t>(out.size());
-        std::size_t k = 1;
-        if (kernel && model_.has_soa_kernel() && n_samples > 1) {
-            // Every pixel now stands at t_s[0]: the rest of the samples on the block's arrays.
-            scratch.soa.load(local, m);
-            for (; k < n_samples; ++k) {
-                emit.start_sample(k);
-                model_.step_block_soa(scratch.soa, local, pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
-                                      scratch, emit, pixel);
-                ends[k] = static_cast<std::uint32_t>(out.size());
-            }
-            scratch.soa.store(local, m, t_s[n_samples - 1]);
-        }
-        for (; k < n_samples; ++k) {
-            emit.start_sample(k);
-            const Real* row = rate + k * n_pixels + lo;
-            if (kernel) {
-                model_.step_block(PixelModel::BlockView{local, pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
-                                  scratch, emit, pixel);
-            } else {
-                for (std::size_t j = 0; j < m; ++j) {
-                    pixel = pixels[lo + j];
-                    model_.advance(local[j], static_cast<double>(row[j]), consts[k], key_, pixel, poisson, scratch.noise, emit);
-                }
-            }
-            ends[k] = static_cast<std::uint32_t>(out.size());
-        }
-    }
+                         PoissonSampler& poisson, BlockModel::BlockScratch& scratch);
 
     /// Count n more events of this call; throw once the call passes max_events_ (whichever
     /// thread gets there first; the exception is rethrown after the parallel region).
@@ -1144,53 +747,14 @@ private:
     /// a stable sort by (t_us, pixel) of that sample's events does.
     ///
     /// Returns the number of samples to sort (0 when there are no events).
-    std::size_t collect_prepare(CollectPlan& plan, bool pixel_ordered) {
-        const std::size_t nblocks = blocks_in_call_, n_samples = samples_in_call_;
-        std::size_t total = 0;
-        for (std::size_t b = 0; b < nblocks; ++b) total += block_events_[b].size();
-        if (total > max_events_) {
-            stopped_ = true;
-            throw_max_events();
-        }
-        plan.pixel_ordered = pixel_ordered;
-        plan.row = detail::PixelDivider(static_cast<std::uint32_t>(width_));
-        labels_.resize(total);
-        if (total == 0) return 0;
-        plan.events = (*plan.storage)(total);
-        plan.total = total;
-        for (std::size_t b = 0; b < nblocks; ++b)
-            if (!block_events_[b].empty()) plan.busy.push_back(static_cast<std::uint32_t>(b));
-        plan.base.assign(n_samples + 1, 0);
-        for (const std::uint32_t b : plan.busy) {
-            const std::uint32_t* ends = block_sample_ends_[b].data();
-            std::uint32_t prev = 0;
-            for (std::size_t k = 0; k < n_samples; ++k) {
-                plan.base[k + 1] += ends[k] - prev;
-                prev = ends[k];
-            }
-        }
-        for (std::size_t k = 0; k < n_samples; ++k) plan.base[k + 1] += plan.base[k];
-        return n_samples;
-    }
+    std::size_t collect_prepare(CollectPlan& plan, bool pixel_ordered);
 
     /// Block b's events of sample k in the order it made them, as fn(time, record) until fn
     /// returns false; returns whether it never did. time: from_low(the record's t_lo) where the
     /// block keeps only the low bits, else from_full(the block's full_t of it).
     template <class FromLow, class FromFull, class Fn>
     bool for_each_event_in_sample(std::uint32_t b, std::size_t k, FromLow&& from_low, FromFull&& from_full,
-                                  Fn&& fn) const {
-        const RawEvent* out = block_events_[b].data();
-        const std::uint32_t first = k == 0 ? 0u : block_sample_ends_[b][k - 1], end = block_sample_ends_[b][k];
-        const std::int64_t* full_t = block_full_t_[b].empty() ? nullptr : block_full_t_[b].data();
-        if (!full_t) {
-            for (std::uint32_t e = first; e < end; ++e)
-                if (!fn(from_low(out[e].t_lo), out[e])) return false;
-        } else {
-            for (std::uint32_t e = first; e < end; ++e)
-                if (!fn(from_full(full_t[e]), out[e])) return false;
-        }
-        return true;
-    }
+                                  Fn&& fn) const;
 
     /// for_each_event_in_sample with each event's offset d = t_us - lo from a microsecond lo
     /// less than 2^31 before the sample's end, where t_us - lo lies in [0, 2^31); any other
@@ -1198,25 +762,12 @@ private:
     /// within 2^31 us of its sample's end (emit()), so the difference of the low bits is the
     /// offset: 32-bit arithmetic in the counting sort's loops.
     template <class Fn>
-    bool for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const {
-        const std::uint32_t lo_bits = static_cast<std::uint32_t>(lo);
-        return for_each_event_in_sample(
-            b, k, [lo_bits](std::uint32_t t_lo) { return t_lo - lo_bits; },
-            [lo](std::int64_t t_us) {
-                const std::uint64_t d = static_cast<std::uint64_t>(t_us) - static_cast<std::uint64_t>(lo);
-                return static_cast<std::uint32_t>(std::min<std::uint64_t>(d, 0xFFFFFFFFu));
-            },
-            fn);
-    }
+    bool for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const;
 
     /// for_each_event_in_sample with each event's full time (event_time from the sample's end
     /// end_us, or the block's full_t).
     template <class Fn>
-    bool for_each_in_sample(std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn) const {
-        return for_each_event_in_sample(
-            b, k, [end_us](std::uint32_t t_lo) { return event_time(end_us, t_lo); },
-            [](std::int64_t t_us) { return t_us; }, fn);
-    }
+    bool for_each_in_sample(std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn) const;
 
     /// counting_sort_in_interval() stages a sample's records by coarse spans of time from this
     /// many events (their 13-byte records fill far more than a core's first-level cache).
@@ -1243,59 +794,7 @@ private:
 
     /// Sample k's events of all blocks, sorted, into their place of the output (see
     /// collect_prepare). Touches only that place: samples may run concurrently.
-    void collect_sample(CollectPlan& plan, std::size_t k, SortScratch& sort) {
-        const std::size_t base = plan.base[k], n_k = plan.base[k + 1] - base;
-        if (n_k == 0) return;
-        Event* events = plan.events + base;
-        std::uint8_t* labels = labels_.data() + base;
-        const detail::PixelDivider row = plan.row;
-        const std::int64_t end_us = round_us(plan.t_s[k]);
-        // Captured by value: the records' byte stores may alias anything, so what the loops
-        // read through a reference was loaded again for every event.
-        const auto put = [events, labels, row](std::size_t j, std::int64_t t_us, RawEvent e) {
-            const std::uint32_t pixel = e.pixel(), y = row.quotient(pixel);
-            put_event(events + j, t_us, static_cast<std::uint16_t>(pixel - y * row.divisor()),
-                      static_cast<std::uint16_t>(y), e.p());
-            labels[j] = e.label();
-        };
-        if (plan.pixel_ordered && plan.intervals_known && counting_sort_in_interval(plan, k, end_us, sort, put)) return;
-        std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
-        for (const std::uint32_t b : plan.busy)
-            for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent) {
-                lo = std::min(lo, t_us);
-                hi = std::max(hi, t_us);
-                return true;
-            });
-        const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
-        if (plan.pixel_ordered && span <= 4 * n_k + 4096) {
-            // Counting sort: slots[d] = where the events of microsecond lo + d start.
-            std::vector<std::uint32_t>& slots = sort.slots;
-            slots.assign(span + 2, 0);
-            for (const std::uint32_t b : plan.busy)
-                for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent) {
-                    ++slots[static_cast<std::size_t>(t_us - lo) + 1];
-                    return true;
-                });
-            for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
-            for (const std::uint32_t b : plan.busy)
-                for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
-                    put(slots[static_cast<std::size_t>(t_us - lo)]++, t_us, e);
-                    return true;
-                });
-        } else {
-            std::vector<TimedEvent>& sample_events = sort.sample_events;
-            sample_events.clear();
-            for (const std::uint32_t b : plan.busy)
-                for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
-                    sample_events.push_back(TimedEvent{t_us, e});
-                    return true;
-                });
-            std::stable_sort(sample_events.begin(), sample_events.end(), [](const TimedEvent& a, const TimedEvent& b) {
-                return a.t_us != b.t_us ? a.t_us < b.t_us : a.e.pixel() < b.e.pixel();
-            });
-            for (std::size_t e = 0; e < n_k; ++e) put(e, sample_events[e].t_us, sample_events[e].e);
-        }
-    }
+    void collect_sample(CollectPlan& plan, std::size_t k, SortScratch& sort);
 
     /// collect_sample()'s counting sort over the microseconds of sample k's interval (plan.t_s, intervals_known),
     /// without the pass that finds the events' own range: one pass counts, one puts (a sample
@@ -1307,68 +806,12 @@ private:
     /// as before. Either way the same order: by t_us, then block and place in the block.
     template <class Put>
     bool counting_sort_in_interval(const CollectPlan& plan, std::size_t k, std::int64_t end_us, SortScratch& sort,
-                                   Put put) const {
-        const double t0 = k == 0 ? plan.t_before : plan.t_s[k - 1];
-        if (!std::isfinite(t0)) return false;
-        const std::size_t n_k = plan.base[k + 1] - plan.base[k];
-        const std::int64_t lo = round_us(t0), hi = end_us;
-        const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
-        if (!(hi >= lo && span <= 4 * n_k + 4096 && span < 0x80000000u)) return false;
-        // Offsets from lo on 32 bits (for_each_offset_in_sample: lo lies within 2^31 us of the
-        // sample's end, since span is small); one outside [0, span] makes the general sort take over.
-        sort.slots.assign(span + 2, 0);
-        std::uint32_t* slots = sort.slots.data();  // a pointer of our own: put()'s stores cannot move it
-        for (const std::uint32_t b : plan.busy) {
-            const bool inside = for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent) {
-                if (d > span) return false;
-                ++slots[d + 1];
-                return true;
-            });
-            if (!inside) return false;
-        }
-        for (std::size_t d = 1; d < span + 2; ++d) slots[d] += slots[d - 1];
-        // A sample with many events goes through a coarse pass first (64 spans of 2^shift
-        // microseconds or fewer), stable, into staged: then put()'s destinations fall in one
-        // span's short stretch of the output at a time, in the cache, instead of anywhere in
-        // the sample's part of it (37,800 records a 1 kHz sample of the event-heavy load, half
-        // a megabyte). Stable passes on the same keys: the same order.
-        if (n_k >= STAGED_MIN_EVENTS) {
-            unsigned shift = 0;
-            while ((span >> shift) >= 64) ++shift;
-            const std::size_t n_coarse = (span >> shift) + 1;
-            sort.coarse.resize(n_coarse);
-            if (sort.staged.size() < n_k) sort.staged.resize(n_k);
-            std::uint32_t* coarse = sort.coarse.data();
-            RawEvent* staged = sort.staged.data();
-            for (std::size_t c = 0; c < n_coarse; ++c) coarse[c] = slots[c << shift];  // where span c starts
-            for (const std::uint32_t b : plan.busy)
-                for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent e) {
-                    staged[coarse[d >> shift]++] = RawEvent(d, e.code);
-                    return true;
-                });
-            for (std::size_t i = 0; i < n_k; ++i) {
-                const RawEvent e = staged[i];
-                put(slots[e.t_lo]++, lo + static_cast<std::int64_t>(e.t_lo), e);
-            }
-            return true;
-        }
-        for (const std::uint32_t b : plan.busy)
-            for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent e) {
-                put(slots[d]++, lo + static_cast<std::int64_t>(d), e);
-                return true;
-            });
-        return true;
-    }
+                                   Put put) const;
 
     /// Keep the blocks' memory for the next call, unless a flood made it large.
-    void collect_finish() {
-        for (auto& b : block_events_)
-            if (b.capacity() > (std::size_t{1} << 18)) std::vector<RawEvent>().swap(b);
-        for (auto& b : block_full_t_)
-            if (b.capacity() > (std::size_t{1} << 17)) std::vector<std::int64_t>().swap(b);
-    }
+    void collect_finish();
 
-    PixelModel model_;
+    BlockModel model_;
     int width_, height_;
     std::uint64_t seed_;
     Philox4x32Key key_;
@@ -1395,9 +838,14 @@ private:
     std::vector<double> hot_map_;
     std::vector<std::uint16_t> hot_chain_map_;  ///< per pixel, its hot_chains index (empty: all 0)
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;
+    Kernel kernel_ = Kernel::Auto;
     std::atomic<std::size_t> events_in_call_{0};
     bool stopped_ = false;
 };
 
 }  // namespace evstwin
 EVSTWIN_FP_STRICT_END
+
+// The definitions of Sensor's calls, block scheduler and event collection.
+#include "detail/sensor_collect.hpp"
+#include "detail/sensor_run.hpp"
