@@ -17,7 +17,7 @@ EVENT_DTYPE: np.dtype = _core.EVENT_DTYPE
 """Event record (declared once, in C++): t [us, int64], x, y [uint16], p [uint8, 1 = ON]."""
 
 EVENT_LABELS: dict[int, str] = dict(_core.EVENT_LABELS)
-"""Why an event fired, code -> name (declared once, in C++: ``EventLabel`` in pixel.hpp): 0
+"""Why an event fired, code -> name (declared once, in C++: ``EventLabel`` in params.hpp): 0
 signal (the scene's light changed), 1 shot_noise (photon and dark-current shot noise), 2 leak,
 3 background (eq. 12 background activity), 4 hot_pixel. The codes of ``Sensor.last_labels()``,
 ``SimulationResult.labels`` and the label column of event files."""

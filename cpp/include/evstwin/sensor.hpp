@@ -63,8 +63,8 @@ private:
 /// Ask Linux to back the 2 MiB pages inside [p, p + bytes) with huge pages (transparent huge
 /// pages in "madvise" mode, the usual default; NumPy asks the same for its large arrays). A
 /// call's event output is fresh memory written once: with 4 KiB pages its page faults took
-/// 5 ns an event, more than sorting it (100 ms for 19 M events, against 20 ms; see README,
-/// "Third round"). A hint: the memory and its contents are the same either way.
+/// 5 ns an event, more than sorting it (100 ms for 19 M events, against 20 ms; the
+/// documentation's decisions page). A hint: the memory and its contents are the same either way.
 inline void advise_huge_pages(void* p, std::size_t bytes) {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
     constexpr std::uintptr_t HUGE_PAGE = std::uintptr_t{1} << 21;
@@ -392,7 +392,7 @@ private:
     /// threads at the start of its parallel region (for_each_block). A memory-bound pass, but
     /// serial it was 5 % of mcreynolds' run_pixels calls on 2 threads, and the reference load
     /// (250 samples of 346 x 260 float rates a call, 90 MB) runs 3.6 % faster on 2 threads
-    /// without it (README, "Sixth round"); in the region it needs no second fork and join. first_bad(): the first bad index in the
+    /// without it (measured when it was removed; git history); in the region it needs no second fork and join. first_bad(): the first bad index in the
     /// whole array (the parts' first, in order), `total` if none, whatever the threads.
     static constexpr std::size_t RATE_CHECK_PART = std::size_t{1} << 16;
     /// for_each_block's input check where the caller checks its input itself, inside the blocks

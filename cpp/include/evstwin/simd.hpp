@@ -184,7 +184,7 @@ inline void philox_batch_tail(std::size_t from, const std::uint32_t* c0, const s
 // vectors of counters through the ten rounds side by side, so one vector's multiplications fill
 // another's latency: four at AVX2, two at AVX-512 (more gained nothing), then the rest one
 // vector at a time; the last n % width counters are done by the scalar philox4x32. Figures:
-// bench/philox_batch.cpp, README's eleventh round.
+// bench/philox_batch.cpp (the documentation's performance page).
 // (Macros and functions, not lambdas: a lambda would not inherit the target attribute.)
 #define EVSTWIN_LOAD4(P) _mm256_cvtepu32_epi64(_mm_loadu_si128(reinterpret_cast<const __m128i*>(P)))
 #define EVSTWIN_STORE4(P, V)                                                                      \
@@ -329,7 +329,7 @@ EVSTWIN_TARGET_AVX512 inline void philox_batch_avx512(const std::uint32_t* c0, c
 // The ziggurat's batches are written with gathers: from the plain loop GCC 12 looked the
 // tables up lane by lane (an extract and an insert a lane), most of the batch's time (found by
 // bench/precision_study.cpp; bench/draw_floor.cpp at AVX-512, before and after: 3.2-3.3 ->
-// 2.2-2.3 ns a pixel-update, README's ninth round). The same operations as
+// 2.2-2.3 ns a pixel-update, at the change; git history). The same operations as
 // ziggurat_batch_body: the 24-bit magnitude converted exactly, one multiplication by the
 // layer's width, the sign set by an XOR of the sign bit (x * (1 - 2 s)
 // only flips it, zeros included), the slow flag from j >= k (both below 2^31, so a signed
