@@ -142,7 +142,8 @@ def test_help_and_messages_say_what_a_user_needs(tmp_path: Path, capsys: pytest.
 
     parser = build_parser()
     for preset in PRESETS.values():  # every preset's camera is named in the description
-        name = {"prophesee_gen3_vga": "Gen3 VGA"}.get(preset.name, preset.name.upper())
+        # davis346_paper is the paper's variant of the DAVIS346, not another camera
+        name = {"prophesee_gen3_vga": "Gen3 VGA", "davis346_paper": "DAVIS346"}.get(preset.name, preset.name.upper())
         assert name in (parser.description or ""), name
     threads = next(a for a in parser._subparsers._group_actions[0].choices["simulate"]._actions  # type: ignore[union-attr]
                    if a.dest == "threads")
