@@ -518,30 +518,6 @@ _DAVIS346_ASSUMPTIONS = (
     "paper does not give the temperature of its 18000 e-/s",
 )
 
-DAVIS346_PAPER = SensorPreset(
-    name="davis346_paper",
-    description="the paper's DAVIS346: its Table 3 photodiode (0.35 % of photons absorbed), kept to reproduce it",
-    width=346,
-    height=260,
-    pixel_pitch_m=18.5e-6,
-    fill_factor=0.22,
-    back_illuminated=False,
-    mean_wavelength_m=DAVIS346_MEAN_WAVELENGTH_M,
-    pixel=FAST_PR_SLOW_SF_BALANCED_TH.pixel_params(_DAVIS346_BASE),
-    biases=FAST_PR_SLOW_SF_BALANCED_TH,
-    qe_notes=(
-        "Front-illuminated, 22 % fill factor, no microlens gain assumed. Photon-to-electron "
-        "efficiency by eq. 2 with Table 3: tau (1 - exp(-alpha W)) = 0.68 x 0.0035 = 0.24 % of the "
-        "photons on the photodiode (x 0.22 fill factor): the paper's constants, kept as given. No "
-        "spectrum: a magnitude counts the V band's photons (the paper's scenes are lab LEDs given in photons/s)."
-    ),
-    sources=_DAVIS346_SOURCES + (f"{_PAPER}, Table 3: alpha, eta_i, tau, W",),
-    assumptions=_DAVIS346_ASSUMPTIONS,
-    readout=DAVIS346_READOUT,
-)
-"""The paper's DAVIS346 with its Table 1 biases (theta 0.2060 / 0.0930, 1 ms, 10 Hz) and its
-Table 3 photodiode: what the paper's tables and its section 3 were computed with."""
-
 QE_REFERENCE_WAVELENGTH_M = 550e-9
 """Wavelength [m] whose photons the engine counts for a front-illuminated preset with a QE
 curve: the pixel's yield (``PixelParams.electrons_per_photon``) is the curve's QE there."""
@@ -597,6 +573,25 @@ DAVIS346 = SensorPreset(
 )
 """The DAVIS346 as a camera: the paper's geometry, biases and dark current, the measured
 background, and a silicon QE curve (about 15 % at its peak) in place of the paper's 0.35 %."""
+
+DAVIS346_PAPER = dataclasses.replace(
+    DAVIS346,
+    name="davis346_paper",
+    description="the paper's DAVIS346: its Table 3 photodiode (0.35 % of photons absorbed), kept to reproduce it",
+    pixel=FAST_PR_SLOW_SF_BALANCED_TH.pixel_params(_DAVIS346_BASE),
+    qe=None,
+    qe_notes=(
+        "Front-illuminated, 22 % fill factor, no microlens gain assumed. Photon-to-electron "
+        "efficiency by eq. 2 with Table 3: tau (1 - exp(-alpha W)) = 0.68 x 0.0035 = 0.24 % of the "
+        "photons on the photodiode (x 0.22 fill factor): the paper's constants, kept as given. No "
+        "spectrum: a magnitude counts the V band's photons (the paper's scenes are lab LEDs given in photons/s)."
+    ),
+    sources=_DAVIS346_SOURCES + (f"{_PAPER}, Table 3: alpha, eta_i, tau, W",),
+    assumptions=_DAVIS346_ASSUMPTIONS,
+)
+"""The paper's DAVIS346 with its Table 1 biases (theta 0.2060 / 0.0930, 1 ms, 10 Hz) and its
+Table 3 photodiode: what the paper's tables and its section 3 were computed with. Everything
+else is the DAVIS346 preset's."""
 
 IMX636_RECORDING = (
     "a public Prophesee EVK4 recording (the test data of the faery package, tests/data/evt3.raw: 10.77 s of a "
