@@ -182,7 +182,7 @@ class NumpySensor:
         self.refr_until[idx] = refr
         ev = np.zeros(sum(a.size for a in out_t), EVENT_DTYPE)
         if ev.size:
-            t = np.floor(np.concatenate(out_t) * 1e6 + 0.5).astype(np.int64)  # as llround
+            t = np.floor(np.concatenate(out_t) * 1e6 + 1e-3).astype(np.int64)  # as Sensor::floor_us
             px = np.concatenate(out_px)
             order = np.lexsort((px, t))
             ev["t"], ev["x"], ev["y"], ev["p"] = t[order], (px % self.w)[order], (px // self.w)[order], np.concatenate(out_p)[order]

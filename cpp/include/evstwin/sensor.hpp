@@ -442,7 +442,7 @@ private:
 
     /// A block's working record of an event, 8 bytes (it was 16: the event-heavy load writes,
     /// counts and copies hundreds of MB of them a call): the low 32 bits of its microsecond
-    /// (round_us) and its pixel, label and polarity in one word. The rest of the time is its
+    /// (floor_us) and its pixel, label and polarity in one word. The rest of the time is its
     /// sample's: an event lies within 2^31 us (35 min) of its sample's end, so event_time()
     /// recovers it from that end; emit() checks, and a block with an event that does not (a
     /// sample interval of over half an hour) keeps its events' full times beside the records
@@ -474,7 +474,7 @@ private:
         return end_us + static_cast<std::int64_t>(d) - (d >= 0x80000000u ? std::int64_t{1} << 32 : 0);
     }
     /// Whether event_time(end_us, t_us's low bits) gives t_us back. The difference is taken
-    /// modulo 2^64, so it cannot overflow: two of round_us' times (run() takes |t| < 9.2e12 s)
+    /// modulo 2^64, so it cannot overflow: two of floor_us' times (run() takes |t| < 9.2e12 s)
     /// differ by less than 2^64 - 2^31, so only a true difference within 2^31 passes.
     static bool near_sample_end(std::int64_t t_us, std::int64_t end_us) {
         return static_cast<std::uint64_t>(t_us) - static_cast<std::uint64_t>(end_us) + 0x80000000ull < 0x100000000ull;
@@ -541,7 +541,7 @@ private:
         }
         void operator()(double t, Polarity pol, std::uint8_t label) {
             std::vector<RawEvent>& out = taken.out;
-            const std::int64_t t_us = round_us(t);
+            const std::int64_t t_us = floor_us(t);
             out.emplace_back(static_cast<std::uint32_t>(t_us), event_code(pixel, pol, label));
             if (full_times || !near_sample_end(t_us, end_us)) {
                 keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
@@ -551,15 +551,22 @@ private:
         }
     };
 
-    /// The event's time in integer microseconds, rounded half away from zero as std::llround
-    /// (without its library call): the truncation is exact, and so is the remainder x - i for
-    /// any |x| < 2^63 (at and above 2^52, x is an integer and the remainder 0).
-    static std::int64_t round_us(double t_s) {
+    /// The event's time in integer microseconds, floored as a sensor's timestamp counter
+    /// does (it reads the microseconds elapsed: an event 0.9 us into a tick bears that tick;
+    /// rounded, a timestamp would be 0.5 us later than the sensor's on average). A time
+    /// within a nanosecond below a whole microsecond counts as that microsecond: a crossing
+    /// meant to fall on one (a leak's period, k dt) lands there only within the rounding its
+    /// arithmetic accumulates (1.05e-12 s for the 2nd period of a 4 Hz leak at 1 kHz), not
+    /// on the tick before. The truncation is exact, and so is the remainder x - i for any
+    /// |x| < 2^63 (at and above 2^52, x is an integer and the remainder 0). Monotone.
+    static std::int64_t floor_us(double t_s) {
         const double x = t_s * 1e6;
-        const std::int64_t i = static_cast<std::int64_t>(x);
-        const double frac = x - static_cast<double>(i);
-        return i + static_cast<std::int64_t>(frac >= 0.5) - static_cast<std::int64_t>(frac <= -0.5);
+        const std::int64_t i = static_cast<std::int64_t>(x);  // toward zero
+        const double frac = x - static_cast<double>(i);       // in (-1, 1)
+        return i - static_cast<std::int64_t>(frac < -US_TOLERANCE) + static_cast<std::int64_t>(frac >= 1.0 - US_TOLERANCE);
     }
+    /// floor_us()'s tolerance, in microseconds (a nanosecond).
+    static constexpr double US_TOLERANCE = 1e-3;
 
     /// Clear the blocks' event lists (keeping their memory) and size their per-sample marks.
     void start_call(std::size_t nblocks, std::size_t n_samples) {
@@ -723,7 +730,7 @@ private:
         /// events' times.
         const double* t_s = nullptr;
         /// run()'s (not run_pixels'): sample k's events lie in [t_s[k - 1], t_s[k]] (t_before
-        /// before the first), so its microseconds lie between those times' (round_us is
+        /// before the first), so its microseconds lie between those times' (floor_us is
         /// monotone), which collect_sample() takes as the counting sort's range without a pass
         /// to find it.
         bool intervals_known = false;
@@ -735,7 +742,7 @@ private:
     /// and this is the order that concatenating their outputs gives), then by pixel; ties (one
     /// pixel's events in one microsecond of one interval) in the order they were made.
     ///
-    /// Every event of sample k lies in [t0, t1] of its interval, so after rounding to
+    /// Every event of sample k lies in [t0, t1] of its interval, so after flooring to
     /// microseconds none comes after an event of sample k + 1: the order is sample by sample,
     /// and within a sample by (t_us, pixel). So each sample's place in the output is known
     /// from the blocks' counts alone (collect_prepare), and the samples are sorted

@@ -92,7 +92,7 @@ inline void Sensor::collect_sample(CollectPlan& plan, std::size_t k, SortScratch
     Event* events = plan.events + base;
     std::uint8_t* labels = labels_.data() + base;
     const detail::PixelDivider row = plan.row;
-    const std::int64_t end_us = round_us(plan.t_s[k]);
+    const std::int64_t end_us = floor_us(plan.t_s[k]);
     // Captured by value: the records' byte stores may alias anything, so what the loops
     // read through a reference was loaded again for every event.
     const auto put = [events, labels, row](std::size_t j, std::int64_t t_us, RawEvent e) {
@@ -146,7 +146,7 @@ inline bool Sensor::counting_sort_in_interval(const CollectPlan& plan, std::size
     const double t0 = k == 0 ? plan.t_before : plan.t_s[k - 1];
     if (!std::isfinite(t0)) return false;
     const std::size_t n_k = plan.base[k + 1] - plan.base[k];
-    const std::int64_t lo = round_us(t0), hi = end_us;
+    const std::int64_t lo = floor_us(t0), hi = end_us;
     const std::uint64_t span = static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
     if (!(hi >= lo && span <= 4 * n_k + 4096 && span < 0x80000000u)) return false;
     // Offsets from lo on 32 bits (for_each_offset_in_sample: lo lies within 2^31 us of the

@@ -268,7 +268,7 @@ inline void Sensor::run_block(std::size_t b, const Real* rate, std::size_t sampl
     std::vector<RawEvent>& out = taken.out;
     std::uint32_t pixel = 0;
     std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-    const auto sample_end_us = [&consts](std::size_t j) { return round_us(consts[j].t1); };
+    const auto sample_end_us = [&consts](std::size_t j) { return floor_us(consts[j].t1); };
     BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
     const bool kernel = !probe_slot && kernel_ != Kernel::PerPixel && model_.has_block_kernel();
     const bool soa_kernel = kernel && kernel_ != Kernel::Blocks && model_.has_soa_kernel();
@@ -421,7 +421,7 @@ inline void Sensor::run_pixel_block(std::size_t b, const std::uint32_t* pixels, 
     std::vector<RawEvent>& out = taken.out;
     std::uint32_t pixel = 0;
     std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
-    const auto sample_end_us = [t_s](std::size_t j) { return round_us(t_s[j]); };
+    const auto sample_end_us = [t_s](std::size_t j) { return floor_us(t_s[j]); };
     BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
     emit.start_sample(0);
     // The listed pixels' states are gathered into a contiguous block, advanced sample-major
