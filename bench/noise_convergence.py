@@ -7,6 +7,16 @@ photoreceptor pole, at a base sample rate and 4x finer, and optionally the built
 and the spread between seeds, for both noise models.
 
     python bench/noise_convergence.py [--duration 20] [--seeds 1,2,3] [--factor 4] [--mcreynolds 5]
+
+With --preset, instead: a camera preset's own pixel (64 x 64 px, uniform light of each
+--background level) stepped at each of --rates, down to steps far longer than its noise's
+correlation time: how long a step a static pixel of that camera may take before its
+statistics move (the question per-pixel time steps ask). Prints ON and OFF counts (mean over
+the seeds), their change from the finest rate against the seeds' spread, and the share of
+pixels with 0, 1, 2 and 3+ events.
+
+    python bench/noise_convergence.py --preset imx636 --rates 1000,200,50,20,5 --background 0,1e5 \
+        --duration 5 --seeds 1,2
 """
 
 from __future__ import annotations
@@ -18,6 +28,7 @@ import time
 import numpy as np
 
 from evstwin import PixelParams, Sensor, simulate
+from evstwin.presets import get_preset
 from evstwin.simulate import resolve_scenario
 
 SCENES = {
@@ -42,6 +53,55 @@ def static_count(model: str, photon_rate: float, theta_on: float, theta_off: flo
     return total
 
 
+def preset_stats(preset: str, photon_rate: float, rate_hz: float, duration_s: float,
+                 seed: int) -> tuple[int, int, np.ndarray]:
+    """ON and OFF counts and the share of pixels with 0, 1, 2, 3+ events of a preset's pixel
+    under uniform light, stepped at rate_hz (one call a second of sensor time)."""
+    side = 64
+    sensor = Sensor(side, side, get_preset(preset).pixel_params(), seed=seed, num_threads=1)
+    n = int(round(duration_s * rate_hz))
+    per = max(1, int(rate_hz))
+    on = off = 0
+    counts = np.zeros(side * side, np.int64)
+    frame = np.full((1, side, side), photon_rate)
+    for k0 in range(1, n + 1, per):
+        t = np.arange(k0, min(n + 1, k0 + per)) / rate_hz
+        ev = sensor.run(np.broadcast_to(frame, (len(t), side, side)), t)
+        n_on = int(np.count_nonzero(ev["p"]))
+        on += n_on
+        off += len(ev) - n_on
+        counts += np.bincount(ev["y"].astype(np.int64) * side + ev["x"], minlength=side * side)
+    return on, off, np.bincount(np.minimum(counts, 3), minlength=4) / counts.size
+
+
+def preset_table(args: argparse.Namespace, seeds: list[int]) -> None:
+    rates = sorted((float(r) for r in args.rates.split(",")), reverse=True)
+    print(f"{args.preset}: 64 x 64 px, uniform light, {args.duration:g} s, seeds {seeds}; change from "
+          f"{rates[0]:g} Hz against the seeds' spread (sd of one seed's count / mean)")
+    for level in (float(b) for b in args.background.split(",")):
+        print(f"\nbackground {level:g} photons/s a pixel\n")
+        print("| step rate | ON | OFF | ON change | OFF change | spread ON / OFF | pixels 0 / 1 / 2 / 3+ events |")
+        print("|---|---|---|---|---|---|---|")
+        ref: tuple[float, float] | None = None
+        for rate in rates:
+            runs = [preset_stats(args.preset, level, rate, args.duration, s) for s in seeds]
+            on = statistics.mean(r[0] for r in runs)
+            off = statistics.mean(r[1] for r in runs)
+            ref = (on, off) if ref is None else ref
+            share = np.mean([r[2] for r in runs], axis=0)
+
+            def pct(a: float, b: float) -> str:
+                return f"{(a - b) / b * 100:+.1f} %" if b else "n/a"
+
+            def spread(i: int) -> str:
+                vals = [r[i] for r in runs]
+                m = statistics.mean(vals)
+                return f"{statistics.stdev(vals) / m * 100:.1f} %" if len(vals) > 1 and m else "n/a"
+
+            print(f"| {rate:g} Hz | {on:,.0f} | {off:,.0f} | {pct(on, ref[0])} | {pct(off, ref[1])} | "
+                  f"{spread(0)} / {spread(1)} | " + " / ".join(f"{x:.4f}" for x in share) + " |", flush=True)
+
+
 def row(name: str, base: list[int], fine: list[int]) -> str:
     b, f = statistics.mean(base), statistics.mean(fine)
     spread = statistics.stdev(base) / b * 100 if len(base) > 1 and b else float("nan")
@@ -56,9 +116,16 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=250.0, help="base sample rate of the static scenes [Hz]")
     ap.add_argument("--factor", type=float, default=4.0, help="how much finer the second sampling is (default 4)")
     ap.add_argument("--mcreynolds", type=float, default=0.0, help="also run mcreynolds for this many seconds")
+    ap.add_argument("--preset", help="instead: a camera preset's pixel at each of --rates")
+    ap.add_argument("--rates", default="1000,200,50,20,5", help="with --preset: step rates [Hz], comma-separated")
+    ap.add_argument("--background", default="0", help="with --preset: photons/s on each pixel, comma-separated")
     args = ap.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     start = time.perf_counter()
+    if args.preset:
+        preset_table(args, seeds)
+        print(f"\n({time.perf_counter() - start:.0f} s)")
+        return
     print(f"static scenes, 32 x 32 px, {args.duration:g} s, seeds {seeds}: mean events at {args.rate:g} Hz "
           f"and {args.factor * args.rate:g} Hz")
     for model in ("continuous", "sampled"):

@@ -44,6 +44,10 @@ CONFIGS: dict[str, dict[str, object]] = {
     "noiseless": {"photon_shot_noise": False, "dark_model": "none"},
     "dark_only": {"photon_shot_noise": False},
     "euler": {"lowpass": "euler", "cutoff_hz": 30.0},
+    # The source follower alone with thresholds its noise crosses, over intervals up to 0.3 b dt:
+    # continuous_finish refines those longer than 1/8 (refine_sf_and_compare), which the vector
+    # kernel's bridge stage must leave to it.
+    "sf_refine": {"cutoff_hz": 100.0, "theta_on": 0.05, "theta_off": 0.04},
     "fast": {"cutoff_hz": 2000.0, "refractory_s": 1e-4, "theta_on": 0.05, "theta_off": 0.04},
     "sampled": {"noise_model": "sampled", "threshold_sigma": 0.03},
     "sampled_pole": {"noise_model": "sampled", "pr_pole": True},
