@@ -2,7 +2,7 @@
 the Python API, grouped by what the user is doing.
 
     evstwin simulate SCENARIO -o OUT      evstwin scenarios          (cli.simulate)
-    evstwin info | show | compare | timing | calibrate-noise         (cli.recordings)
+    evstwin info | show | movie | compare | timing | calibrate-noise (cli.recordings)
     evstwin fit | sweep | limiting-magnitude                         (cli.tuning)
     evstwin characterize PRESET                                      (cli.characterize)
 
