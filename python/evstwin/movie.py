@@ -27,7 +27,7 @@ import numpy as np
 
 from ._extras import require
 from .io import iter_events
-from .io._common import remove_quietly, temporary_path, to_faery
+from .io._common import one_line, remove_quietly, temporary_path, to_faery
 from .sensor import EVENT_DTYPE
 
 DECAYS = ("exponential", "linear", "window", "cumulative")
@@ -141,8 +141,11 @@ def render_movie(path_in: str | os.PathLike[str], out: str | os.PathLike[str], o
         stream = stream.scale(options.scale)
     tracks = _truth_tracks(meta) if options.truth else {}
     legend = {name: TRUTH_COLORS[i % len(TRUTH_COLORS)] for i, name in enumerate(tracks)}
-    if tracks:
-        stream = _TruthOverlay(stream, tracks, legend, options.scale, (width, height))
+    video = (width * options.scale, height * options.scale)
+    if out.suffix.lower() == ".mp4":  # H.264 (yuv420) takes even sizes: one background row/column more
+        video = (video[0] + video[0] % 2, video[1] + video[1] % 2)
+    if tracks or video != (width * options.scale, height * options.scale):
+        stream = _Finish(stream, tracks, legend, options.scale, (width, height), video, bg)
     done = [0]
 
     def on_progress(state: Any) -> None:
@@ -154,8 +157,13 @@ def render_movie(path_in: str | os.PathLike[str], out: str | os.PathLike[str], o
     # faery writes FILE.write and renames it FILE at its end
     partials = (tmp, tmp.with_suffix(tmp.suffix + ".write"))
     try:
-        stream.to_file(tmp, frame_rate=options.frame_rate_hz, on_progress=on_progress,
-                       file_type=out.suffix.lower().lstrip("."))
+        try:
+            stream.to_file(tmp, frame_rate=options.frame_rate_hz, on_progress=on_progress,
+                           file_type=out.suffix.lower().lstrip("."))
+        except (ValueError, OSError):
+            raise
+        except Exception as exc:  # noqa: BLE001 - faery's encoders raise plain Exception
+            raise ValueError(f"--out {out}: faery could not write the movie: {one_line(exc)}") from exc
         from ._signals import sigint_deferred
 
         with sigint_deferred():
@@ -163,7 +171,7 @@ def render_movie(path_in: str | os.PathLike[str], out: str | os.PathLike[str], o
     except BaseException:
         remove_quietly(*partials)
         raise
-    return Movie(out, frames, (width * options.scale, height * options.scale), window, len(events), legend)
+    return Movie(out, frames, video, window, len(events), legend)
 
 
 def _hex(rgb: tuple[int, int, int]) -> str:
@@ -216,23 +224,33 @@ def _truth_tracks(meta: Mapping[str, Any]) -> dict[str, tuple[np.ndarray, np.nda
     return out
 
 
-def _overlay_class() -> Any:
+def _finish_class() -> Any:
     faery = require("faery", "movies")
 
-    class TruthOverlay(faery.frame_stream.FiniteRegularFrameFilter):  # type: ignore[misc, name-defined]
-        """Square outlines at each target's true place at the frame's time."""
+    class Finish(faery.frame_stream.FiniteRegularFrameFilter):  # type: ignore[misc, name-defined]
+        """Square outlines at each target's true place at the frame's time; frames padded
+        with the background to ``video`` (width, height)."""
 
         def __init__(self, parent: Any, tracks: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
-                     legend: Mapping[str, str], scale: int, sensor: tuple[int, int]) -> None:
+                     legend: Mapping[str, str], scale: int, sensor: tuple[int, int], video: tuple[int, int],
+                     background: tuple[int, int, int]) -> None:
             self.init(parent=parent)
             self.tracks = tracks
             self.colors = {name: parse_color(legend[name], "legend") for name in tracks}
             self.scale = scale
             self.sensor = sensor
+            self.video = video
+            self.background = np.array([*background, 255], np.uint8)
+
+        def dimensions(self) -> tuple[int, int]:
+            return self.video
 
         def __iter__(self) -> Iterator[Any]:
             for frame in self.parent:
-                pixels = np.array(frame.pixels, copy=True)
+                pixels = np.empty((self.video[1], self.video[0], 4), np.uint8)
+                pixels[...] = self.background
+                rows, cols = frame.pixels.shape[:2]
+                pixels[:rows, :cols] = frame.pixels
                 t_us = float(frame.t.to_microseconds())
                 for name, (t, x, y) in self.tracks.items():
                     if not t[0] <= t_us <= t[-1]:
@@ -241,11 +259,12 @@ def _overlay_class() -> Any:
                                 self.colors[name], self.scale, self.sensor)
                 yield faery.frame_stream.Frame(t=frame.t, pixels=pixels)
 
-    return TruthOverlay
+    return Finish
 
 
-def _TruthOverlay(parent: Any, tracks: Any, legend: Any, scale: int, sensor: tuple[int, int]) -> Any:  # noqa: N802
-    return _overlay_class()(parent, tracks, legend, scale, sensor)
+def _Finish(parent: Any, tracks: Any, legend: Any, scale: int, sensor: tuple[int, int],  # noqa: N802
+            video: tuple[int, int], background: tuple[int, int, int]) -> Any:
+    return _finish_class()(parent, tracks, legend, scale, sensor, video, background)
 
 
 MARKER_HALF_PX = 3

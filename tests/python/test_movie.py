@@ -87,6 +87,16 @@ def test_an_mp4_is_written_whole(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.h5", "r.mp4"]
 
 
+def test_an_mp4_of_an_odd_sized_sensor_is_padded_to_even(tmp_path: Path) -> None:
+    events = np.zeros(2, EVENT_DTYPE)
+    events["t"] = [0, 99_999]
+    events["x"], events["y"] = [0, 32], [0, 24]
+    write_events(tmp_path / "odd.h5", events, {"width": 33, "height": 25})
+    movie = render_movie(tmp_path / "odd.h5", tmp_path / "odd.mp4", MovieOptions())  # H.264 takes even sizes
+    assert movie.size_px == (34, 26) and (tmp_path / "odd.mp4").read_bytes()[4:8] == b"ftyp"
+    assert render_movie(tmp_path / "odd.h5", tmp_path / "odd.gif", MovieOptions()).size_px == (33, 25)
+
+
 def test_an_interrupted_movie_leaves_nothing(tmp_path: Path) -> None:
     rec = recording(tmp_path / "r.h5")
 
