@@ -11,7 +11,7 @@ import pytest
 
 from evstwin import scenario
 from evstwin.scenario import ScenarioError
-from evstwin.sky import earth, orbit, photometry, pointing
+from evstwin.sky import earth, iers, orbit, photometry, pointing
 from evstwin.targets import LinearTarget, StaticTarget
 
 ISS = ("1 25544U 98067A   14020.93268519  .00009878  00000-0  18200-3 0  5082",
@@ -36,13 +36,73 @@ def test_iss_seen_from_bluffton_matches_skyfields_published_example() -> None:
     # (40.8939 N, 83.8917 W) at 2014-01-23 11:18:07 UTC: altitude 16 deg 16' 32.6", azimuth
     # 350 deg 15' 20.4", distance 1168.7 km, RA/Dec of date 03h 20m 22.42s, +63 deg 58' 45.2".
     site = earth.Site(40.8939, -83.8917, 0.0)
-    o = orbit.observe(orbit.Elements(*ISS), site, datetime(2014, 1, 23, 11, 18, 7, tzinfo=timezone.utc), [0.0])
-    assert o.el_deg[0] == pytest.approx(16 + 16 / 60 + 32.6 / 3600, abs=20 * ARCSEC / (math.pi / 180))
-    assert o.az_deg[0] == pytest.approx(350 + 15 / 60 + 20.4 / 3600, abs=20 * ARCSEC / (math.pi / 180))
-    assert o.range_km[0] == pytest.approx(1168.7, abs=0.1)
-    # TEME's mean equinox against Skyfield's true equinox: the equation of the equinoxes (< 1.2 s)
-    assert o.ra_deg[0] == pytest.approx(15 * (3 + 20 / 60 + 22.42 / 3600), abs=1.2 * 15 / 3600)
-    assert o.dec_deg[0] == pytest.approx(63 + 58 / 60 + 45.2 / 3600, abs=10 / 3600)
+    when = datetime(2014, 1, 23, 11, 18, 7, tzinfo=timezone.utc)
+    o = orbit.observe(orbit.Elements(*ISS), site, when, [0.0], iers.ut1_utc_s(when))
+    deg = ARCSEC / (math.pi / 180)
+    assert o.el_deg[0] == pytest.approx(16 + 16 / 60 + 32.6 / 3600, abs=0.1 * deg)  # printed to 0.1"
+    assert o.az_deg[0] == pytest.approx(350 + 15 / 60 + 20.4 / 3600, abs=0.1 * deg)
+    assert o.range_km[0] == pytest.approx(1168.7, abs=0.05)
+    assert o.dec_deg[0] == pytest.approx(63 + 58 / 60 + 45.2 / 3600, abs=0.1 * deg)
+    # TEME's mean equinox against Skyfield's true equinox: RA smaller by the equation of the
+    # equinoxes, dpsi cos(eps) = +0.6505 s of time then (skyfield: gast - gmst).
+    assert 3600 / 15 * o.ra_deg[0] - 3600 * (3 + 20 / 60 + 22.42 / 3600) == pytest.approx(-0.6505, abs=0.01)
+
+
+def test_ut1_utc_comes_from_the_iers_table_across_a_leap_second() -> None:
+    # IERS finals2000A: 2014-01-23 -0.11958 s at 1:23:30 UTC (Bulletin B, interpolated between
+    # the days' values -0.1195 and -0.1205 s); across the leap second that ended 2016: -0.4087 s
+    # an hour before it, +0.5912 s an hour after (skyfield's own table: -0.408678, +0.591236).
+    assert iers.ut1_utc_s(datetime(2014, 1, 23, 1, 23, 30, tzinfo=timezone.utc)) == pytest.approx(-0.11958, abs=2e-5)
+    assert iers.ut1_utc_s(datetime(2016, 12, 31, 23, tzinfo=timezone.utc)) == pytest.approx(-0.408678, abs=2e-5)
+    assert iers.ut1_utc_s(datetime(2017, 1, 1, 1, tzinfo=timezone.utc)) == pytest.approx(0.591236, abs=2e-5)
+    first, last = iers.span_utc()
+    assert first == datetime(1973, 1, 2, tzinfo=timezone.utc) and last > datetime(2026, 1, 1, tzinfo=timezone.utc)
+
+
+def test_the_leo_pass_geometry_matches_skyfield() -> None:
+    # The built-in pass as its scene sees it (UT1 - UTC from the table, not set in leo-pass.toml)
+    # against skyfield's own reduction (its bundled IERS table, its SGP4, WGS-84 site), 21 times.
+    skyfield_api = pytest.importorskip("skyfield.api", reason="skyfield is a test dependency")
+    from evstwin.optics import Optics
+    from evstwin.sky import scene as sky_scene
+
+    s = scenario.resolve(scenario.load("leo-pass"))
+    assert "ut1_utc_s" not in s["site"]
+    ctx = sky_scene._Context(s, Optics(focal_length_m=0.025, f_number=1.4), 346, 260, 60.0, 5.0)
+    assert ctx.ut1_utc_s == pytest.approx(-0.1196, abs=1e-4)
+    tle = s["targets"][0]
+    t = np.linspace(0.0, 60.0, 21)
+    ts = skyfield_api.load.timescale(builtin=True)
+    sat = skyfield_api.EarthSatellite(tle["line1"], tle["line2"], ts=ts)
+    where = skyfield_api.wgs84.latlon(s["site"]["lat_deg"], s["site"]["lon_deg"], elevation_m=s["site"]["alt_m"])
+    st = ctx.start
+    alt, az, distance = (sat - where).at(ts.utc(st.year, st.month, st.day, st.hour, st.minute, st.second + t)).altaz()
+    for ut1_utc_s, within_arcsec, within_m in ((ctx.ut1_utc_s, 0.05, 0.05), (0.0, 30.0, 40.0)):
+        o = orbit.observe(orbit.Elements(tle["line1"], tle["line2"]), ctx.site, ctx.start, t, ut1_utc_s)
+        d_az = ((o.az_deg - az.degrees + 180.0) % 360.0 - 180.0) * np.cos(np.radians(alt.degrees)) * 3600
+        d_el = (o.el_deg - alt.degrees) * 3600
+        off = max(np.max(np.abs(d_az)), np.max(np.abs(d_el)))
+        assert off < within_arcsec and np.max(np.abs(o.range_km - distance.km)) * 1e3 < within_m
+        if ut1_utc_s == 0.0:
+            assert off > 5.0  # leaving UT1 - UTC out is what the table fixes: ~11" on the sky, 24" of el
+
+
+def test_site_ut1_utc_s_wins_and_a_start_outside_the_table_says_what_to_set() -> None:
+    explicit = small(pointing={"mode": "staring", "az_deg": 0.0, "el_deg": 60.0},
+                     site=dict(SMALL["site"], ut1_utc_s=0.25))
+    from evstwin.optics import Optics
+    from evstwin.sky import scene as sky_scene
+
+    ctx = sky_scene._Context(scenario.resolve(explicit), Optics(), 64, 48, 4.0, 5.0)
+    assert (ctx.ut1_utc_s, ctx.ut1_utc_from) == (0.25, "site.ut1_utc_s")
+    late = small(pointing={"mode": "staring", "az_deg": 0.0, "el_deg": 60.0}, start_utc="2090-01-01T00:00:00Z",
+                 star_field={"density_per_deg2": 0.0}, targets=[])
+    with pytest.raises(ScenarioError, match=r"^start_utc 2090-01-01T00:00:00\+00:00 is outside the UT1 - UTC table "
+                                            r"\(IERS finals2000A.all of astropy-iers-data .*: 1973-01-02 to 20\d\d-\d\d-\d\d\); "
+                                            r"set site.ut1_utc_s"):
+        scenario.build(late)
+    late["site"] = dict(SMALL["site"], ut1_utc_s=0.0)
+    scenario.build(late)  # with the value given, the date is fine
 
 
 def test_gmst_matches_vallado_example_3_5() -> None:

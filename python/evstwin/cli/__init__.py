@@ -2,7 +2,7 @@
 the Python API, grouped by what the user is doing.
 
     evstwin simulate SCENARIO -o OUT      evstwin scenarios          (cli.simulate)
-    evstwin info | show | compare | timing | calibrate-noise         (cli.recordings)
+    evstwin info | show | movie | compare | timing | calibrate-noise (cli.recordings)
     evstwin fit | sweep | limiting-magnitude                         (cli.tuning)
     evstwin characterize PRESET                                      (cli.characterize)
 
@@ -94,7 +94,23 @@ def run() -> NoReturn:
     atexit.register(_late_interrupt)
     status = main()
     signal.signal(signal.SIGINT, lambda signum, frame: late.append(signum))
+    _forget_escaped_interrupt()
     sys.exit(status)
+
+
+def _forget_escaped_interrupt() -> None:
+    """Clear CPython's note that a KeyboardInterrupt escaped code run from a string.
+
+    ``exec``/``eval`` of a string (dataclasses and namedtuple build their methods so, at
+    import time) runs through ``run_eval_code_obj``, which sets the interpreter's
+    "unhandled KeyboardInterrupt" flag when a KeyboardInterrupt leaves it, even though
+    :func:`main` catches it further up; ``Py_RunMain`` checks that flag after finalising
+    and then kills the process with SIGINT (exit status -2) whatever ``sys.exit`` said: a
+    Ctrl-C that landed in such code (~1 run in 20 of ``show`` interrupted while drawing,
+    whose matplotlib imports build dataclasses) printed the one line and then died by
+    SIGINT. ``run_eval_code_obj`` clears the flag on entry, so running an empty string
+    through it clears a stale one; the interrupt itself has been handled (status 130)."""
+    exec("")  # runs nothing: see the docstring
 
 
 def _one_line(exc: BaseException) -> str:

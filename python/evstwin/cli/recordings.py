@@ -40,6 +40,31 @@ def register(sub: Any) -> None:
     add_force(p)
     p.set_defaults(func=cmd_show)
 
+    p = sub.add_parser("movie", help="render a recording as a movie (.mp4 or .gif, through faery)",
+                       description="Render any readable recording, real or simulated, as a movie: frames of "
+                                   "--speed/--frame-rate seconds of recording, each pixel coloured by its latest "
+                                   "event (ON/OFF colours) faded by --decay; a simulated file's ground truth "
+                                   "(each target's true place) is drawn as coloured squares.")
+    p.add_argument("file", help="event file in any format read_events takes")
+    p.add_argument("--out", required=True, help="the movie: a .mp4 (H.264) or .gif file (must not exist, or --force)")
+    p.add_argument("--t0", type=float, default=0.0, help="start after the recording's first event [s] (default 0)")
+    p.add_argument("--duration", type=float, help="recording time shown [s] (default: to the last event)")
+    p.add_argument("--frame-rate", type=float, default=30.0, help="video frames per second (default 30)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="recording seconds per video second (default 1; 0.1 plays ten times slower)")
+    p.add_argument("--decay", default="exponential", choices=("exponential", "linear", "window", "cumulative"),
+                   help="how a pixel's colour fades with its latest event's age (faery's render; default exponential)")
+    p.add_argument("--tau", type=float, help="the decay's time constant [s] (default: one frame's span)")
+    p.add_argument("--on-color", default="#F4C20D", help="colour of ON events, #RRGGBB (default #F4C20D)")
+    p.add_argument("--off-color", default="#1E88E5", help="colour of OFF events, #RRGGBB (default #1E88E5)")
+    p.add_argument("--background", default="#000000", help="colour of pixels without events, #RRGGBB (default black)")
+    p.add_argument("--scale", type=int, default=1, help="video pixels per sensor pixel, each way (default 1)")
+    p.add_argument("--no-truth", action="store_true", help="do not draw the ground truth of a simulated file")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_size(p)
+    add_force(p)
+    p.set_defaults(func=cmd_movie)
+
     p = sub.add_parser("compare", help="compare a real recording with simulations (paper sec. 3)")
     p.add_argument("real", help="real recording (AEDAT4, RAW, ... any format read_events takes)")
     p.add_argument("sims", nargs="+", help="simulated recordings, or scenarios (built-in names or TOML) to simulate")
@@ -110,6 +135,42 @@ def cmd_show(args: argparse.Namespace) -> int:
         print(note, file=sys.stderr)
     for name, path in outputs.items():
         print(f"{name}: {stage.final_of(path)}")
+    return 0
+
+
+def cmd_movie(args: argparse.Namespace) -> int:
+    from ..movie import MovieOptions, render_movie
+
+    options = MovieOptions(
+        t0_s=args.t0, duration_s=args.duration, frame_rate_hz=args.frame_rate, speed=args.speed, decay=args.decay,
+        tau_s=args.tau, on_color=args.on_color, off_color=args.off_color, background=args.background,
+        scale=args.scale, truth=not args.no_truth,
+    )
+    options.check()
+    out = check_output_file(args.out, args.force, "--out")
+    bar: Any = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if args.no_progress:
+            return
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, unit="frame", desc="rendering", file=sys.stderr, leave=False)
+        bar.update(done - bar.n)
+
+    try:
+        movie = render_movie(args.file, out, options, size=args.size, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    t0, t1 = movie.window_us
+    print(f"wrote {movie.path}: {movie.frames} frames of {movie.size_px[0]} x {movie.size_px[1]} px at "
+          f"{options.frame_rate_hz:g} frames/s, {movie.events} events from {t0} to {t1} us "
+          f"({options.frame_span_s:.6g} s of recording a frame)")
+    for name, color in movie.legend.items():
+        print(f"  truth {name}: {color} square")
     return 0
 
 

@@ -10,10 +10,24 @@ files: entry ``m`` is the index of the first event with ``t >= t_origin_us + 100
 first event's time floored to the millisecond otherwise (Unix-time recordings). Without the
 attribute (DSEC files) the origin is 0. The index has ``floor((t_last - t_origin_us) / 1000) + 1``
 entries.
+
+Metavision's HDF5 event files (Prophesee's ``.hdf5``; layout: docs.prophesee.ai, "HDF5 Event
+File Format", and openeb's ``hdf5_event_file_writer.cpp``) are read too: ``/CD/events`` is a
+compound dataset (``x`` uint16, ``y`` uint16, ``p`` int16, ``t`` int64 [us]) in chunks of 16384
+events, ``/CD/indexes`` (``id`` uint64, ``ts`` int64, one every 2 ms, its ``offset``
+attribute the first time's negative), ``/EXT_TRIGGER/events`` and ``/EXT_TRIGGER/indexes``
+(trigger events, not read), and string attributes on the root (``version`` "1.0", the
+camera's ``geometry`` "WxH", ``format``, ``generation``, ``serial_number``, ...). Metavision
+compresses ``/CD/events`` with Prophesee's ECF codec (HDF5 filter 0x8ECF), which libhdf5 loads
+as a plugin from ``HDF5_PLUGIN_PATH`` where Prophesee's ``hdf5_ecf`` is installed (no package
+on PyPI ships it); without it reading stops with one line saying so. Files written with gzip
+(h5py, other tools) or no filter need nothing more. No maintained Python writer of the layout
+exists (the Metavision SDK writes it from C++ only), so evstwin writes its own layout.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -32,11 +46,13 @@ from ._common import (
     SpooledColumn,
     Truth,
     WriteSpec,
+    check_header_size,
     decode_scenario,
     decoded,
     decoding,
     from_columns,
     label_header,
+    one_line,
 )
 
 H5_CHUNK = 1 << 16  # events per HDF5 chunk (512 KiB of t)
@@ -179,7 +195,8 @@ def _event_datasets(f: Any, path: Path) -> list[Any]:
     group = f.get("events")
     if not isinstance(group, h5py.Group):
         raise ValueError(  # noqa: TRY004 - a malformed file, not a wrong argument
-            f"{str(path)!r}: no /events group (expected datasets /events/t, x, y, p)"
+            f"{str(path)!r}: no /events group (expected datasets /events/t, x, y, p, or Metavision's "
+            f"{METAVISION_EVENTS})"
         )
     missing = [name for name in FIELDS if not isinstance(group.get(name), h5py.Dataset)]
     if missing:
@@ -221,10 +238,92 @@ def _read_meta(f: Any) -> Meta:
     return meta
 
 
+# ---------------------------------------------------------------------------------------------
+# Metavision's layout
+
+METAVISION_EVENTS = "/CD/events"
+METAVISION_FIELDS = ("x", "y", "p", "t")
+ECF_FILTER = 0x8ECF
+"""HDF5 filter id of Prophesee's ECF codec (self-assigned; docs.prophesee.ai)."""
+ECF_INSTALL = (
+    "install Prophesee's HDF5 ECF plugin (hdf5_ecf: it comes with the Metavision SDK and OpenEB, or "
+    "build it from github.com/prophesee-ai/hdf5_ecf) and set HDF5_PLUGIN_PATH to the folder that holds it"
+)
+_GEOMETRY = re.compile(r"^\s*(\d+)\s*x\s*(\d+)\s*$", re.IGNORECASE)
+
+
+def _metavision_events(f: Any, path: Path) -> Any:
+    """``/CD/events`` of a Metavision file, checked (fields, shape, filters), or None when the
+    file has no ``/CD/events``."""
+    import h5py
+
+    ds = f.get(METAVISION_EVENTS)
+    if ds is None:
+        return None
+    names = ds.dtype.names or () if isinstance(ds, h5py.Dataset) else ()
+    missing = [name for name in METAVISION_FIELDS if name not in names]
+    if not isinstance(ds, h5py.Dataset) or missing or len(ds.shape) != 1:
+        raise ValueError(
+            f"{str(path)!r}: {METAVISION_EVENTS} must be a 1-D compound dataset with fields x, y, p, t "
+            f"(Metavision's layout); got {getattr(ds, 'dtype', type(ds).__name__)} of shape {getattr(ds, 'shape', None)}"
+        )
+    _check_filters(ds, path)
+    return ds
+
+
+def _check_filters(ds: Any, path: Path) -> None:
+    """One line naming what to install when a filter of ``ds`` is not available here."""
+    import h5py
+
+    plist = ds.id.get_create_plist()
+    for i in range(plist.get_nfilters()):
+        code, _flags, _values, name = plist.get_filter(i)
+        if h5py.h5z.filter_avail(code):
+            continue
+        from .._extras import MissingExtraError
+
+        if code == ECF_FILTER:
+            raise MissingExtraError(
+                f"{str(path)!r}: {ds.name} is compressed with Prophesee's ECF codec (HDF5 filter 0x8ECF), "
+                f"which this HDF5 library cannot load: {ECF_INSTALL}"
+            )
+        label = name.decode("utf-8", "replace") if isinstance(name, bytes) else str(name)
+        raise MissingExtraError(
+            f"{str(path)!r}: {ds.name} is compressed with HDF5 filter {code} ({label or 'unnamed'}), which this "
+            "HDF5 library cannot load: pip install hdf5plugin and import it first, or install that filter's "
+            "plugin and set HDF5_PLUGIN_PATH"
+        )
+
+
+def _metavision_meta(f: Any, path: Path) -> Meta:
+    """The root's string attributes, the sensor size from ``geometry`` (None without one)."""
+    meta: Meta = {key: _attr_value(value) for key, value in f.attrs.items()}
+    if "format" in meta:  # the camera's encoding (EVT3, ...): meta["format"] is the file's
+        meta["metavision_format"] = meta.pop("format")
+    meta["hdf5_layout"] = "metavision"
+    meta["width"], meta["height"], meta["size_source"] = None, None, None
+    geometry = meta.get("geometry")
+    if geometry is not None:
+        match = _GEOMETRY.match(str(geometry))
+        if match is None:
+            raise ValueError(f"{str(path)!r}: the root attribute geometry = {one_line(repr(geometry), 80)} "
+                             "is not 'WIDTHxHEIGHT'")
+        meta["width"], meta["height"] = check_header_size(path, int(match[1]), int(match[2]))
+        meta["size_source"] = "header"
+    return meta
+
+
+def _metavision_columns(ds: Any, start: int, stop: int, path: Path) -> np.ndarray:
+    block = ds[start:stop]
+    return from_columns([block["t"], block["x"], block["y"], block["p"]], where=path)
+
+
 def open_source(path: Path, chunk: int) -> EventSource:
     import h5py
 
     with decoding(path, "h5py"), h5py.File(path, "r") as f:
+        if "events" not in f and _metavision_events(f, path) is not None:
+            return _open_metavision(path, chunk, _metavision_meta(f, path))
         columns = _event_datasets(f, path)
         has_labels = _label_dataset(f, path, columns[0].shape[0]) is not None
         meta = _read_meta(f)
@@ -244,12 +343,33 @@ def open_source(path: Path, chunk: int) -> EventSource:
     return EventSource(meta, decoded(path, "h5py", packets()))
 
 
+def _open_metavision(path: Path, chunk: int, meta: Meta) -> EventSource:
+    import h5py
+
+    meta["has_labels"] = False
+
+    def packets() -> Iterator[np.ndarray]:
+        with h5py.File(path, "r") as f:
+            ds = _metavision_events(f, path)
+            n = ds.shape[0]
+            for start in range(0, n, chunk):
+                yield _metavision_columns(ds, start, start + chunk, path)
+
+    return EventSource(meta, decoded(path, "h5py", packets()))
+
+
 def read_window(path: Path, t_start_us: int, t_end_us: int) -> np.ndarray:
     """Events with ``t_start_us <= t < t_end_us``: bounds from ``/ms_to_idx`` (then at most one
     millisecond of ``t`` read to refine each), or a bisection on ``/events/t`` without it."""
     import h5py
 
     with decoding(path, "h5py"), h5py.File(path, "r") as f:
+        if "events" not in f:
+            ds = _metavision_events(f, path)
+            if ds is not None:  # bisection on t, one event read at a time
+                t_of = ds.fields("t")
+                lo, hi = _bisect(t_of, ds.shape[0], t_start_us), _bisect(t_of, ds.shape[0], t_end_us)
+                return _metavision_columns(ds, lo, max(lo, hi), path)
         columns = _event_datasets(f, path)
         t = columns[0]
         n = t.shape[0]

@@ -10,10 +10,11 @@ Earth-fixed frame (PEF) by one rotation about z by the Greenwich mean sidereal t
 IAU 1982 expression (Vallado, *Fundamentals of Astrodynamics and Applications*, 4th ed.,
 eq. 3-45/3-47). That is the whole chain here:
 
-* **Earth rotation**: GMST (IAU 1982) from UT1; UT1 = UTC + ``ut1_utc_s`` (default 0: the
-  difference is kept below 0.9 s by leap seconds; 0.9 s of rotation moves a site by up to
-  420 m, a few arcminutes at a LEO's range). Polar motion is ignored (PEF taken as ITRF:
-  about 0.3 arcsec, 10 m on the ground).
+* **Earth rotation**: GMST (IAU 1982) from UT1; UT1 = UTC + ``ut1_utc_s`` (a scene takes it
+  from the IERS table, :mod:`evstwin.sky.iers`, unless ``site.ut1_utc_s`` is set; leap
+  seconds keep it below 0.9 s, but 0.9 s of rotation moves a site by up to 420 m, a few
+  arcminutes at a LEO's range, and 0.12 s already 24 arcsec). Polar motion is ignored (PEF
+  taken as ITRF: about 0.3 arcsec, 10 m on the ground).
 * **The sky frame** is TEME itself: directions of satellites, the pointing and the stars are
   all given in it, so they agree with each other exactly. It is the equator of date with the
   mean equinox of date, which differs from a J2000/ICRS catalogue by precession (0.36 deg
@@ -27,8 +28,8 @@ eq. 3-45/3-47). That is the whole chain here:
 
 The accuracy that matters is the elements': a TLE is good to about 1 km at its epoch and
 drifts by kilometres per day (Vallado et al. 2006), i.e. arcminutes for a LEO, far more than
-any of the approximations above. astropy would do the frames to milliarcseconds, but it needs
-IERS tables that go stale for future dates (and then warns or downloads), weighs ~40 MB with
+any of the approximations above. astropy would do the frames to milliarcseconds, but its
+IERS tables go stale for future dates (and then it warns or downloads), it weighs ~40 MB with
 pyerfa, and buys nothing against the elements' own error; skyfield needs a downloaded JPL
 ephemeris for the Sun. These formulas run offline, vectorised over time, and are tested
 against published values (``tests/python/test_sky_orbit.py``).

@@ -4,7 +4,8 @@ site through a pointing, as evstwin Targets on the sensor.
 The scenario keys (``evstwin.scenario`` reads them and calls :func:`build_sky`):
 
 ``start_utc``  the UTC time of t = 0 ("2014-01-23T11:18:07Z").
-``[site]``     ``lat_deg``, ``lon_deg``, ``alt_m`` (WGS-84), ``ut1_utc_s`` (default 0),
+``[site]``     ``lat_deg``, ``lon_deg``, ``alt_m`` (WGS-84), ``ut1_utc_s`` (default: the IERS
+               table at ``start_utc``, :mod:`evstwin.sky.iers`; an error outside it),
                ``extinction_mag_per_airmass`` (V-band k, default ``DEFAULT_EXTINCTION``).
 ``[pointing]`` ``mode`` = staring | sidereal | target | table (``evstwin.sky.pointing``; right
                ascensions and declinations are of date, TEME's equator and mean equinox, not
@@ -48,7 +49,7 @@ import numpy as np
 
 from ..optics import Optics
 from ..targets import LightCurve, LinearTarget, StaticTarget, TabulatedTarget, Target
-from . import earth, orbit, photometry
+from . import earth, iers, orbit, photometry
 from .pointing import MODES, UPS, Attitude, project, unproject
 from .stars import STAR_FIELD_COUNTS_SLOPE, STAR_FIELD_MAG_MAX, STAR_FIELD_MAG_MIN
 
@@ -112,10 +113,15 @@ class _Context:
                                    float(self.site_table.get("alt_m", 0.0)))
         except (TypeError, ValueError) as exc:
             raise ValueError(f"site.{exc}") from None
-        self.ut1_utc_s = float(self.site_table.get("ut1_utc_s", 0.0))
-        if not abs(self.ut1_utc_s) <= 1.0:
-            raise ValueError(f"site.ut1_utc_s must be in [-1, 1] s (leap seconds keep |UT1 - UTC| < 0.9 s); "
-                             f"got {self.ut1_utc_s!r}")
+        explicit_ut1 = "ut1_utc_s" in self.site_table
+        if explicit_ut1:
+            try:
+                self.ut1_utc_s = float(self.site_table["ut1_utc_s"])
+            except (TypeError, ValueError):
+                self.ut1_utc_s = math.nan
+            if not abs(self.ut1_utc_s) <= 1.0:
+                raise ValueError(f"site.ut1_utc_s must be in [-1, 1] s (leap seconds keep |UT1 - UTC| < 0.9 s); "
+                                 f"got {self.site_table['ut1_utc_s']!r}")
         self.k_ext = float(self.site_table.get("extinction_mag_per_airmass", DEFAULT_EXTINCTION))
         if not 0.0 <= self.k_ext <= 5.0:
             raise ValueError(f"site.extinction_mag_per_airmass must be in [0, 5]; got {self.k_ext!r}")
@@ -126,6 +132,9 @@ class _Context:
             self.start: datetime = earth.parse_utc(s["start_utc"])
         except ValueError as exc:
             raise ValueError(f"start_utc {exc}") from None
+        if not explicit_ut1:  # the IERS table's value at the start (it changes < 3 ms a day)
+            self.ut1_utc_s = iers.ut1_utc_s(self.start)
+        self.ut1_utc_from = "site.ut1_utc_s" if explicit_ut1 else iers.source()
         self.optics = optics
         self.k = optics.plate_scale_rad_per_px
         self.width, self.height = width, height
@@ -571,6 +580,8 @@ def build_sky(s: dict[str, Any], optics: Optics, width: int, height: int, t_end:
     info["stars_drawn"] = int(directions.shape[0])
     info["stars_kept"] = len(stars)
     info["sun_el_deg"] = float(orbit.sun_elevation_deg(ctx.site, ctx.start, 0.0)[0])
+    info["ut1_utc_s"] = ctx.ut1_utc_s
+    info["ut1_utc_from"] = ctx.ut1_utc_from
     return SkyTargets(satellites, stars, info)
 
 
