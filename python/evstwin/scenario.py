@@ -27,8 +27,11 @@ The tables mirror the Python objects:
                   the pixels near moving targets; default true), ``chunk_samples``,
                   ``max_events`` (most events of one engine call; default 1e8, see
                   ``Sensor.max_events``), ``pre_roll_s`` (the sensor watches the scene this
-                  long before t = 0, its events dropped; default 0) and
-                  ``pre_roll_rate_hz`` (its sampling rate; default ``rate_hz``).
+                  long before t = 0, its events dropped; default 0),
+                  ``pre_roll_rate_hz`` (its sampling rate; default ``rate_hz``) and
+                  ``static_step_s`` (the longest step of a pixel whose light is constant,
+                  in a sparse run with the continuous noise model and the exact low-pass;
+                  default 0.2, 0 = every pixel at ``rate_hz``; ``simulate``).
 ``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
 ``[photometry]``  how magnitudes become electrons on a preset with a QE curve
                   (``evstwin.spectra``): ``band`` (``"V"``, default, ``"G"`` or a CSV of
@@ -184,7 +187,7 @@ SCHEMA: dict[str, Any] = {
     "pixel": {name: Any for name in PixelParams.field_names()},
     "optics": {k: Any for k in _OPTICS_KEYS},
     "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int, "max_events": int,
-                 "pre_roll_s": float, "pre_roll_rate_hz": float},
+                 "pre_roll_s": float, "pre_roll_rate_hz": float, "static_step_s": float},
     "background": {"photon_rate_ph_s": float, "sky_mag_per_arcsec2": float},
     "photometry": {k: str for k in PHOTOMETRY_KEYS},
     "hot_pixels": {"pixels": list, "file": str},
@@ -199,7 +202,8 @@ SCHEMA: dict[str, Any] = {
     "site": {k: float for k in sky_scene.SITE_KEYS},
     "pointing": {k: Any for k in sky_scene.POINTING_KEYS},
 }
-DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50}
+DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50,
+                    "static_step_s": 0.2}
 
 
 # -- loading ------------------------------------------------------------------------------------
@@ -419,6 +423,7 @@ def _check_values(s: dict[str, Any]) -> None:
         raise ScenarioError(f"sampling.sparse must be true or false; got {sp['sparse']!r}")
     if isinstance(sp["chunk_samples"], bool) or not isinstance(sp["chunk_samples"], int) or sp["chunk_samples"] < 1:
         raise ScenarioError(f"sampling.chunk_samples must be an integer >= 1; got {sp['chunk_samples']!r}")
+    number("sampling.static_step_s", sp["static_step_s"], 0.0, 1e6)
     if "pre_roll_s" in sp:
         number("sampling.pre_roll_s", sp["pre_roll_s"], 0.0, 1e6)
     if "pre_roll_rate_hz" in sp:
@@ -545,6 +550,12 @@ class Scene:
     (rounded up to whole pre-roll samples, ``pre_roll_samples``) and its events before t = 0
     are dropped, so that every pixel starts the recording with its history: the reference
     where its last event left it, its noise, leak and hot-pixel phases (``simulate``)."""
+    static_step_s: float = 0.0
+    """sampling.static_step_s [s]: the longest step of a pixel whose light is constant (0: every
+    pixel at rate_hz). In a sparse run with the continuous noise model and the exact low-pass
+    (whose statistics do not depend on the step: the engine refines an interval where a
+    crossing is plausible), a pixel no moving source touches and that has settled is advanced
+    once per ``static_step_s``, rounded down to whole base intervals (``simulate``)."""
     pre_roll_rate_hz: float | None = None
     """sampling.pre_roll_rate_hz: the pre-roll's sampling rate [Hz] (None: rate_hz). Whole
     frames, no sub-sampling: a pre-roll only sets the pixels' state, and with the continuous
@@ -844,6 +855,7 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         chunk_samples=int(sp["chunk_samples"]), max_events=sp.get("max_events"), field_stars=field_stars,
         pre_roll_s=float(sp.get("pre_roll_s", 0.0)),
         pre_roll_rate_hz=None if "pre_roll_rate_hz" not in sp else float(sp["pre_roll_rate_hz"]),
+        static_step_s=float(sp["static_step_s"]),
         readout=readout, atmosphere=atmosphere,
     )
 

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from . import psf
-from ._core import __version__
+from ._core import ELEMENTARY_CHARGE_C, __version__
 from .readout import Readout
 from .scenario import ScenarioError, Scene, build, load, parse_assignment, pre_roll_samples, set_value
 from .sensor import EVENT_DTYPE, Sensor
@@ -405,6 +405,11 @@ class _Runner:
         # fine samples at the run's fastest, so a pixel is not sampled finely long before or
         # after a source is near it (it is for the whole unit if a source touches it in it).
         self.unit = max(1, SUB_SAMPLED_UNIT_SAMPLES // self._n_sub(0.0, self.t_end))
+        # Long steps for the pixels whose light is constant (sampling.static_step_s): base
+        # intervals per step, 1 where the run keeps every pixel at the base rate.
+        self.static_every = self._static_every()
+        self.settle_until = np.full(scene.width * scene.height, -np.inf)
+        self.settle_px_s = self._settle_times() if self.static_every > 1 else self.settle_s
 
     # -- the loop --------------------------------------------------------------------------------
 
@@ -415,7 +420,7 @@ class _Runner:
         for events, labels in self._engine_chunks(bar):
             if self.n_pre and events.size and events["t"][0] < 0:
                 # The pre-roll's events are dropped (a chunk is sorted by t). An event in the
-                # last half microsecond before t = 0 rounds to 0 and stays.
+                # last nanosecond before t = 0 counts as 0 (Sensor::floor_us) and stays.
                 keep = events["t"] >= 0
                 events = events[keep]
                 labels = None if labels is None else labels[keep]
@@ -452,6 +457,9 @@ class _Runner:
                 done = (stop - 1) * self.dt_pre
                 bar.set_postfix_str(f"pre-roll {done:.1f}/{self.n_pre * self.dt_pre:.1f} s"
                                     if stop <= self.n_pre else "")
+        if self.static_every > 1:
+            yield from self._stepped_chunks(bar)
+            return
         a = 0
         while a < self.n_base:
             u0 = a - a % self.unit
@@ -486,6 +494,115 @@ class _Runner:
                 # 200 Hz ended at 0.7700000000000001 of 0.77: "clamping frac", a negative ETA).
                 bar.n = min(round(b * self.dt, 6), bar.total)
                 bar.update(0)  # displays at tqdm's own pace
+            a = b
+
+    def _static_every(self) -> int:
+        """Base intervals per step of a pixel whose light is constant: sampling.static_step_s
+        in whole base intervals, where the statistics do not depend on the step (a sparse run,
+        the continuous noise model, the exact low-pass: the engine advances a pixel's noise
+        exactly over any interval and refines one where a crossing is plausible; the
+        documentation's noise model page measures it), and no halo changes the light of every
+        pixel (a ``CompositePSF``'s smooth part is sampled at the base rate everywhere). Else 1."""
+        sc, p = self.scene, self.scene.params
+        if not (sc.sparse and sc.static_step_s > 0.0 and p.noise_model == "continuous" and p.lowpass == "exact"
+                and not self._halo_groups):
+            return 1
+        if not p.pr_pole and p.cutoff_hz is not None and 2.0 * math.pi * p.cutoff_hz * sc.static_step_s > 1.0:
+            # The follower alone: where its noise can cross (the DAVIS346 preset's dark pixel
+            # fires ~2 times a second, so almost everywhere), a long step is refined to
+            # pieces of an eighth of its time constant, which costs more than the base rate's
+            # vector kernel (a 1280 x 720 dark frame of the DAVIS346 preset's pixel: 13.1 us a
+            # pixel for one 0.2 s step against ~5.6 us for 200 samples at 1 kHz, one thread).
+            # Such a pixel's cost is its noise.
+            return 1
+        return max(1, math.floor(sc.static_step_s / self.dt + 1e-9))
+
+    def _settle_times(self) -> np.ndarray:
+        """Per pixel, how long after a moving source leaves it the pixel keeps the base rate
+        [s]: five time constants of the slower of its source follower and, when on, its
+        photoreceptor pole at the static light's mean current (the pole's cutoff scales with
+        it). Until then its levels still relax, and the comparator's line between two samples
+        far apart would misplace the crossings they make (the OFF events after a passage)."""
+        p = self.scene.params
+        settle = np.full(self.static_map.size, self.settle_s)
+        if p.pr_pole:
+            dark_e_s = 0.0 if p.dark_model == "none" else p.dark_rate_e_per_s
+            current_a = ELEMENTARY_CHARGE_C * (p.electrons_per_photon * self.static_map.reshape(-1) + dark_e_s)
+            with np.errstate(divide="ignore"):
+                pole_s = 5.0 * p.pr_ref_current_a / (2.0 * math.pi * p.pr_cutoff_ref_hz * current_a)
+            np.maximum(settle, pole_s, out=settle)
+        return settle
+
+    def _stepped_chunks(self, bar: Any = None) -> Iterator[_Chunk]:
+        """``_engine_chunks`` with time steps per pixel: units of ``static_every`` base intervals
+        aligned from t = 0. In each, the pixels inside a moving source's window take the fine
+        samples (``_n_sub`` per base interval), those a source has left and that still settle
+        take the base samples, and every other pixel one step to the unit's end, its light
+        the static map's. Every pixel reaches the unit's end, so a unit's events all lie in it
+        and come out in time order; which pixel takes which grid depends on the unit alone,
+        not on the chunking."""
+        sc = self.scene
+        npix = sc.width * sc.height
+        static = self.static_map.reshape(-1)
+        unit_s = self.static_every * self.dt
+        # Sources that move less than max_shift_px in a unit (a drifting star field: 0.07-0.3
+        # px/s, thousands of stars) need no sample between the unit's ends: they are rendered
+        # into the unit's one frame. Only untracked ones of constant flux (the ground truth is
+        # written at the times a tracked target is sampled; a light curve may change fast).
+        n_tracked = len(self.track_names)
+        slow = np.zeros(len(self.moving), bool)
+        for j in self._linear.cols:
+            if j >= n_tracked and self.moving[j].max_speed_px_s(self.t_start, self.t_end) * unit_s <= sc.max_shift_px:
+                slow[j] = True
+        fast_groups = [(shape, cols[~slow[cols]]) for shape, cols in self._fine_groups if (~slow[cols]).any()]
+        slow_groups = [(shape, cols[slow[cols]]) for shape, cols in self._fine_groups if slow[cols].any()]
+        frame = self._buffer("unit_frame", (1, sc.height, sc.width)) if slow_groups else None
+        a = 0
+        while a < self.n_base:
+            b = min(a - a % self.static_every + self.static_every, self.n_base)
+            s0 = time.perf_counter()
+            calls: list[tuple[np.ndarray | None, np.ndarray, np.ndarray]] = []  # (pixels, rates, t_s)
+            if fast_groups:
+                n_sub = self._n_sub(a * self.dt, b * self.dt)
+                k = np.arange(a + 1, b + 1)
+                t_base = k * self.dt
+                i = np.arange(1, n_sub + 1)
+                t_fine = np.where(i[None, :] == n_sub, (k[:, None]) * self.dt,
+                                  (k[:, None] - 1 + i[None, :] / n_sub) * self.dt).reshape(-1)
+                x, y, f = self._sources(t_fine)
+                lit = self._lit(x, y, f, fast_groups)
+                settling = (self.settle_until > a * self.dt) & ~lit
+                self.settle_until[lit] = b * self.dt + self.settle_px_s[lit]
+                lit_px, settling_px = np.flatnonzero(lit), np.flatnonzero(settling)
+                if lit_px.size:
+                    calls.append((lit_px, self._window_rates(lit_px, x, y, f, fast_groups), t_fine))
+                if settling_px.size:
+                    calls.append((settling_px, np.repeat(static[settling_px][None, :], t_base.size, axis=0), t_base))
+                self.pixel_updates += lit_px.size * t_fine.size + settling_px.size * t_base.size
+            t_end = np.array([b * self.dt])
+            if frame is not None:
+                x, y, f = self._sources(t_end, truth=not fast_groups)
+                frame[0] = self.static_map
+                for shape, cols in slow_groups:
+                    psf.render_points(sc.width, sc.height, x[0, cols], y[0, cols], f[0, cols], shape, out=frame[0])
+            calls.append((None, np.broadcast_to(self.static_map, (1, sc.height, sc.width)) if frame is None else frame,
+                          t_end))
+            self.pixel_updates += npix - sum(c[0].size for c in calls if c[0] is not None)
+            s1 = time.perf_counter()
+            parts, codes = [], []
+            for pixels, rates, t in calls:
+                parts.append(self.sensor.run(rates, t) if pixels is None else self.sensor.run_pixels(pixels, rates, t))
+                if self.labels:
+                    codes.append(self.sensor.last_labels())
+            s2 = time.perf_counter()
+            self.scene_s += s1 - s0
+            self.engine_s += s2 - s1
+            events = parts[0] if len(parts) == 1 else np.concatenate(parts)
+            order = np.lexsort((events["y"].astype(np.int64) * sc.width + events["x"], events["t"]))
+            yield events[order], (np.concatenate(codes)[order] if self.labels else None)
+            if bar is not None:
+                bar.n = min(round(b * self.dt, 6), bar.total)
+                bar.update(0)
             a = b
 
     def _n_sub(self, t0: float, t1: float) -> int:
@@ -590,28 +707,41 @@ class _Runner:
             buf = self._buffers[name] = np.empty(size, np.float64)
         return buf[:size].reshape(shape)
 
-    def _lit(self, x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
+    def _lit(self, x: np.ndarray, y: np.ndarray, f: np.ndarray,
+             groups: Sequence[tuple[psf.PSFShape, np.ndarray]] | None = None) -> np.ndarray:
         """Flat mask of the pixels inside the window of a fine-sampled source with flux > 0
         at any of the (T, S) positions: a PSF's window is the (2 h + 1)^2 pixels around the
         pixel the source is on (``psf.render``), those on the sensor. A difference table of
         the rectangles' corners, summed along both axes: linear in the rectangles and pixels."""
         sc = self.scene
-        diff = np.zeros((sc.height + 1, sc.width + 1), np.int64)
-        for shape, cols in self._fine_groups:
+        rects = []
+        for shape, cols in self._fine_groups if groups is None else groups:
             h = int(shape.half_width_px)
             xs, ys, fs = x[:, cols].reshape(-1), y[:, cols].reshape(-1), f[:, cols].reshape(-1)
             with np.errstate(invalid="ignore"):
                 cx, cy = np.floor(xs + 0.5), np.floor(ys + 0.5)
                 on = (fs > 0.0) & (cx + h >= 0) & (cx - h <= sc.width - 1) & (cy + h >= 0) & (cy - h <= sc.height - 1)
-            x0 = np.clip(cx[on] - h, 0, sc.width).astype(np.int64)
-            x1 = np.clip(cx[on] + h + 1, 0, sc.width).astype(np.int64)
-            y0 = np.clip(cy[on] - h, 0, sc.height).astype(np.int64)
-            y1 = np.clip(cy[on] + h + 1, 0, sc.height).astype(np.int64)
-            np.add.at(diff, (y0, x0), 1)
-            np.add.at(diff, (y0, x1), -1)
-            np.add.at(diff, (y1, x0), -1)
-            np.add.at(diff, (y1, x1), 1)
-        covered = diff.cumsum(axis=0).cumsum(axis=1)[: sc.height, : sc.width] > 0
+            rects.append((np.clip(cx[on] - h, 0, sc.width).astype(np.int64),
+                          np.clip(cx[on] + h + 1, 0, sc.width).astype(np.int64),
+                          np.clip(cy[on] - h, 0, sc.height).astype(np.int64),
+                          np.clip(cy[on] + h + 1, 0, sc.height).astype(np.int64)))
+        covered = np.zeros((sc.height, sc.width), bool)
+        if not any(r[0].size for r in rects):
+            return covered.reshape(-1)
+        # The table over the rectangles' bounding box only: a satellite's windows over a unit
+        # cover a few hundred pixels of a million, and two cumulative sums over the whole
+        # IMX636 array cost ~5 ms a unit.
+        bx0 = min(int(r[0].min()) for r in rects if r[0].size)
+        bx1 = max(int(r[1].max()) for r in rects if r[0].size)
+        by0 = min(int(r[2].min()) for r in rects if r[0].size)
+        by1 = max(int(r[3].max()) for r in rects if r[0].size)
+        diff = np.zeros((by1 - by0 + 1, bx1 - bx0 + 1), np.int64)
+        for x0, x1, y0, y1 in rects:
+            np.add.at(diff, (y0 - by0, x0 - bx0), 1)
+            np.add.at(diff, (y0 - by0, x1 - bx0), -1)
+            np.add.at(diff, (y1 - by0, x0 - bx0), -1)
+            np.add.at(diff, (y1 - by0, x1 - bx0), 1)
+        covered[by0:by1, bx0:bx1] = diff.cumsum(axis=0).cumsum(axis=1)[: by1 - by0, : bx1 - bx0] > 0
         return covered.reshape(-1)
 
     def _with_halos(self, frames: np.ndarray, t_base: np.ndarray, t_fine: np.ndarray, hot: np.ndarray,
@@ -644,6 +774,37 @@ class _Runner:
                 rates[k * n_sub : (k + 1) * n_sub] += (1.0 - w) * at_hot[k] + w * at_hot[k + 1]
         return out
 
+    def _window_rates(self, hot: np.ndarray, x: np.ndarray, y: np.ndarray, f: np.ndarray,
+                      groups: Sequence[tuple[psf.PSFShape, np.ndarray]] | None = None) -> np.ndarray:
+        """The (T, hot.size) photon rates of the pixels ``hot`` (flat indices, increasing) at
+        the T times of the (T, S) sources: the static light plus the moving sources' sharp
+        parts (``groups``, default ``_fine_groups``). Every window pixel of those sources must
+        be in ``hot``."""
+        sc = self.scene
+        npix = sc.width * sc.height
+        column = self._column
+        column[hot] = np.arange(hot.size)
+        rates = self._buffer("rates", (x.shape[0], hot.size))
+        rates[:] = self.static_map.reshape(-1)[hot][None, :]
+        flat_rates = rates.reshape(-1)
+        # The windows' flat indices with a power-of-two stride between samples, so that a shift
+        # and a mask split them into (sample, pixel): NumPy's integer division by a scalar cost
+        # ~10 times a shift (and its divmod by hand a division, a multiply and a subtraction).
+        shift = (npix - 1).bit_length()
+        for idx, val in self._contribution_parts(x, y, f, self._fine_groups if groups is None else groups,
+                                                 stride=1 << shift):
+            # Scatter-add only where the windows are (a bincount over every hot pixel and
+            # sample would zero and add the whole table); the chunks in order, each
+            # sequentially. The chunk's own index array becomes the target, in place.
+            if val.size:
+                pixel = idx & ((1 << shift) - 1)
+                target = idx
+                target >>= shift
+                target *= hot.size
+                target += column[pixel]
+                np.add.at(flat_rates, target, val)
+        return rates
+
     def _sparse(self, t_fine: np.ndarray, t_base: np.ndarray) -> _Chunk:
         s0 = time.perf_counter()
         sc = self.scene
@@ -663,27 +824,7 @@ class _Runner:
         mask = (self.hot_until > t_fine[0]) | lit
         self.hot_until[lit] = t_fine[-1] + self.settle_s
         hot = np.flatnonzero(mask)
-        column = self._column
-        column[hot] = np.arange(hot.size)
-        # The rates of the hot pixels at the fine times: static light plus the moving sources.
-        rates = self._buffer("rates", (n_t, hot.size))
-        rates[:] = self.static_map.reshape(-1)[hot][None, :]
-        flat_rates = rates.reshape(-1)
-        # The windows' flat indices with a power-of-two stride between samples, so that a shift
-        # and a mask split them into (sample, pixel): NumPy's integer division by a scalar cost
-        # ~10 times a shift (and its divmod by hand a division, a multiply and a subtraction).
-        shift = (npix - 1).bit_length()
-        for idx, val in self._contribution_parts(x, y, f, self._fine_groups, stride=1 << shift):
-            # Scatter-add only where the windows are (a bincount over every hot pixel and
-            # sample would zero and add the whole table); the chunks in order, each
-            # sequentially. The chunk's own index array becomes the target, in place.
-            if val.size:
-                pixel = idx & ((1 << shift) - 1)
-                target = idx
-                target >>= shift
-                target *= hot.size
-                target += column[pixel]
-                np.add.at(flat_rates, target, val)
+        rates = self._window_rates(hot, x, y, f)
         # Base frames for everyone else: their light is static in this chunk (hot pixels
         # have passed these times and are skipped by the engine), but for the halos.
         frames = np.broadcast_to(self.static_map, (t_base.size, sc.height, sc.width))
