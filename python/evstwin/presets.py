@@ -24,8 +24,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from ._core import ELEMENTARY_CHARGE_C  # one place for each constant
-from .optics import DAVIS346_MEAN_WAVELENGTH_M, Optics, _finite, _positive
+from ._checks import finite, positive
+from .constants import BOLTZMANN_J_K, ELEMENTARY_CHARGE_C
+from .optics import DAVIS346_MEAN_WAVELENGTH_M, Optics
 from .pixel import PixelParams
 from .readout import ReadoutParams
 from .spectra import QECurve, silicon_absorption_per_m, silicon_qe_curve
@@ -39,7 +40,6 @@ Tables 1-2 (e.g. 0.0659 ln(0.85 uA / 235.3 nA) = 0.0846). The documentation's "d
 K_THRESHOLD_TEXT = 1.0 / 14.0
 """The paper's text approximation of the same factor (sec. 2.4, after its ref. [13])."""
 
-BOLTZMANN_J_K = 1.380649e-23
 THERMAL_VOLTAGE_V = BOLTZMANN_J_K * 300.0 / ELEMENTARY_CHARGE_C
 """U_T = k_B T / q at 300 K [V] (25.85 mV)."""
 
@@ -99,10 +99,10 @@ def thresholds_from_biases(
     Raises ValueError naming the currents when one is not > 0 or a threshold is not > 0
     (the biases must satisfy I_ON > I_diff > I_OFF).
     """
-    on = _positive("i_on_a", i_on_a)
-    diff = _positive("i_diff_a", i_diff_a)
-    off = _positive("i_off_a", i_off_a)
-    kk = _positive("k", k)
+    on = positive("i_on_a", i_on_a)
+    diff = positive("i_diff_a", i_diff_a)
+    off = positive("i_off_a", i_off_a)
+    kk = positive("k", k)
     theta_on = kk * math.log(on / diff)
     theta_off = kk * math.log(diff / off)
     if theta_on <= 0.0:
@@ -153,7 +153,7 @@ def dark_rate_eq3(
         raise TypeError(f"unknown eq. 3 constant(s) {unknown}; known: {sorted(TABLE3_DARK)}")
     c = dict(TABLE3_DARK, **constants)
     for name, value in [("tau_g_s", tau_g_s), ("pixel_pitch_m", pixel_pitch_m), ("fill_factor", fill_factor), *c.items()]:
-        _positive(name, value)
+        positive(name, value)
     diffusion = (c["hole_diffusion_m2_s"] / (c["hole_diffusion_length_m"] * c["donor_m3"])
                  + c["electron_diffusion_m2_s"] / (c["electron_diffusion_length_m"] * c["acceptor_m3"])) * c["intrinsic_m3"] ** 2
     generation = c["depletion_width_m"] * c["intrinsic_m3"] / tau_g_s
@@ -168,7 +168,7 @@ def refractory_from_bias(i_refr_a: float, charge_c: float = REFRACTORY_CHARGE_C)
     ``REFRACTORY_CHARGE_C``). A model assumption: the inverse dependence is the circuit's,
     the constant is fitted, not measured.
     """
-    return _positive("charge_c", charge_c) / _positive("i_refr_a", i_refr_a)
+    return positive("charge_c", charge_c) / positive("i_refr_a", i_refr_a)
 
 
 def cutoff_from_bias(
@@ -184,12 +184,12 @@ def cutoff_from_bias(
     says f_c scales as I_sf, which is the part to trust. In the dark the photoreceptor, not
     the follower, may set the bandwidth (see ``PixelParams.pr_pole``).
     """
-    i = _positive("i_sf_a", i_sf_a)
-    c = _positive("capacitance_f", capacitance_f)
+    i = positive("i_sf_a", i_sf_a)
+    c = positive("capacitance_f", capacitance_f)
     return (
-        _positive("kappa", kappa)
+        positive("kappa", kappa)
         * i
-        / (2.0 * math.pi * _positive("thermal_voltage_v", thermal_voltage_v) * c)
+        / (2.0 * math.pi * positive("thermal_voltage_v", thermal_voltage_v) * c)
     )
 
 
@@ -225,7 +225,7 @@ class BiasSet:
         for f in ("i_on_a", "i_off_a", "i_diff_a", "i_pr_a", "i_sf_a", "i_refr_a"):
             v = getattr(self, f)
             if v is not None or f in ("i_on_a", "i_off_a", "i_diff_a"):
-                object.__setattr__(self, f, _positive(f, v))
+                object.__setattr__(self, f, positive(f, v))
         thresholds_from_biases(self.i_on_a, self.i_diff_a, self.i_off_a)
 
     def thresholds(self, k: float = K_THRESHOLD_DAVIS346) -> tuple[float, float]:
@@ -357,9 +357,9 @@ class SensorPreset:
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
                 raise ValueError(f"{f} must be a positive integer; got {f}={v!r}")
-        _positive("pixel_pitch_m", self.pixel_pitch_m)
-        _positive("mean_wavelength_m", self.mean_wavelength_m)
-        ff = _finite("fill_factor", self.fill_factor)
+        positive("pixel_pitch_m", self.pixel_pitch_m)
+        positive("mean_wavelength_m", self.mean_wavelength_m)
+        ff = finite("fill_factor", self.fill_factor)
         if not 0.0 < ff <= 1.0:
             raise ValueError(f"fill_factor must be in (0, 1]; got fill_factor={self.fill_factor!r}")
         if self.pixel.fill_factor != ff:
@@ -372,7 +372,7 @@ class SensorPreset:
         hot pixels) moved from ``dark_reference_temperature_c`` to ``temperature_c`` by
         ``2 ** ((T - T_ref) / dark_doubling_c)`` (see ``DARK_DOUBLING_C``). ValueError outside
         ``TEMPERATURE_RANGE_C``, where the law has not been shown to hold."""
-        t = _finite("temperature_c", temperature_c)
+        t = finite("temperature_c", temperature_c)
         lo, hi = TEMPERATURE_RANGE_C
         if not lo <= t <= hi:
             raise ValueError(f"temperature_c must be in [{lo:g}, {hi:g}] degC (the range of the dark-current law "

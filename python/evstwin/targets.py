@@ -34,7 +34,8 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
-from .optics import Optics, _array, _finite, _non_negative, _positive
+from ._checks import array, finite, integer, non_negative, positive
+from .optics import Optics
 from .sky.stars import STAR_FIELD_COUNTS_SLOPE, STAR_FIELD_MAG_MAX, STAR_FIELD_MAG_MIN
 
 if TYPE_CHECKING:
@@ -44,18 +45,18 @@ Outside = Literal["raise", "hold"]
 
 
 def _times(t_s: npt.ArrayLike) -> np.ndarray:
-    return _array("t_s", t_s)
+    return array("t_s", t_s)
 
 
 def _table(name: str, t_name: str, t: np.ndarray, values: npt.ArrayLike) -> np.ndarray:
-    v = _array(name, values)
+    v = array(name, values)
     if v.shape != t.shape:
         raise ValueError(f"{name} must have the shape of {t_name} {t.shape}; got {v.shape}")
     return v
 
 
 def _table_times(name: str, t_s: npt.ArrayLike) -> np.ndarray:
-    t = np.array(_array(name, t_s))  # own copy, made read-only below
+    t = np.array(array(name, t_s))  # own copy, made read-only below
     if t.ndim != 1 or t.size < 1:
         raise ValueError(f"{name} must be a non-empty 1-D array; got shape {t.shape}")
     if t.size > 1:
@@ -67,12 +68,6 @@ def _table_times(name: str, t_s: npt.ArrayLike) -> np.ndarray:
             )
     t.setflags(write=False)
     return t
-
-
-def _check_int(name: str, value: object, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}; got {name}={value!r}")
-    return int(value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +89,7 @@ class LightCurve:
     def __post_init__(self) -> None:
         t = _table_times("t_s", self.t_s)
         flux = np.array(_table("flux_ph_s", "t_s", t, self.flux_ph_s))
-        _array("flux_ph_s", flux, min_value=0.0, strict=self.log_interp)
+        array("flux_ph_s", flux, min_value=0.0, strict=self.log_interp)
         if self.periodic and t.size < 2:
             raise ValueError(f"a periodic light curve needs at least 2 points; got t_s of size {t.size}")
         flux.setflags(write=False)
@@ -130,12 +125,12 @@ Brightness = float | LightCurve
 def _check_brightness(value: object) -> Brightness:
     if isinstance(value, LightCurve):
         return value
-    return _non_negative("brightness", value)
+    return non_negative("brightness", value)
 
 
 def _interval(t0_s: float, t1_s: float) -> tuple[float, float]:
-    t0 = _finite("t0_s", t0_s)
-    t1 = _finite("t1_s", t1_s)
+    t0 = finite("t0_s", t0_s)
+    t1 = finite("t1_s", t1_s)
     if t1 < t0:
         raise ValueError(f"need t0_s <= t1_s; got t0_s={t0_s!r}, t1_s={t1_s!r}")
     return t0, t1
@@ -181,8 +176,8 @@ class StaticTarget(Target):
     label: str = ""
 
     def __post_init__(self) -> None:
-        _finite("x_px", self.x_px)
-        _finite("y_px", self.y_px)
+        finite("x_px", self.x_px)
+        finite("y_px", self.y_px)
         object.__setattr__(self, "brightness", _check_brightness(self.brightness))
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -212,7 +207,7 @@ class LinearTarget(Target):
 
     def __post_init__(self) -> None:
         for name in ("x0_px", "y0_px", "vx_px_s", "vy_px_s", "t0_s"):
-            _finite(name, getattr(self, name))
+            finite(name, getattr(self, name))
         object.__setattr__(self, "brightness", _check_brightness(self.brightness))
 
     @classmethod
@@ -232,8 +227,8 @@ class LinearTarget(Target):
         stretch (1 + tan^2 of the off-axis angle, ~1 % in the corners of a DAVIS346 behind 41 mm)
         is neglected."""
         k = optics.plate_scale_rad_per_px
-        wx = _finite("wx_rad_s", wx_rad_s)
-        wy = _finite("wy_rad_s", wy_rad_s)
+        wx = finite("wx_rad_s", wx_rad_s)
+        wy = finite("wy_rad_s", wy_rad_s)
         return cls(x0_px, y0_px, wx / k, wy / k, brightness, t0_s, label)
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -266,11 +261,11 @@ class CircularTarget(Target):
     label: str = ""
 
     def __post_init__(self) -> None:
-        _finite("centre_x_px", self.centre_x_px)
-        _finite("centre_y_px", self.centre_y_px)
-        _positive("radius_px", self.radius_px)
-        _finite("angular_rate_rad_s", self.angular_rate_rad_s)
-        _finite("phase_rad", self.phase_rad)
+        finite("centre_x_px", self.centre_x_px)
+        finite("centre_y_px", self.centre_y_px)
+        positive("radius_px", self.radius_px)
+        finite("angular_rate_rad_s", self.angular_rate_rad_s)
+        finite("phase_rad", self.phase_rad)
         object.__setattr__(self, "brightness", _check_brightness(self.brightness))
 
     @classmethod
@@ -286,7 +281,7 @@ class CircularTarget(Target):
         label: str = "",
     ) -> CircularTarget:
         """From the period of one turn [s] (> 0); ``reverse=True`` turns the other way."""
-        w = 2.0 * math.pi / _positive("period_s", period_s)
+        w = 2.0 * math.pi / positive("period_s", period_s)
         return cls(centre_x_px, centre_y_px, radius_px, -w if reverse else w, brightness, phase_rad, label)
 
     @property
@@ -322,7 +317,7 @@ def aligned_rotating_targets(
     radii_px: signed distances along the bar [px], non-zero; a negative radius puts the source
     on the other side of the centre (phase + pi). brightness: one for all or one per source.
     """
-    radii = [_finite(f"radii_px[{k}]", r) for k, r in enumerate(radii_px)]
+    radii = [finite(f"radii_px[{k}]", r) for k, r in enumerate(radii_px)]
     if isinstance(brightness, (LightCurve, int, float, np.floating, np.integer)):
         levels: list[Brightness] = [brightness] * len(radii)  # type: ignore[list-item]
     else:
@@ -436,7 +431,7 @@ class DriftingTarget(Target):
     def __post_init__(self) -> None:
         adopt(self, self.target)
         for name in ("vx_px_s", "vy_px_s", "dx_px", "dy_px"):
-            _finite(name, getattr(self, name))
+            finite(name, getattr(self, name))
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         t = _times(t_s)
@@ -477,8 +472,8 @@ def drifting(target: Target, vx_px_s: float, vy_px_s: float) -> Target:
     the velocities summed (exact, and sampled with the other linear targets in one array
     operation); any other a :class:`DriftingTarget`. A zero drift returns ``target`` itself.
     """
-    vx = _finite("vx_px_s", vx_px_s)
-    vy = _finite("vy_px_s", vy_px_s)
+    vx = finite("vx_px_s", vx_px_s)
+    vy = finite("vy_px_s", vy_px_s)
     if vx == 0.0 and vy == 0.0:
         return target
     if isinstance(target, StaticTarget):
@@ -496,7 +491,7 @@ def shifted(target: Target, dx_px: float, dy_px: float) -> Target:
     plus (dx_px, dy_px) [px] (a sensor window's coordinates: dx = -x0, dy = -y0). The same
     kind of target where the shift is a change of its constants, else a :class:`DriftingTarget`
     with that offset."""
-    dx, dy = _finite("dx_px", dx_px), _finite("dy_px", dy_px)
+    dx, dy = finite("dx_px", dx_px), finite("dy_px", dy_px)
     if dx == 0.0 and dy == 0.0:
         return target
     out: Target
@@ -578,12 +573,12 @@ class MirroredTarget(Target):
     def __post_init__(self) -> None:
         if not isinstance(self.source, Target):
             raise TypeError(f"source must be a Target; got {self.source!r}")
-        _finite("centre_x_px", self.centre_x_px)
-        _finite("centre_y_px", self.centre_y_px)
-        m = _finite("magnification", self.magnification)
+        finite("centre_x_px", self.centre_x_px)
+        finite("centre_y_px", self.centre_y_px)
+        m = finite("magnification", self.magnification)
         if not m > 0.0:
             raise ValueError(f"magnification must be > 0; got magnification={self.magnification!r}")
-        f = _finite("flux_fraction", self.flux_fraction)
+        f = finite("flux_fraction", self.flux_fraction)
         if not 0.0 < f <= 1.0:
             raise ValueError(f"flux_fraction must be in (0, 1]; got flux_fraction={self.flux_fraction!r}")
         # Its own brightness, the source's scaled (not a flux_ph_s override): wrappers that
@@ -745,7 +740,7 @@ def drift_px_s_from_arcsec(wx_arcsec_s: float, wy_arcsec_s: float, optics: Optic
     """A field drift across the sky [arcsec/s] in pixels per second through the plate scale
     (``optics.plate_scale_arcsec_per_px``; small-angle, as ``LinearTarget.from_angular_velocity``)."""
     k = optics.plate_scale_arcsec_per_px
-    return _drift("drift_px_s", (_finite("wx_arcsec_s", wx_arcsec_s) / k, _finite("wy_arcsec_s", wy_arcsec_s) / k))
+    return _drift("drift_px_s", (finite("wx_arcsec_s", wx_arcsec_s) / k, finite("wy_arcsec_s", wy_arcsec_s) / k))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -805,16 +800,16 @@ def random_star_field(
     area (drawn last, from their own stream, so the others do not change): the ones a field
     path (a slew of up to margin_px) brings in.
     """
-    width = _check_int("width", width, 1)
-    height = _check_int("height", height, 1)
-    lo = _finite("mag_min", mag_min)
-    hi = _finite("mag_max", mag_max)
+    width = integer("width", width, 1)
+    height = integer("height", height, 1)
+    lo = finite("mag_min", mag_min)
+    hi = finite("mag_max", mag_max)
     if not lo <= hi:
         raise ValueError(f"need mag_min <= mag_max; got mag_min={mag_min!r}, mag_max={mag_max!r}")
-    alpha = _non_negative("counts_slope", counts_slope)
-    seed = _check_int("seed", seed, 0)
+    alpha = non_negative("counts_slope", counts_slope)
+    seed = integer("seed", seed, 0)
     vx, vy = _drift("drift_px_s", drift_px_s)
-    duration = _non_negative("duration_s", duration_s)
+    duration = non_negative("duration_s", duration_s)
     if distribution not in ("uniform", "all-sky"):
         raise ValueError(f"distribution must be 'uniform' or 'all-sky'; got distribution={distribution!r}")
     if distribution == "all-sky":
@@ -843,7 +838,7 @@ def random_star_field(
     swept = "" if area_px2 == width * height else (
         f" and the area drift_px_s={drift_px_s!r} sweeps past it over duration_s={duration_s!r}")
     if n_stars is not None:
-        n = _check_int("n_stars", n_stars, 0)
+        n = integer("n_stars", n_stars, 0)
         per_px2 = n / (width * height)
         mean = per_px2 * area_px2 if n else 0.0
         if n > MAX_STARS:
@@ -853,7 +848,7 @@ def random_star_field(
             raise ValueError(f"n_stars={n:,} on the {width}x{height} sensor{swept} gives {mean:.3g} stars, more than "
                              f"{MAX_STARS:,} ({mean * _STAR_BYTES / 1e9:.3g} GB)")
     else:
-        density = _non_negative("density_per_deg2", density_per_deg2)
+        density = non_negative("density_per_deg2", density_per_deg2)
         px_deg = math.degrees(optics.plate_scale_rad_per_px)
         per_px2 = density * px_deg * px_deg
         on_sensor = density * width * height * px_deg * px_deg  # this order: the same draws as before drifts
@@ -878,7 +873,7 @@ def random_star_field(
         y = np.concatenate([y, ys, (height - 0.5 if dy > 0 else -0.5) + s * dy])
         u = np.concatenate([u, rng.uniform(0.0, 1.0, n_x + n_y)])
         n = x.size
-    margin = _non_negative("margin_px", margin_px)
+    margin = non_negative("margin_px", margin_px)
     if margin > 0.0 and per_px2 > 0.0:
         # The frame: the bounding box of the sensor and its strips, widened by the margin, less
         # the sensor and strips themselves (rejection, at the same density).

@@ -12,7 +12,8 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _core
-from ..optics import Optics, _finite, _non_negative, check_halo_shape
+from .._checks import finite, non_negative
+from ..optics import Optics, check_halo_shape
 from .render import GaussianPSF, PSFShape, _scatter, pixel_fractions
 
 DEFAULT_SUBPIXEL = 8
@@ -287,20 +288,20 @@ def airy_psf(
     (asymptotically 2 / (pi v), v = pi r / (lambda N)) is 1 %, plus 5 sigma of the blur; h in
     [2, 128] px (a 1 % cut for lambda N up to 5.5 px; ``captured_fraction`` says what it keeps).
     """
-    lam = _finite("lambda_n_px", lambda_n_px)
+    lam = finite("lambda_n_px", lambda_n_px)
     if not 0.02 <= lam <= 50.0:
         raise ValueError("airy PSF: mean_wavelength_m x f_number / pixel_pitch_m (lambda N) must be in [0.02, 50] px "
                          f"(under 0.02 px the pattern is far inside a pixel: use psf='gaussian'); got {lam:.4g} px")
-    eps = _finite("obstruction_ratio", obstruction_ratio)
+    eps = finite("obstruction_ratio", obstruction_ratio)
     if not 0.0 <= eps < 1.0:
         raise ValueError(f"obstruction_ratio must be in [0, 1); got obstruction_ratio={obstruction_ratio!r}")
     if isinstance(spider_vanes, bool) or not isinstance(spider_vanes, (int, np.integer)) or not 0 <= spider_vanes <= 64:
         raise ValueError(f"spider_vanes must be an integer in [0, 64]; got spider_vanes={spider_vanes!r}")
-    w = _finite("spider_width_ratio", spider_width_ratio)
+    w = finite("spider_width_ratio", spider_width_ratio)
     if not 0.0 <= w < 0.5:
         raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={spider_width_ratio!r}")
-    angle = _finite("spider_angle_deg", spider_angle_deg)
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    angle = finite("spider_angle_deg", spider_angle_deg)
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
     k = _subpixel(subpixel)
     h = _half_from("airy", half_width_px, _default_half(2.0 * lam / (math.pi**2 * DEFAULT_TAIL_FRACTION), blur))
     m = max(1, math.ceil(4.0 / (k * lam)))  # cells <= lambda N / 4
@@ -370,13 +371,13 @@ def moffat_psf(
     sigma of the blur, h in [2, 128] px (beta = 4.765, FWHM 3 px: h = 7; beta = 2.5, FWHM 3 px:
     h = 14; beta <= 1.5 reaches the 128 px cap and ``captured_fraction`` says what it keeps).
     """
-    f = _finite("moffat_fwhm_px", fwhm_px)
+    f = finite("moffat_fwhm_px", fwhm_px)
     if not 0.05 <= f <= 100.0:
         raise ValueError(f"moffat_fwhm_px must be in [0.05, 100]; got moffat_fwhm_px={fwhm_px!r}")
-    be = _finite("moffat_beta", beta)
+    be = finite("moffat_beta", beta)
     if not 1.0 < be <= 1000.0:
         raise ValueError(f"moffat_beta must be > 1 (a finite flux) and <= 1000; got moffat_beta={beta!r}")
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
     k = _subpixel(subpixel)
     alpha = moffat_alpha_px(f, be)
     with np.errstate(over="ignore"):
@@ -424,19 +425,19 @@ def defocus_psf(
     blur, h in [2, 128] px. ``subpixel`` defaults to 2: a disc pixels wide needs no finer
     phases (its pixel values change by ~(1/k)^2/8 of their curvature, only at the edge).
     """
-    r = _finite("defocus_radius_px", radius_px)
+    r = finite("defocus_radius_px", radius_px)
     if not 0.5 <= r <= 120.0:
         raise ValueError(f"defocus_radius_px must be in [0.5, 120]; got defocus_radius_px={radius_px!r}")
-    eps = _finite("obstruction_ratio", obstruction_ratio)
+    eps = finite("obstruction_ratio", obstruction_ratio)
     if not 0.0 <= eps < 1.0:
         raise ValueError(f"obstruction_ratio must be in [0, 1); got obstruction_ratio={obstruction_ratio!r}")
     if isinstance(spider_vanes, bool) or not isinstance(spider_vanes, (int, np.integer)) or not 0 <= spider_vanes <= 16:
         raise ValueError(f"spider_vanes must be an integer in [0, 16]; got spider_vanes={spider_vanes!r}")
-    width = _finite("spider_width_ratio", spider_width_ratio)
+    width = finite("spider_width_ratio", spider_width_ratio)
     if not 0.0 <= width < 0.5:
         raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={spider_width_ratio!r}")
-    angle = math.radians(_finite("spider_angle_deg", spider_angle_deg))
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    angle = math.radians(finite("spider_angle_deg", spider_angle_deg))
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
     k = _subpixel(subpixel)
     h = _half_from("defocus", half_width_px, _default_half(r, blur))
     # Cells at least 8 across the smaller of the radius and the vanes' shadow (2 r width wide).
@@ -540,10 +541,10 @@ def image_psf(
     ``captured_fraction`` is the share it keeps.
     """
     img = check_psf_image(image)
-    o = _finite("psf_file_oversampling", oversampling)
+    o = finite("psf_file_oversampling", oversampling)
     if not 1e-3 <= o <= 1e3:
         raise ValueError(f"psf_file_oversampling must be in [0.001, 1000]; got psf_file_oversampling={oversampling!r}")
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
     k = _subpixel(subpixel)
     img = img / img.sum()
     extent = max(img.shape) / (2.0 * o)
