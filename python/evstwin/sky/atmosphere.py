@@ -94,7 +94,9 @@ from .._checks import finite, non_negative, positive
 from ..optics import Optics
 from ..psf import KernelPSF, PSFShape, from_optics, moffat_alpha_px, moffat_psf, with_halo
 from ..psf.shapes import DEFAULT_TAIL_FRACTION, _default_half, _grid
-from ..targets import LightCurve, Target, _interval, _times, adopt
+from ..targets import DriftingTarget, LightCurve, MirroredTarget, PathTarget, Target, adopt
+from ..targets.base import _interval, _times
+from .photometry import airmass_kasten_young
 
 KOLMOGOROV_MOFFAT_BETA = 4.765
 """Moffat beta of long-exposure Kolmogorov seeing (Trujillo et al. 2001, MNRAS 328, 977)."""
@@ -506,8 +508,6 @@ class Atmosphere:
 
 def _is_ghost(target: Target) -> bool:
     """Whether a target is a MirroredTarget, bare or under offset/drift wrappers."""
-    from ..targets import DriftingTarget, MirroredTarget, PathTarget
-
     while isinstance(target, (DriftingTarget, PathTarget)):
         target = target.target
     return isinstance(target, MirroredTarget)
@@ -517,8 +517,6 @@ def airmass_from_elevation_deg(elevation_deg: float) -> float:
     """The airmass at an elevation in (0, 90] deg: Kasten & Young (1989), the one formula the
     sky uses for extinction too (``evstwin.sky.photometry.airmass_kasten_young``; 1 at the
     zenith, 37.9 at the horizon)."""
-    from .photometry import airmass_kasten_young
-
     el = finite("elevation_deg", elevation_deg)
     if not 0.0 < el <= 90.0:
         raise ValueError(f"elevation_deg must be in (0, 90] (above the horizon); got elevation_deg={elevation_deg!r}")
