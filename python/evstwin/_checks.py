@@ -67,6 +67,18 @@ def non_negative(name: str, value: Any) -> float:
     return v
 
 
+def in_range(name: str, value: Any, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False,
+             note: str = "") -> float:
+    """A finite number in [lo, hi] (an end left out where ``lo_open`` / ``hi_open``), as a float;
+    the message writes the interval: ``halo_beta must be in (1, 10] (a finite flux); got
+    halo_beta=11``, ``note`` (a unit, a reason) after it."""
+    v = finite(name, value)
+    if not (lo < v if lo_open else lo <= v) or not (v < hi if hi_open else v <= hi):
+        interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        raise ValueError(f"{name} must be in {interval}{' ' + note if note else ''}; got {name}={value!r}")
+    return v
+
+
 def integer(name: str, value: Any, minimum: int | None = None, maximum: int | None = None) -> int:
     """``value`` as an int: an integer (WrongTypeError otherwise: not a bool, not 2.0), in
     [minimum, maximum] where given (ValueError)."""
@@ -99,8 +111,8 @@ def array(name: str, value: npt.ArrayLike, *, min_value: float | None = None, st
     (WrongTypeError)."""
     try:
         raw = np.asarray(value)
-        if raw.dtype.kind == "O":  # Python objects (Fractions, None...): numbers only if they convert
-            raw = raw.astype(np.float64)
+        if raw.dtype.kind == "O":  # Python objects: numbers (Fractions, huge ints) only, not None
+            raw = raw.astype(np.float64) if all(is_real(v) for v in raw.ravel()) else np.asarray(None, dtype=object)
     except (TypeError, ValueError, OverflowError):
         raw = np.asarray(None, dtype=object)
     if raw.dtype.kind not in "iuf":

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ._checks import array, finite, integer, non_negative, positive
+from ._checks import array, finite, in_range, integer, non_negative, positive
 from .constants import ARCSEC_PER_RAD, JANSKY_W_M2_HZ, PLANCK_J_S
 
 V_BAND_ZERO_FLUX_JY = 3640.0
@@ -130,12 +130,8 @@ def check_halo_shape(fwhm_px: float | None, beta: float, half_width_px: int) -> 
     """The ranges of a halo's shape (``Optics.halo_*``; ``psf.halo_psf``): FWHM in [2, 200] px
     (None: not given), beta in (1, 10], an integer half width in [8, MAX_HALO_HALF_PX]."""
     if fwhm_px is not None:
-        w = finite("halo_fwhm_px", fwhm_px)
-        if not 2.0 <= w <= 200.0:
-            raise ValueError(f"halo_fwhm_px must be in [2, 200]; got halo_fwhm_px={fwhm_px!r}")
-    b = finite("halo_beta", beta)
-    if not 1.0 < b <= 10.0:
-        raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={beta!r}")
+        in_range("halo_fwhm_px", fwhm_px, 2.0, 200.0)
+    in_range("halo_beta", beta, 1.0, 10.0, lo_open=True, note="(a finite flux)")
     integer("halo_half_width_px", half_width_px, 8, MAX_HALO_HALF_PX)
 
 
@@ -224,14 +220,8 @@ class Optics:
         positive("pixel_pitch_m", self.pixel_pitch_m)
         positive("mean_wavelength_m", self.mean_wavelength_m)
         non_negative("extra_blur_sigma_px", self.extra_blur_sigma_px)
-        t = finite("transmission", self.transmission)
-        if not 0.0 < t <= 1.0:
-            raise ValueError(f"transmission must be in (0, 1]; got transmission={self.transmission!r}")
-        eps = finite("obstruction_ratio", self.obstruction_ratio)
-        if not 0.0 <= eps < 1.0:
-            raise ValueError(
-                f"obstruction_ratio must be in [0, 1); got obstruction_ratio={self.obstruction_ratio!r}"
-            )
+        in_range("transmission", self.transmission, 0.0, 1.0, lo_open=True)
+        in_range("obstruction_ratio", self.obstruction_ratio, 0.0, 1.0, hi_open=True)
         s = float(self.focus_distance_m)
         if math.isnan(s) or s <= f:
             raise ValueError(
@@ -261,18 +251,14 @@ class Optics:
             if v is None and name == "psf_half_width_px":
                 continue
             integer(name, v, lo, hi)
-        w = finite("spider_width_ratio", self.spider_width_ratio)
-        if not 0.0 <= w < 0.5:
-            raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={self.spider_width_ratio!r}")
+        in_range("spider_width_ratio", self.spider_width_ratio, 0.0, 0.5, hi_open=True)
         finite("spider_angle_deg", self.spider_angle_deg)
         if self.moffat_beta is not None:
             b = finite("moffat_beta", self.moffat_beta)
             if not 1.0 < b <= 1000.0:
                 raise ValueError(f"moffat_beta must be > 1 (a finite flux) and <= 1000; got moffat_beta={self.moffat_beta!r}")
         if self.moffat_fwhm_px is not None:
-            f = finite("moffat_fwhm_px", self.moffat_fwhm_px)
-            if not 0.05 <= f <= 100.0:
-                raise ValueError(f"moffat_fwhm_px must be in [0.05, 100]; got moffat_fwhm_px={self.moffat_fwhm_px!r}")
+            in_range("moffat_fwhm_px", self.moffat_fwhm_px, 0.05, 100.0)
         if self.moffat_fwhm_arcsec is not None:
             positive("moffat_fwhm_arcsec", self.moffat_fwhm_arcsec)
         if self.psf_file is not None and (not isinstance(self.psf_file, str) or not self.psf_file):
@@ -292,9 +278,7 @@ class Optics:
         if self.psf == "moffat" and (self.moffat_fwhm_px is None) == (self.moffat_fwhm_arcsec is None):
             raise ValueError("psf='moffat' needs one of moffat_fwhm_px or moffat_fwhm_arcsec; got "
                              f"moffat_fwhm_px={self.moffat_fwhm_px!r}, moffat_fwhm_arcsec={self.moffat_fwhm_arcsec!r}")
-        hf = finite("halo_fraction", self.halo_fraction)
-        if not 0.0 <= hf < 1.0:
-            raise ValueError(f"halo_fraction must be in [0, 1); got halo_fraction={self.halo_fraction!r}")
+        hf = in_range("halo_fraction", self.halo_fraction, 0.0, 1.0, hi_open=True)
         check_halo_shape(self.halo_fwhm_px, self.halo_beta, self.halo_half_width_px)
         if (hf > 0.0) != (self.halo_fwhm_px is not None):
             raise ValueError("halo_fraction > 0 and halo_fwhm_px go together (a halo needs its width, a width its "

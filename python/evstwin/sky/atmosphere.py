@@ -90,7 +90,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .._checks import finite, non_negative, positive
+from .._checks import finite, in_range, non_negative, positive
 from ..optics import Optics
 from ..psf import KernelPSF, PSFShape, from_optics, moffat_alpha_px, moffat_psf, with_halo
 from ..psf.shapes import DEFAULT_TAIL_FRACTION, _default_half, _grid
@@ -336,12 +336,8 @@ class Scintillation:
     tau_s: float | None = None
 
     def __post_init__(self) -> None:
-        h = finite("site_altitude_m", self.altitude_m)
-        if not -500.0 <= h <= 9000.0:
-            raise ValueError(f"site_altitude_m must be in [-500, 9000] m; got site_altitude_m={self.altitude_m!r}")
-        x = finite("airmass", self.airmass)
-        if not 1.0 <= x <= 40.0:
-            raise ValueError(f"airmass must be in [1, 40] (1 at the zenith); got airmass={self.airmass!r}")
+        in_range("site_altitude_m", self.altitude_m, -500.0, 9000.0, note="m")
+        in_range("airmass", self.airmass, 1.0, 40.0, note="(1 at the zenith)")
         c = positive("scintillation_c_y", self.c_y)
         if c > 100.0:
             raise ValueError(f"scintillation_c_y must be in (0, 100]; got scintillation_c_y={self.c_y!r}")
@@ -517,9 +513,7 @@ def airmass_from_elevation_deg(elevation_deg: float) -> float:
     """The airmass at an elevation in (0, 90] deg: Kasten & Young (1989), the one formula the
     sky uses for extinction too (``evstwin.sky.photometry.airmass_kasten_young``; 1 at the
     zenith, 37.9 at the horizon)."""
-    el = finite("elevation_deg", elevation_deg)
-    if not 0.0 < el <= 90.0:
-        raise ValueError(f"elevation_deg must be in (0, 90] (above the horizon); got elevation_deg={elevation_deg!r}")
+    el = in_range("elevation_deg", elevation_deg, 0.0, 90.0, lo_open=True, note="(above the horizon)")
     return float(airmass_kasten_young(el))
 
 
