@@ -452,3 +452,29 @@ def time_slice(events: np.ndarray, t_start_us: int, t_end_us: int) -> np.ndarray
     events = _check_events(events)
     lo, hi = np.searchsorted(events["t"], [t_start_us, t_end_us], side="left")
     return events[lo:hi]
+
+
+SAME_VALUE_TOLERANCE = 1e-3
+"""Fluxes or speeds within this share of each other are one value in the timing summary and
+figure: a source's speed in pixels changes in its last digits along a track (geo-stare's
+7.8828..7.8830 px/s), and a group or axis tick per digit helps nobody."""
+
+
+def same_value_groups(values: np.ndarray, tolerance: float = SAME_VALUE_TOLERANCE) -> np.ndarray:
+    """A group number per value (0, 1, ... in increasing order of value): sorted values go in
+    one group while each is within ``tolerance`` (relative) of the group's smallest."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return np.zeros(0, np.int64)
+    order = np.argsort(v, kind="stable")
+    s = v[order]
+    group = np.zeros(s.size, np.int64)
+    start, g = s[0], 0
+    for i in range(1, s.size):  # over distinct values in practice: a handful of targets
+        if s[i] - start > tolerance * max(abs(start), abs(s[i])):
+            g += 1
+            start = s[i]
+        group[i] = g
+    out = np.empty_like(group)
+    out[order] = group
+    return out
