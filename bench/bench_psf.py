@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from evstwin import psf
-from evstwin.psf import shapes
+from evstwin.psf import halo
 from evstwin.scenario import build
 
 
@@ -43,7 +43,7 @@ def main() -> None:
     }
     print(f"{'shape':58s} {'h':>4s} {'build s':>8s} {'us per source-sample':>21s}")
     for name, make in cases.items():
-        for cached in (shapes._from_optics, shapes.halo_psf, shapes._composite):
+        for cached in (halo._from_optics, halo.halo_psf, halo._composite):
             cached.cache_clear()  # time each build
         t0 = time.perf_counter()
         shape = make()

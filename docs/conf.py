@@ -63,5 +63,34 @@ def _docstring_as_text(app, what, name, obj, options, lines):  # noqa: ANN001
     lines[:] = [".. code-block:: text", "   :class: evstwin-docstring", ""] + ["   " + line for line in text] + [""]
 
 
+def _package_attr_docs(app) -> None:  # noqa: ANN001
+    """Give each package that re-exports its submodules' constants (``__all__``) their doc
+    comments: autodoc reads a constant's docstring, and decides that it is one to document,
+    from the source of the module it documents, here the package's ``__init__``, where it is
+    not. The submodule's text is added to the package's (cached) analyzer."""
+    import importlib
+    import pkgutil
+
+    from sphinx.errors import PycodeError
+    from sphinx.pycode import ModuleAnalyzer
+
+    for name in ("evstwin.presets", "evstwin.targets", "evstwin.psf", "evstwin.scenario"):
+        package = importlib.import_module(name)
+        analyzer = ModuleAnalyzer.for_module(name)
+        analyzer.analyze()
+        exported = set(getattr(package, "__all__", ()))
+        for info in pkgutil.iter_modules(package.__path__):
+            try:
+                sub = ModuleAnalyzer.for_module(f"{name}.{info.name}")
+                sub.analyze()
+            except PycodeError:  # pragma: no cover - every submodule here is source
+                continue
+            for (namespace, attr), doc in sub.attr_docs.items():
+                if namespace == "" and attr in exported and ("", attr) not in analyzer.attr_docs:
+                    analyzer.attr_docs[("", attr)] = doc
+                    analyzer.tagorder.setdefault(attr, len(analyzer.tagorder))
+
+
 def setup(app):  # noqa: ANN001, ANN201
+    app.connect("builder-inited", _package_attr_docs)
     app.connect("autodoc-process-docstring", _docstring_as_text)

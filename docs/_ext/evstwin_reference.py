@@ -306,6 +306,16 @@ def _target_classes() -> dict[str, Any]:
             "ghost": targets.MirroredTarget}
 
 
+def _package_modules(package: Any) -> list[Any]:
+    """A package and each of its modules (a plain module: itself alone)."""
+    import importlib
+    import pkgutil
+
+    found = [importlib.import_module(f"{package.__name__}.{m.name}")
+             for m in pkgutil.iter_modules(getattr(package, "__path__", []))]
+    return [package, *found]
+
+
 def _all_docstrings(module: Any) -> str:
     """Every docstring of a module (module, classes, functions), as one text."""
     tree = ast.parse(inspect.getsource(module))
@@ -329,7 +339,7 @@ def scenario_keys() -> list[ScenarioKey]:
     optics = {f.name: f for f in dataclass_fields(Optics)}
     readout_doc = " ".join((readout.ReadoutParams.__doc__ or "").split())
     biases = {f.name: f for f in dataclass_fields(BiasSet)}
-    scenario_all = _all_docstrings(scenario)
+    scenario_all = " ".join(_all_docstrings(m) for m in _package_modules(scenario))
     targets_all = _all_docstrings(targets)
     target_fields: dict[str, str] = {}
     for kind, obj in _target_classes().items():
@@ -383,9 +393,9 @@ def scenario_keys() -> list[ScenarioKey]:
                 doc, source, default = describe(top, key)
                 out.append(ScenarioKey(top, key, type_name(t), default, doc, source))
         elif top == "targets":
-            kinds: dict[str, tuple[str, ...]] = dict(scenario._TARGET_KEYS)
+            kinds: dict[str, tuple[str, ...]] = dict(scenario.schema._TARGET_KEYS)
             seen: set[str] = set()
-            common = ("kind", "label", "frame", "halo", *scenario._BRIGHTNESS_KEYS, *scenario._TARGET_PSF_KEYS)
+            common = ("kind", "label", "frame", "halo", *scenario.schema._BRIGHTNESS_KEYS, *scenario.schema._TARGET_PSF_KEYS)
             for key in common + tuple(k for ks in kinds.values() for k in ks):
                 if key in seen:
                     continue

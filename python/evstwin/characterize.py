@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from . import spectra
+from ._checks import integer
 from .presets import SensorPreset, get_preset
 from .sensor import Sensor
 
@@ -251,8 +252,7 @@ def characterize(preset: str | SensorPreset, lux: Sequence[float] = DEFAULT_LUX,
                  progress: Callable[[int, int], None] | None = None) -> CharacterizationResult:
     """Run the bench (module doc) on a preset's pixel; ``progress(done, total)`` after each run."""
     p = get_preset(preset) if isinstance(preset, str) else preset
-    if isinstance(size_px, bool) or not isinstance(size_px, int) or not 4 <= size_px <= MAX_SIZE_PX:
-        raise ValueError(f"size_px must be an integer in [4, {MAX_SIZE_PX}]; got size_px={size_px!r}")
+    integer("size_px", size_px, 4, MAX_SIZE_PX)
     grid = sorted(float(v) for v in lux)
     if not grid or not all(math.isfinite(v) and 1e-6 <= v <= 1e6 for v in grid):
         raise ValueError(f"lux must be illuminances in [1e-6, 1e6]; got {list(lux)!r}")

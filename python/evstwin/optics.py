@@ -38,14 +38,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-PLANCK_J_S = 6.62607015e-34
-"""Planck constant h [J s] (exact, SI 2019)."""
-SPEED_OF_LIGHT_M_S = 299792458.0
-"""Speed of light c [m/s] (exact)."""
-JANSKY_W_M2_HZ = 1e-26
-"""1 Jy in W m^-2 Hz^-1."""
-ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
-"""Arcseconds per radian (206264.806...)."""
+from ._checks import array, finite, in_range, integer, non_negative, positive
+from .constants import ARCSEC_PER_RAD, JANSKY_W_M2_HZ, PLANCK_J_S
 
 V_BAND_ZERO_FLUX_JY = 3640.0
 """Spectral flux density f_nu of a V = 0 star [Jy]. Bessell (1979); 3636 Jy in Bessell,
@@ -89,53 +83,6 @@ _PHYSICAL_RANGES = {
 (the focal length from 10 um to 10 km): within them the plate scale, PSF, fluxes and the sky
 background stay finite (a focal length of 1e-300 m overflowed them; found by fuzzing)."""
 
-# validation helpers (shared by psf, targets, presets)
-
-
-def _finite(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a real number; got {name}={value!r}") from None
-    if isinstance(value, bool) or not math.isfinite(v):
-        raise ValueError(f"{name} must be a finite number; got {name}={value!r}")
-    return v
-
-
-def _positive(name: str, value: Any) -> float:
-    v = _finite(name, value)
-    if v <= 0.0:
-        raise ValueError(f"{name} must be > 0; got {name}={value!r}")
-    return v
-
-
-def _non_negative(name: str, value: Any) -> float:
-    v = _finite(name, value)
-    if v < 0.0:
-        raise ValueError(f"{name} must be >= 0; got {name}={value!r}")
-    return v
-
-
-def _array(
-    name: str, value: ArrayLike, *, min_value: float | None = None, strict: bool = False
-) -> np.ndarray:
-    """float64 array, all finite; optionally all >= min_value (> if strict)."""
-    try:
-        a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a real number or array of them; got {name}={value!r}") from None
-    if not np.all(np.isfinite(a)):
-        bad = a[~np.isfinite(a)].ravel()[0]
-        raise ValueError(f"{name} must be finite; got {name} containing {bad}")
-    if min_value is not None:
-        bad_mask = a <= min_value if strict else a < min_value
-        if np.any(bad_mask):
-            bad = a[bad_mask].ravel()[0]
-            op = ">" if strict else ">="
-            raise ValueError(f"{name} must be {op} {min_value:g}; got {name} containing {bad:g}")
-    return a
-
-
 def _scalar_or_array(a: np.ndarray) -> FloatOrArray:
     return float(a) if a.ndim == 0 else a
 
@@ -151,8 +98,8 @@ def broadband_zero_point_ph_s_m2(lambda_min_m: float, lambda_max_m: float) -> fl
     between the U..K band centres (0.36-2.22 um; Bessell 1979, Campins et al. 1985). A coarse
     estimate for unfiltered sensors: e.g. 0.4-1.0 um gives ~4.4e10, against 8.79e9 in V.
     """
-    lo = _positive("lambda_min_m", lambda_min_m)
-    hi = _positive("lambda_max_m", lambda_max_m)
+    lo = positive("lambda_min_m", lambda_min_m)
+    hi = positive("lambda_max_m", lambda_max_m)
     if not lo < hi:
         raise ValueError(f"need lambda_min_m < lambda_max_m; got {lo:g} and {hi:g}")
     if lo < _A0V_LAMBDA_M[0] or hi > _A0V_LAMBDA_M[-1]:
@@ -183,15 +130,9 @@ def check_halo_shape(fwhm_px: float | None, beta: float, half_width_px: int) -> 
     """The ranges of a halo's shape (``Optics.halo_*``; ``psf.halo_psf``): FWHM in [2, 200] px
     (None: not given), beta in (1, 10], an integer half width in [8, MAX_HALO_HALF_PX]."""
     if fwhm_px is not None:
-        w = _finite("halo_fwhm_px", fwhm_px)
-        if not 2.0 <= w <= 200.0:
-            raise ValueError(f"halo_fwhm_px must be in [2, 200]; got halo_fwhm_px={fwhm_px!r}")
-    b = _finite("halo_beta", beta)
-    if not 1.0 < b <= 10.0:
-        raise ValueError(f"halo_beta must be in (1, 10] (a finite flux); got halo_beta={beta!r}")
-    h = half_width_px
-    if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 8 <= h <= MAX_HALO_HALF_PX:
-        raise ValueError(f"halo_half_width_px must be an integer in [8, {MAX_HALO_HALF_PX}]; got halo_half_width_px={h!r}")
+        in_range("halo_fwhm_px", fwhm_px, 2.0, 200.0)
+    in_range("halo_beta", beta, 1.0, 10.0, lo_open=True, note="(a finite flux)")
+    integer("halo_half_width_px", half_width_px, 8, MAX_HALO_HALF_PX)
 
 
 @dataclass(frozen=True)
@@ -274,34 +215,26 @@ class Optics:
     its square; ``python bench/bench_psf.py``)."""
 
     def __post_init__(self) -> None:
-        f = _positive("focal_length_m", self.focal_length_m)
-        _positive("f_number", self.f_number)
-        _positive("pixel_pitch_m", self.pixel_pitch_m)
-        _positive("mean_wavelength_m", self.mean_wavelength_m)
-        _non_negative("extra_blur_sigma_px", self.extra_blur_sigma_px)
-        t = _finite("transmission", self.transmission)
-        if not 0.0 < t <= 1.0:
-            raise ValueError(f"transmission must be in (0, 1]; got transmission={self.transmission!r}")
-        eps = _finite("obstruction_ratio", self.obstruction_ratio)
-        if not 0.0 <= eps < 1.0:
-            raise ValueError(
-                f"obstruction_ratio must be in [0, 1); got obstruction_ratio={self.obstruction_ratio!r}"
-            )
+        f = positive("focal_length_m", self.focal_length_m)
+        positive("f_number", self.f_number)
+        positive("pixel_pitch_m", self.pixel_pitch_m)
+        positive("mean_wavelength_m", self.mean_wavelength_m)
+        non_negative("extra_blur_sigma_px", self.extra_blur_sigma_px)
+        in_range("transmission", self.transmission, 0.0, 1.0, lo_open=True)
+        in_range("obstruction_ratio", self.obstruction_ratio, 0.0, 1.0, hi_open=True)
         s = float(self.focus_distance_m)
         if math.isnan(s) or s <= f:
             raise ValueError(
                 f"focus_distance_m must exceed focal_length_m={f:g} (or be inf); got focus_distance_m={self.focus_distance_m!r}"
             )
         for name in ("width_px", "height_px"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
-                raise ValueError(f"{name} must be a positive integer; got {name}={v!r}")
-        _positive("zero_point_ph_s_m2", self.zero_point_ph_s_m2)
+            integer(name, getattr(self, name), 1)
+        positive("zero_point_ph_s_m2", self.zero_point_ph_s_m2)
         self._check_psf_fields()
         if self.aperture_diameter_m is None:
             object.__setattr__(self, "aperture_diameter_m", f / float(self.f_number))
         else:
-            _positive("aperture_diameter_m", self.aperture_diameter_m)
+            positive("aperture_diameter_m", self.aperture_diameter_m)
         for name, (lo, hi) in _PHYSICAL_RANGES.items():
             v = float(getattr(self, name))
             if not lo <= v <= hi:
@@ -317,26 +250,21 @@ class Optics:
             v = getattr(self, name)
             if v is None and name == "psf_half_width_px":
                 continue
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
-                raise ValueError(f"{name} must be an integer in [{lo}, {hi}]; got {name}={v!r}")
-        w = _finite("spider_width_ratio", self.spider_width_ratio)
-        if not 0.0 <= w < 0.5:
-            raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={self.spider_width_ratio!r}")
-        _finite("spider_angle_deg", self.spider_angle_deg)
+            integer(name, v, lo, hi)
+        in_range("spider_width_ratio", self.spider_width_ratio, 0.0, 0.5, hi_open=True)
+        finite("spider_angle_deg", self.spider_angle_deg)
         if self.moffat_beta is not None:
-            b = _finite("moffat_beta", self.moffat_beta)
+            b = finite("moffat_beta", self.moffat_beta)
             if not 1.0 < b <= 1000.0:
                 raise ValueError(f"moffat_beta must be > 1 (a finite flux) and <= 1000; got moffat_beta={self.moffat_beta!r}")
         if self.moffat_fwhm_px is not None:
-            f = _finite("moffat_fwhm_px", self.moffat_fwhm_px)
-            if not 0.05 <= f <= 100.0:
-                raise ValueError(f"moffat_fwhm_px must be in [0.05, 100]; got moffat_fwhm_px={self.moffat_fwhm_px!r}")
+            in_range("moffat_fwhm_px", self.moffat_fwhm_px, 0.05, 100.0)
         if self.moffat_fwhm_arcsec is not None:
-            _positive("moffat_fwhm_arcsec", self.moffat_fwhm_arcsec)
+            positive("moffat_fwhm_arcsec", self.moffat_fwhm_arcsec)
         if self.psf_file is not None and (not isinstance(self.psf_file, str) or not self.psf_file):
             raise ValueError(f"psf_file must be a non-empty path string; got psf_file={self.psf_file!r}")
         if self.psf_file_oversampling is not None:
-            o = _finite("psf_file_oversampling", self.psf_file_oversampling)
+            o = finite("psf_file_oversampling", self.psf_file_oversampling)
             if not 1e-3 <= o <= 1e3:
                 raise ValueError("psf_file_oversampling (image pixels per sensor pixel) must be in [0.001, 1000]; "
                                  f"got psf_file_oversampling={self.psf_file_oversampling!r}")
@@ -350,9 +278,7 @@ class Optics:
         if self.psf == "moffat" and (self.moffat_fwhm_px is None) == (self.moffat_fwhm_arcsec is None):
             raise ValueError("psf='moffat' needs one of moffat_fwhm_px or moffat_fwhm_arcsec; got "
                              f"moffat_fwhm_px={self.moffat_fwhm_px!r}, moffat_fwhm_arcsec={self.moffat_fwhm_arcsec!r}")
-        hf = _finite("halo_fraction", self.halo_fraction)
-        if not 0.0 <= hf < 1.0:
-            raise ValueError(f"halo_fraction must be in [0, 1); got halo_fraction={self.halo_fraction!r}")
+        hf = in_range("halo_fraction", self.halo_fraction, 0.0, 1.0, hi_open=True)
         check_halo_shape(self.halo_fwhm_px, self.halo_beta, self.halo_half_width_px)
         if (hf > 0.0) != (self.halo_fwhm_px is not None):
             raise ValueError("halo_fraction > 0 and halo_fwhm_px go together (a halo needs its width, a width its "
@@ -411,9 +337,9 @@ class Optics:
         (``image_distance_m``) and (cx, cy) the sensor centre. z must be > 0 (in front).
         A point at a depth other than ``focus_distance_m`` is blurred: see ``defocus_sigma_px``.
         """
-        x = _array("x_m", x_m)
-        y = _array("y_m", y_m)
-        z = _array("z_m", z_m, min_value=0.0, strict=True)
+        x = array("x_m", x_m)
+        y = array("y_m", y_m)
+        z = array("z_m", z_m, min_value=0.0, strict=True)
         k = self.image_distance_m / self.pixel_pitch_m
         cx, cy = self.principal_point_px
         with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
@@ -423,8 +349,8 @@ class Optics:
 
     def length_to_px(self, length_m: ArrayLike, distance_m: ArrayLike) -> FloatOrArray:
         """Image size [px] of a length [m] seen face-on at a distance [m] (e.g. a radius)."""
-        length = _array("length_m", length_m)
-        d = _array("distance_m", distance_m, min_value=0.0, strict=True)
+        length = array("length_m", length_m)
+        d = array("distance_m", distance_m, min_value=0.0, strict=True)
         with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
             size = length * self.image_distance_m / (d * self.pixel_pitch_m)
         _finite_image("length_m / distance_m", size)
@@ -455,12 +381,6 @@ class Optics:
                              f"{self.plate_scale_arcsec_per_px:.3g} arcsec/px; it must be in [0.05, 100] px")
         return fwhm
 
-    def psf_shape(self) -> Any:
-        """The PSF to render sources with (``evstwin.psf.from_optics``: cached per Optics)."""
-        from . import psf
-
-        return psf.from_optics(self)
-
     def defocus_sigma_px(self, object_distance_m: ArrayLike) -> FloatOrArray:
         """Geometric defocus blur of a point at this distance [m], as a Gaussian sigma [px].
 
@@ -469,7 +389,7 @@ class Optics:
         diameter c has a per-axis sigma of c / 4. Add it in quadrature to the PSF through
         ``extra_blur_sigma_px`` if it matters (0 at the focus distance).
         """
-        d = _array("object_distance_m", object_distance_m)
+        d = array("object_distance_m", object_distance_m)
         f = self.focal_length_m
         if np.any(d <= f):
             raise ValueError(f"object_distance_m must exceed focal_length_m={f:g}; got {object_distance_m!r}")
@@ -496,12 +416,12 @@ class Optics:
         ``zero_point_ph_s_m2 * 10**(-0.4 mag) * collecting_area_m2 * transmission``; no
         atmosphere (space-based, or fold the extinction into ``mag``).
         """
-        m = _array("mag", mag)
+        m = array("mag", mag)
         return _scalar_or_array(self.zero_point_ph_s_m2 * 10.0 ** (-0.4 * m) * self._throughput_m2)
 
     def magnitude_from_flux(self, flux_ph_s: ArrayLike) -> FloatOrArray:
         """The inverse of ``flux_from_magnitude``: magnitude of a source giving this flux [ph/s]."""
-        flux = _array("flux_ph_s", flux_ph_s, min_value=0.0, strict=True)
+        flux = array("flux_ph_s", flux_ph_s, min_value=0.0, strict=True)
         return _scalar_or_array(-2.5 * np.log10(flux / (self.zero_point_ph_s_m2 * self._throughput_m2)))
 
     def flux_from_intensity(self, intensity_ph_s_sr: ArrayLike, distance_m: ArrayLike) -> FloatOrArray:
@@ -510,8 +430,8 @@ class Optics:
         ``I * A / d^2 * transmission``: radiant intensity I [photons/s/sr] times the solid angle
         of the entrance pupil seen from the source (valid for D << d: 22.8 mm at 63 cm).
         """
-        i = _array("intensity_ph_s_sr", intensity_ph_s_sr, min_value=0.0)
-        d = _array("distance_m", distance_m, min_value=0.0, strict=True)
+        i = array("intensity_ph_s_sr", intensity_ph_s_sr, min_value=0.0)
+        d = array("distance_m", distance_m, min_value=0.0, strict=True)
         return _scalar_or_array(i * self._throughput_m2 / (d * d))
 
     def background_ph_s_per_px(
@@ -523,7 +443,7 @@ class Optics:
         Default 21.9 mag/arcsec^2, a dark site in V (Benn & Ellison 1998). For a lab or a
         measured background give the photons/s per pixel directly to the renderer instead.
         """
-        mu = _array("sky_mag_per_arcsec2", sky_mag_per_arcsec2)
+        mu = array("sky_mag_per_arcsec2", sky_mag_per_arcsec2)
         pixel_arcsec2 = self.plate_scale_arcsec_per_px**2
         return _scalar_or_array(
             self.zero_point_ph_s_m2 * 10.0 ** (-0.4 * mu) * pixel_arcsec2 * self._throughput_m2

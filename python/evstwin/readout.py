@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from .optics import _finite
+from ._checks import finite, integer
 
 TIME_UNIT_S: float = float(_core.Readout.TIME_UNIT_S)
 """The model's clock (10 ps): times, services and delays are whole multiples of it."""
@@ -51,16 +51,14 @@ MAX_FIFO_DEPTH = 2**63 - 1
 
 
 def _rate(value: Any) -> float:
-    v = _finite("max_rate_hz", value)
+    v = finite("max_rate_hz", value)
     if not 0.0 < v <= MAX_RATE_HZ:
         raise ValueError(f"max_rate_hz must be > 0 and <= {MAX_RATE_HZ:g} Hz; got max_rate_hz={value!r}")
     return v
 
 
 def _depth(value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"fifo_depth must be an integer number of events; got fifo_depth={value!r}")
-    v = int(value)
+    v = integer("fifo_depth", value)
     if not 1 <= v <= MAX_FIFO_DEPTH:
         raise ValueError(f"fifo_depth must be an integer >= 1 (events); got fifo_depth={value!r}")
     return v
@@ -75,7 +73,7 @@ def _queue(depth: int, rate_hz: float) -> None:
 
 
 def _tick(value: Any) -> float:
-    v = _finite("tick_s", value)
+    v = finite("tick_s", value)
     if not MIN_TICK_S <= v <= MAX_TICK_S:
         raise ValueError(f"tick_s must be in [{MIN_TICK_S:g}, {MAX_TICK_S:g}] s (> 0); got tick_s={value!r}")
     return v

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import numbers
-import operator
 from collections.abc import Iterator, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
 from . import _core
+from ._checks import integer
 from .pixel import HotPixelChain, PixelParams
 
 EVENT_DTYPE: np.dtype = _core.EVENT_DTYPE
@@ -93,18 +93,18 @@ class Sensor:
         params = PixelParams() if params is None else params
         if not isinstance(params, PixelParams):
             raise TypeError(f"params must be an evstwin.PixelParams; got {type(params).__name__}")
-        width = _in_range("width", _as_int("width", width), 1, 65535)
-        height = _in_range("height", _as_int("height", height), 1, 65535)
+        width = _in_range("width", integer("width", width), 1, 65535)
+        height = _in_range("height", integer("height", height), 1, 65535)
         if width * height > MAX_PIXELS:
             raise ValueError(
                 f"width * height must be at most {MAX_PIXELS} pixels (8192 x 8192); got width={width}, "
                 f"height={height}: {width * height} pixels, {width * height * STATE_BYTES_PER_PIXEL / 1e9:.3g} GB of pixel state"
             )
-        seed = _as_int("seed", seed)
+        seed = integer("seed", seed)
         if not 0 <= seed < 2**64:
             raise ValueError(f"seed must be in [0, 2**64); got seed={seed}")
         if num_threads is not None:
-            num_threads = _in_range("num_threads", _as_int("num_threads", num_threads), 1, MAX_THREADS, "or None")
+            num_threads = _in_range("num_threads", integer("num_threads", num_threads), 1, MAX_THREADS, "or None")
         self.params = params
         self._core = _core.Sensor(width, height, params.to_core(), seed, num_threads)
         if max_events is not None:
@@ -219,7 +219,7 @@ class Sensor:
         index = []
         for j, xy in enumerate(pixels):
             try:
-                x, y = (_as_int("pixels", v) for v in xy)
+                x, y = (integer("pixels", v) for v in xy)
             except (TypeError, ValueError):
                 raise TypeError(f"pixels must be (x, y) pairs of integers; got pixels[{j}]={xy!r}") from None
             if not (0 <= x < self.width and 0 <= y < self.height):
@@ -269,15 +269,6 @@ class Sensor:
         return f"Sensor({self.width}x{self.height}, seed={self.seed}, samples_seen={self.samples_seen})"
 
 
-def _as_int(name: str, value: object) -> int:
-    if isinstance(value, bool):
-        raise TypeError(f"{name} must be an integer; got {name}={value!r}")
-    try:
-        return operator.index(value)  # type: ignore[arg-type]
-    except TypeError:
-        raise TypeError(f"{name} must be an integer; got {name}={value!r}") from None
-
-
 def _in_range(name: str, value: int, lo: int, hi: int, extra: str = "") -> int:
     if not lo <= value <= hi:
         raise ValueError(f"{name} must be in [{lo}, {hi}]{' (' + extra + ')' if extra else ''}; got {name}={value}")
@@ -285,7 +276,7 @@ def _in_range(name: str, value: int, lo: int, hi: int, extra: str = "") -> int:
 
 
 def _max_events(value: object) -> int:
-    return _in_range("max_events", _as_int("max_events", value), 1, MAX_MAX_EVENTS)
+    return _in_range("max_events", integer("max_events", value), 1, MAX_MAX_EVENTS)
 
 
 def _as_array(value: npt.ArrayLike, name: str = "photon_rate") -> np.ndarray:

@@ -33,10 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .optics import _A0V_FNU_JY, _A0V_LAMBDA_M, JANSKY_W_M2_HZ, PLANCK_J_S, SPEED_OF_LIGHT_M_S
+from .constants import BOLTZMANN_J_K, JANSKY_W_M2_HZ, PLANCK_J_S, SPEED_OF_LIGHT_M_S
+from .optics import _A0V_FNU_JY, _A0V_LAMBDA_M
 
-BOLTZMANN_J_K = 1.380649e-23
-"""Boltzmann constant k_B [J/K] (exact, SI 2019)."""
 GRID_M = np.arange(300.0, 1100.0 + 0.25, 0.5) * 1e-9
 """Wavelength grid of every integral [m]: 300-1100 nm every 0.5 nm."""
 AB_ZERO_FNU_JY = 3631.0

@@ -44,7 +44,7 @@ def test_the_walk_reaches_every_scenario_key() -> None:
         if isinstance(spec, dict):
             expected |= {f"{top}.{k}" for k in spec}
         elif top == "targets":
-            expected |= {f"targets.{k}" for ks in scenario._TARGET_KEYS.values() for k in ks}
+            expected |= {f"targets.{k}" for ks in scenario.schema._TARGET_KEYS.values() for k in ks}
         else:
             expected.add(top)
     walked = {k.path for k in ref.scenario_keys()}

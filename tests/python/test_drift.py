@@ -10,7 +10,8 @@ import pytest
 
 from evstwin.optics import Optics
 from evstwin.presets import get_preset
-from evstwin.scenario import ScenarioError, _most_windows_at_once, build
+from evstwin.scenario import ScenarioError, build
+from evstwin.scenario.limits import _most_windows_at_once
 from evstwin.simulate import simulate, track_names
 from evstwin.targets import (
     CircularTarget,

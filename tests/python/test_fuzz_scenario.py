@@ -16,7 +16,8 @@ from hypothesis import event, given
 from hypothesis import strategies as st
 from test_fuzz_engine import FUZZ, tick
 
-from evstwin.scenario import _TARGET_KEYS, SCHEMA, ScenarioError, build, load, parse_assignment, set_value
+from evstwin.scenario import SCHEMA, ScenarioError, build, load, parse_assignment, set_value
+from evstwin.scenario.schema import _TARGET_KEYS
 from evstwin.simulate import simulate
 
 BASES = ("geo-stare", "mcreynolds")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -18,13 +18,56 @@ if TYPE_CHECKING:  # pragma: no cover
 else:
     to_rgb = require("matplotlib.colors").to_rgb
     Figure = require("matplotlib.figure").Figure
-if TYPE_CHECKING:  # pragma: no cover
-    from ..validation import Comparison, MonteCarloSummary
 from .recording import plot_count_histograms
 from .style import DPI, KIND_COLOURS, KIND_LABELS, PathLike, _unit, save
 
 
-def plot_comparison_histograms(comp: Comparison, path: PathLike, dpi: int = DPI, **kw: Any) -> Path:
+# What these plots read of evstwin.validation's results, as protocols: plotting does not import
+# the validation package (whose report imports plotting), it takes anything of this shape.
+class SimComparisonLike(Protocol):
+    """What the plots read of a :class:`~evstwin.validation.SimComparison`."""
+
+    @property
+    def label(self) -> str: ...
+    @property
+    def hist(self) -> Mapping[str, np.ndarray]: ...
+    @property
+    def percent_error(self) -> Mapping[str, np.ndarray]: ...
+    @property
+    def error_pixels(self) -> Mapping[str, np.ndarray]: ...
+    @property
+    def max_bin_error_share(self) -> float: ...
+
+
+class ComparisonLike(Protocol):
+    """What the plots read of a :class:`~evstwin.validation.Comparison`."""
+
+    @property
+    def real_label(self) -> str: ...
+    @property
+    def real_hist(self) -> Mapping[str, np.ndarray]: ...
+    @property
+    def sims(self) -> Sequence[SimComparisonLike]: ...
+    @property
+    def edges(self) -> Mapping[str, np.ndarray]: ...
+    @property
+    def value_unit(self) -> str: ...
+    @property
+    def pixel_count(self) -> int: ...
+
+
+class MonteCarloLike(Protocol):
+    """What the plots read of a :class:`~evstwin.validation.MonteCarloSummary`."""
+
+    @property
+    def runs(self) -> int: ...
+    @property
+    def mean(self) -> Mapping[str, Any]: ...
+    @property
+    def std(self) -> Mapping[str, Any]: ...
+
+
+def plot_comparison_histograms(comp: ComparisonLike, path: PathLike, dpi: int = DPI, **kw: Any) -> Path:
     """Fig. 7 of a :class:`~evstwin.validation.Comparison`: real, then each simulation."""
     hists = [(comp.real_label + " (real)", comp.real_hist)] + [(s.label, s.hist) for s in comp.sims]
     return plot_count_histograms(comp.edges, hists, path, dpi, value_unit=comp.value_unit, **kw)
@@ -174,7 +217,7 @@ def _mask_empty(values: Any, real: Any, sim: Any) -> np.ndarray:
     return v
 
 
-def plot_comparison_percent_error(comp: Comparison, path: PathLike, dpi: int = DPI, **kw: Any) -> Path:
+def plot_comparison_percent_error(comp: ComparisonLike, path: PathLike, dpi: int = DPI, **kw: Any) -> Path:
     """Fig. 8 of a :class:`~evstwin.validation.Comparison`; bins empty in both recordings
     (percent error 0 by definition) are drawn as gaps, not as points on the zero line."""
     sims = [
@@ -184,7 +227,7 @@ def plot_comparison_percent_error(comp: Comparison, path: PathLike, dpi: int = D
     return plot_percent_error(comp.edges, sims, path, dpi, value_unit=comp.value_unit, **kw)
 
 
-def plot_comparison_bin_error(comp: Comparison, path: PathLike, dpi: int = DPI, **kw: Any) -> Path:
+def plot_comparison_bin_error(comp: ComparisonLike, path: PathLike, dpi: int = DPI, **kw: Any) -> Path:
     """Fig. 9 of a :class:`~evstwin.validation.Comparison`."""
     sims = [(s.label, s.error_pixels) for s in comp.sims]
     kw.setdefault("worst", [s.max_bin_error_share for s in comp.sims])
@@ -195,7 +238,7 @@ def _nan_list(v: Sequence[float | None]) -> np.ndarray:
     return np.array([np.nan if x is None else x for x in v], dtype=np.float64)
 
 
-def plot_monte_carlo(summary: MonteCarloSummary, out_dir: PathLike, dpi: int = DPI) -> dict[str, Path]:
+def plot_monte_carlo(summary: MonteCarloLike, out_dir: PathLike, dpi: int = DPI) -> dict[str, Path]:
     """Figs. 8 and 9 of a Monte Carlo summary (mean over runs, +-1 std band):
     ``out_dir/percent_error_mc.png`` and ``out_dir/bin_error_mc.png``."""
     out = Path(out_dir)

@@ -18,7 +18,7 @@ else:
     Figure = require("matplotlib.figure").Figure
 if TYPE_CHECKING:  # pragma: no cover
     pass
-from ..validation.timing import SAME_VALUE_TOLERANCE, same_value_groups
+from ..analysis import SAME_VALUE_TOLERANCE, same_value_groups
 from .style import DPI, MAX_SCATTER_POINTS, OFF_COLOUR, ON_COLOUR, PathLike, save, subsample
 
 

@@ -42,6 +42,20 @@ scattered light to any shape (``CompositePSF``: the two rendered apart and summe
 from __future__ import annotations
 
 from ..optics import MAX_HALO_HALF_PX
+from .halo import (
+    HALO_SUBPIXEL,
+    CompositePSF,
+    from_optics,
+    halo_psf,
+    sharp_part,
+    smooth_part,
+    with_halo,
+)
+from .measured import (
+    check_psf_image,
+    image_psf,
+    load_psf_image,
+)
 from .render import (
     MAX_WINDOW_HALF_PX,
     GaussianPSF,
@@ -58,27 +72,17 @@ from .shapes import (
     DEFAULT_MAX_HALF_PX,
     DEFAULT_SUBPIXEL,
     DEFAULT_TAIL_FRACTION,
-    HALO_SUBPIXEL,
     MAX_KERNEL_HALF_PX,
     MOFFAT_DEFAULT_BETA,
-    CompositePSF,
     KernelPSF,
     airy_psf,
-    check_psf_image,
     defocus_psf,
-    from_optics,
-    halo_psf,
-    image_psf,
-    load_psf_image,
     moffat_alpha_px,
     moffat_enclosed_energy,
     moffat_psf,
     pupil,
-    sharp_part,
-    smooth_part,
     taper,
     taper_width_px,
-    with_halo,
 )
 
 __all__ = [

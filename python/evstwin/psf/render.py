@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.special import erfc
 
-from ..optics import _array, _positive
+from .._checks import array, positive, size
 
 _SQRT2 = math.sqrt(2.0)
 _CHUNK_ELEMENTS = 1 << 21
@@ -38,8 +38,8 @@ the sensor). A wider PSF is refused with a ValueError instead of exhausting memo
 
 def window_half_width_px(sigma_px: float, window_sigmas: float = 5.0) -> int:
     """Half width h [px] of the square window (2 h + 1 pixels a side) rendered per source."""
-    s = _positive("sigma_px", sigma_px)
-    w = _positive("window_sigmas", window_sigmas)
+    s = positive("sigma_px", sigma_px)
+    w = positive("window_sigmas", window_sigmas)
     half = w * s
     if not half <= MAX_WINDOW_HALF_PX:
         raise ValueError(f"window_sigmas x sigma_px must be at most {MAX_WINDOW_HALF_PX} px (a {2 * MAX_WINDOW_HALF_PX + 1}"
@@ -185,7 +185,7 @@ def contributions(
                              f"window (GaussianPSF(sigma_px, window_sigmas, normalize)); got {psf!r}")
         return psf.contributions(width, height, x, y, flux, offset)
     if sigma is None:
-        sigma = np.ascontiguousarray(np.broadcast_to(_array("sigma_px", psf, min_value=0.0, strict=True), x.shape))
+        sigma = np.ascontiguousarray(np.broadcast_to(array("sigma_px", psf, min_value=0.0, strict=True), x.shape))
     half = window_half_width_px(float(sigma.max()) if sigma.size else 1.0, window_sigmas)
     return _window_contributions(width, height, x, y, flux, sigma, half, normalize, offset)
 
@@ -203,13 +203,6 @@ def _accumulate(flat: np.ndarray, idx: np.ndarray, w: np.ndarray) -> None:
         np.add.at(flat, idx, w.astype(flat.dtype, copy=False))
 
 
-def _check_size(width: int, height: int) -> tuple[int, int]:
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
-            raise ValueError(f"{name} must be a positive integer; got {name}={v!r}")
-    return int(width), int(height)
-
-
 def _sources(
     x_px: npt.ArrayLike,
     y_px: npt.ArrayLike,
@@ -217,10 +210,10 @@ def _sources(
     sigma_px: npt.ArrayLike | PSFShape,
     shape: tuple[int, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    x = _array("x_px", x_px)
-    y = _array("y_px", y_px)
-    flux = _array("flux_ph_s", flux_ph_s, min_value=0.0)
-    sigma = np.ones(()) if isinstance(sigma_px, PSFShape) else _array("sigma_px", sigma_px, min_value=0.0, strict=True)
+    x = array("x_px", x_px)
+    y = array("y_px", y_px)
+    flux = array("flux_ph_s", flux_ph_s, min_value=0.0)
+    sigma = np.ones(()) if isinstance(sigma_px, PSFShape) else array("sigma_px", sigma_px, min_value=0.0, strict=True)
     try:
         if shape is None:
             shape = np.broadcast_shapes(x.shape, y.shape, flux.shape, sigma.shape)
@@ -248,7 +241,7 @@ def render_points(
 
     x_px, y_px: source centres [px] (pixel-centre convention of this module); flux_ph_s:
     photons/s of each source at the focal plane, >= 0; sigma_px: PSF sigma [px], > 0 (e.g.
-    ``Optics.psf_sigma_px``), or a ``PSFShape`` (``Optics.psf_shape()``; then window_sigmas
+    ``Optics.psf_sigma_px``), or a ``PSFShape`` (``psf.from_optics(optics)``; then window_sigmas
     and normalize stay at their defaults: the shape has its own window). All four broadcast
     together (scalars = one source).
     out: optional C-contiguous float64/float32 (height, width) array the sources are *added*
@@ -257,7 +250,7 @@ def render_points(
     Cost grows with the number of sources and their window, not with the sensor size (except
     allocating ``out``).
     """
-    width, height = _check_size(width, height)
+    width, height = size(width, height)
     x, y, flux, sigma = _sources(x_px, y_px, flux_ph_s, sigma_px)
     parts = contributions(width, height, x, y, flux, sigma_px, sigma, window_sigmas, normalize)
     if out is None:
@@ -287,7 +280,7 @@ def render_window(
     a narrow PSF's tail), and their photons/s. An isolated source well inside the sensor
     touches exactly (2 h + 1)^2 pixels (``window_half_width_px``), whatever the sensor size.
     """
-    width, height = _check_size(width, height)
+    width, height = size(width, height)
     x, y, flux, sigma = _sources(x_px, y_px, flux_ph_s, sigma_px)
     parts = contributions(width, height, x, y, flux, sigma_px, sigma, window_sigmas, normalize)
     if not parts:
@@ -326,7 +319,7 @@ def render_frames(
     seen by a tracking mount) are cheaper rendered once with ``render_points`` and passed as
     ``background_ph_s``.
     """
-    width, height = _check_size(width, height)
+    width, height = size(width, height)
     xa = np.asarray(x_px)
     if xa.ndim != 2 or np.shape(y_px) != xa.shape:
         raise ValueError(
@@ -334,7 +327,7 @@ def render_frames(
         )
     n_t, n_s = xa.shape
     x, y, flux, sigma = _sources(x_px, y_px, flux_ph_s, sigma_px, shape=(n_t, n_s))
-    bg = _array("background_ph_s", background_ph_s, min_value=0.0)
+    bg = array("background_ph_s", background_ph_s, min_value=0.0)
     shape = (n_t, height, width)
     try:
         bg = np.broadcast_to(bg, shape)
@@ -410,7 +403,7 @@ class GaussianPSF(PSFShape):
     normalize: bool = True
 
     def __post_init__(self) -> None:
-        _positive("sigma_px", self.sigma_px)
+        positive("sigma_px", self.sigma_px)
         object.__setattr__(self, "half_width_px", window_half_width_px(self.sigma_px, self.window_sigmas))
 
     def contributions(

@@ -1,19 +1,19 @@
-"""PSF shapes beyond the Gaussian: ``KernelPSF`` tabulated at sub-pixel phases from ``airy_psf``,
-``moffat_psf`` or ``image_psf``, and ``from_optics`` (the package docstring, ``evstwin.psf``)."""
+"""PSF shapes beyond the Gaussian: ``KernelPSF`` tabulated at sub-pixel phases from ``airy_psf``
+(diffraction), ``moffat_psf`` (seeing) or ``defocus_psf`` (an out-of-focus pupil); measured
+images are :mod:`evstwin.psf.measured`, the halo and ``from_optics`` :mod:`evstwin.psf.halo`
+(the package docstring, ``evstwin.psf``)."""
 
 from __future__ import annotations
 
-import functools
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from .. import _core
-from ..optics import Optics, _finite, _non_negative, check_halo_shape
-from .render import GaussianPSF, PSFShape, _scatter, pixel_fractions
+from .._checks import finite, in_range, integer, non_negative
+from .render import PSFShape, _scatter, pixel_fractions
 
 DEFAULT_SUBPIXEL = 8
 """Sub-pixel phases per pixel (and axis) of a tabulated PSF (``Optics.psf_subpixel``)."""
@@ -224,17 +224,11 @@ def _blur(mass: np.ndarray, sigma_px: float, cell_px: float) -> np.ndarray:
 def _half_from(kind: str, half_width_px: int | None, default: int) -> int:
     if half_width_px is None:
         return default
-    if isinstance(half_width_px, bool) or not isinstance(half_width_px, (int, np.integer)) \
-            or not 1 <= half_width_px <= MAX_KERNEL_HALF_PX:
-        raise ValueError(f"psf_half_width_px must be an integer in [1, {MAX_KERNEL_HALF_PX}]; "
-                         f"got psf_half_width_px={half_width_px!r}")
-    return int(half_width_px)
+    return integer("psf_half_width_px", half_width_px, 1, MAX_KERNEL_HALF_PX)
 
 
 def _subpixel(value: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 32:
-        raise ValueError(f"psf_subpixel must be an integer in [1, 32]; got psf_subpixel={value!r}")
-    return int(value)
+    return integer("psf_subpixel", value, 1, 32)
 
 
 # -- diffraction -------------------------------------------------------------------------------
@@ -287,20 +281,15 @@ def airy_psf(
     (asymptotically 2 / (pi v), v = pi r / (lambda N)) is 1 %, plus 5 sigma of the blur; h in
     [2, 128] px (a 1 % cut for lambda N up to 5.5 px; ``captured_fraction`` says what it keeps).
     """
-    lam = _finite("lambda_n_px", lambda_n_px)
+    lam = finite("lambda_n_px", lambda_n_px)
     if not 0.02 <= lam <= 50.0:
         raise ValueError("airy PSF: mean_wavelength_m x f_number / pixel_pitch_m (lambda N) must be in [0.02, 50] px "
                          f"(under 0.02 px the pattern is far inside a pixel: use psf='gaussian'); got {lam:.4g} px")
-    eps = _finite("obstruction_ratio", obstruction_ratio)
-    if not 0.0 <= eps < 1.0:
-        raise ValueError(f"obstruction_ratio must be in [0, 1); got obstruction_ratio={obstruction_ratio!r}")
-    if isinstance(spider_vanes, bool) or not isinstance(spider_vanes, (int, np.integer)) or not 0 <= spider_vanes <= 64:
-        raise ValueError(f"spider_vanes must be an integer in [0, 64]; got spider_vanes={spider_vanes!r}")
-    w = _finite("spider_width_ratio", spider_width_ratio)
-    if not 0.0 <= w < 0.5:
-        raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={spider_width_ratio!r}")
-    angle = _finite("spider_angle_deg", spider_angle_deg)
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    eps = in_range("obstruction_ratio", obstruction_ratio, 0.0, 1.0, hi_open=True)
+    integer("spider_vanes", spider_vanes, 0, 64)
+    w = in_range("spider_width_ratio", spider_width_ratio, 0.0, 0.5, hi_open=True)
+    angle = finite("spider_angle_deg", spider_angle_deg)
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
     k = _subpixel(subpixel)
     h = _half_from("airy", half_width_px, _default_half(2.0 * lam / (math.pi**2 * DEFAULT_TAIL_FRACTION), blur))
     m = max(1, math.ceil(4.0 / (k * lam)))  # cells <= lambda N / 4
@@ -370,13 +359,11 @@ def moffat_psf(
     sigma of the blur, h in [2, 128] px (beta = 4.765, FWHM 3 px: h = 7; beta = 2.5, FWHM 3 px:
     h = 14; beta <= 1.5 reaches the 128 px cap and ``captured_fraction`` says what it keeps).
     """
-    f = _finite("moffat_fwhm_px", fwhm_px)
-    if not 0.05 <= f <= 100.0:
-        raise ValueError(f"moffat_fwhm_px must be in [0.05, 100]; got moffat_fwhm_px={fwhm_px!r}")
-    be = _finite("moffat_beta", beta)
+    f = in_range("moffat_fwhm_px", fwhm_px, 0.05, 100.0)
+    be = finite("moffat_beta", beta)
     if not 1.0 < be <= 1000.0:
         raise ValueError(f"moffat_beta must be > 1 (a finite flux) and <= 1000; got moffat_beta={beta!r}")
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
     k = _subpixel(subpixel)
     alpha = moffat_alpha_px(f, be)
     with np.errstate(over="ignore"):
@@ -424,19 +411,12 @@ def defocus_psf(
     blur, h in [2, 128] px. ``subpixel`` defaults to 2: a disc pixels wide needs no finer
     phases (its pixel values change by ~(1/k)^2/8 of their curvature, only at the edge).
     """
-    r = _finite("defocus_radius_px", radius_px)
-    if not 0.5 <= r <= 120.0:
-        raise ValueError(f"defocus_radius_px must be in [0.5, 120]; got defocus_radius_px={radius_px!r}")
-    eps = _finite("obstruction_ratio", obstruction_ratio)
-    if not 0.0 <= eps < 1.0:
-        raise ValueError(f"obstruction_ratio must be in [0, 1); got obstruction_ratio={obstruction_ratio!r}")
-    if isinstance(spider_vanes, bool) or not isinstance(spider_vanes, (int, np.integer)) or not 0 <= spider_vanes <= 16:
-        raise ValueError(f"spider_vanes must be an integer in [0, 16]; got spider_vanes={spider_vanes!r}")
-    width = _finite("spider_width_ratio", spider_width_ratio)
-    if not 0.0 <= width < 0.5:
-        raise ValueError(f"spider_width_ratio must be in [0, 0.5); got spider_width_ratio={spider_width_ratio!r}")
-    angle = math.radians(_finite("spider_angle_deg", spider_angle_deg))
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    r = in_range("defocus_radius_px", radius_px, 0.5, 120.0)
+    eps = in_range("obstruction_ratio", obstruction_ratio, 0.0, 1.0, hi_open=True)
+    integer("spider_vanes", spider_vanes, 0, 16)
+    width = in_range("spider_width_ratio", spider_width_ratio, 0.0, 0.5, hi_open=True)
+    angle = math.radians(finite("spider_angle_deg", spider_angle_deg))
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
     k = _subpixel(subpixel)
     h = _half_from("defocus", half_width_px, _default_half(r, blur))
     # Cells at least 8 across the smaller of the radius and the vanes' shadow (2 r width wide).
@@ -464,257 +444,3 @@ def defocus_psf(
     params = {"radius_px": r, "obstruction_ratio": eps, "spider_vanes": int(spider_vanes),
               "spider_width_ratio": width, "extra_blur_sigma_px": blur}
     return KernelPSF(mass, k, m, h, "defocus", params)
-
-
-# -- measured -----------------------------------------------------------------------------------
-
-
-def load_psf_image(path: str | Path) -> np.ndarray:
-    """A PSF image from a ``.npy`` file, or a FITS file (``.fits``, ``.fit``, ``.fts``; needs
-    astropy), checked: 2-D, finite, >= 0, with a positive sum. Not normalised."""
-    p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"psf_file={str(path)!r} does not exist or is not a file")
-    suffix = p.suffix.lower()
-    if suffix == ".npy":
-        try:
-            data = np.load(p, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"psf_file={str(path)!r} is not a readable .npy array ({exc})") from None
-    elif suffix in (".fits", ".fit", ".fts"):
-        try:
-            from astropy.io import fits
-        except ImportError:
-            raise ValueError(f"psf_file={str(path)!r}: reading FITS needs astropy: pip install 'evstwin[fits]'") from None
-        try:
-            data = fits.getdata(p)
-        except (OSError, ValueError, TypeError) as exc:
-            raise ValueError(f"psf_file={str(path)!r} is not a readable FITS image ({exc})") from None
-    else:
-        raise ValueError(f"psf_file must be a .npy or .fits file; got psf_file={str(path)!r}")
-    return check_psf_image(data, f"psf_file={str(path)!r}")
-
-
-def check_psf_image(image: npt.ArrayLike, name: str = "psf image") -> np.ndarray:
-    """The image as float64 if it is a usable PSF (2-D, finite, >= 0, positive sum)."""
-    try:
-        a = np.asarray(image, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 2-D array of real numbers") from None
-    if a.ndim != 2 or a.shape[0] < 1 or a.shape[1] < 1:
-        raise ValueError(f"{name} must be a 2-D image; got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} has {int(np.count_nonzero(~np.isfinite(a)))} NaN or infinite values")
-    if np.any(a < 0.0):
-        raise ValueError(f"{name} has negative values (the least is {float(a.min()):g})")
-    if not a.sum() > 0.0:
-        raise ValueError(f"{name} sums to 0: no flux")
-    return a
-
-
-def _overlap(n_cells: int, cell_px: float, n_img: int, img_px: float) -> np.ndarray:
-    """(n_cells, n_img): share of each image pixel inside each cell, both grids centred on 0."""
-    ce = (np.arange(n_cells + 1, dtype=np.float64) - 0.5 * n_cells) * cell_px
-    ie = (np.arange(n_img + 1, dtype=np.float64) - 0.5 * n_img) * img_px
-    lo = np.maximum(ce[:-1, None], ie[None, :-1])
-    hi = np.minimum(ce[1:, None], ie[None, 1:])
-    return np.clip(hi - lo, 0.0, None) / img_px
-
-
-def image_psf(
-    image: npt.ArrayLike,
-    oversampling: float,
-    extra_blur_sigma_px: float = 0.0,
-    subpixel: int = DEFAULT_SUBPIXEL,
-    half_width_px: int | None = None,
-) -> KernelPSF:
-    """A PSF given as an image with ``oversampling`` image pixels per sensor pixel per axis.
-
-    The image is normalised to unit sum; its centre (the middle of the array, between two
-    pixels for an even size) is the source position. Each image pixel is taken as uniform over
-    its area and shared among the 1 / k px cells by area (exact flux; where a sensor pixel's
-    edge cuts an image pixel of width d, each side gets its share of the area, which misplaces
-    d^2 / 8 |dI/dx| per unit of edge: 0.7 % of the peak per axis for a sigma = 1 px Gaussian at
-    d = 1/4 px). Default window: the taper (``KernelPSF``) starts past the image's corners
-    (sqrt 2 max(ny, nx) / (2 oversampling) px) plus 5 sigma of the blur, h in [2, 128] px;
-    ``captured_fraction`` is the share it keeps.
-    """
-    img = check_psf_image(image)
-    o = _finite("psf_file_oversampling", oversampling)
-    if not 1e-3 <= o <= 1e3:
-        raise ValueError(f"psf_file_oversampling must be in [0.001, 1000]; got psf_file_oversampling={oversampling!r}")
-    blur = _non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
-    k = _subpixel(subpixel)
-    img = img / img.sum()
-    extent = max(img.shape) / (2.0 * o)
-    h = _half_from("image", half_width_px, _default_half(math.sqrt(2.0) * extent, blur))
-    n = _grid("image", h, k, 1)
-    cell = 1.0 / k
-    mass = _overlap(n, cell, img.shape[0], 1.0 / o) @ img @ _overlap(n, cell, img.shape[1], 1.0 / o).T
-    mass = _blur(mass, blur, cell)
-    params = {"shape": img.shape, "oversampling": o, "extra_blur_sigma_px": blur}
-    return KernelPSF(mass, k, 1, h, "image", params)
-
-
-# -- scattered-light halo -------------------------------------------------------------------------
-
-HALO_SUBPIXEL = 2
-"""Sub-pixel phases of a halo's table: a halo at least 2 px wide (``Optics.halo_fwhm_px``)
-varies so slowly within a pixel that bilinear interpolation between half-pixel phases is off
-by at most (1/2)^2 / 8 of its second derivative, 0.3 % of its peak at the narrowest (and the
-table is 16 times smaller than at 8 phases)."""
-
-
-class CompositePSF(PSFShape):
-    """A core shape holding ``1 - halo_fraction`` of each source's flux plus a wide Moffat
-    halo holding the rest (``Optics.halo_fraction``): the two are rendered apart and add up,
-    each with its own window, so the halo's 2 h + 1 = 513 px window does not make the core's
-    fine sub-pixel table 4x larger. Flux is conserved by each part, hence by the sum."""
-
-    def __init__(self, core: PSFShape, halo: KernelPSF, halo_fraction: float) -> None:
-        f = float(halo_fraction)
-        if not 0.0 < f < 1.0:
-            raise ValueError(f"halo_fraction must be in (0, 1); got halo_fraction={halo_fraction!r}")
-        self.core = core
-        self.halo = halo
-        self.halo_fraction = f
-        self.kind = f"{getattr(core, 'kind', 'gaussian')}+halo"
-        self.half_width_px = max(core.half_width_px, halo.half_width_px)
-
-    def __repr__(self) -> str:
-        return f"CompositePSF(core={self.core!r}, halo={self.halo!r}, halo_fraction={self.halo_fraction:g})"
-
-    @property
-    def max_pixel_share(self) -> float:
-        return (1.0 - self.halo_fraction) * self.core.max_pixel_share + self.halo_fraction * self.halo.max_pixel_share
-
-    @functools.cached_property
-    def core_part(self) -> PSFShape:
-        """The core alone with its share of the flux (the parts add up to the whole; one
-        object per composite, so that sources rendered with it group together)."""
-        return ScaledPSF(self.core, 1.0 - self.halo_fraction)
-
-    @functools.cached_property
-    def halo_part(self) -> PSFShape:
-        """The halo alone with its share of the flux."""
-        return ScaledPSF(self.halo, self.halo_fraction, smooth=True)
-
-    def contributions(
-        self, width: int, height: int, x: np.ndarray, y: np.ndarray, flux: np.ndarray,
-        offset: np.ndarray | None = None,
-    ) -> list[tuple[np.ndarray, np.ndarray]]:
-        return (self.core_part.contributions(width, height, x, y, flux, offset)
-                + self.halo_part.contributions(width, height, x, y, flux, offset))
-
-
-class ScaledPSF(PSFShape):
-    """``shape`` with every source's flux times ``factor`` (a ``CompositePSF``'s part).
-    ``smooth``: a halo, which a moving source changes slowly enough to sample at the base
-    rate (``smooth_part``)."""
-
-    def __init__(self, shape: PSFShape, factor: float, smooth: bool = False) -> None:
-        self.shape = shape
-        self.factor = float(factor)
-        self.smooth = bool(smooth)
-        self.half_width_px = shape.half_width_px
-
-    def __repr__(self) -> str:
-        return f"ScaledPSF({self.shape!r}, {self.factor:g})"
-
-    @property
-    def max_pixel_share(self) -> float:
-        return self.factor * self.shape.max_pixel_share
-
-    def contributions(
-        self, width: int, height: int, x: np.ndarray, y: np.ndarray, flux: np.ndarray,
-        offset: np.ndarray | None = None,
-    ) -> list[tuple[np.ndarray, np.ndarray]]:
-        return self.shape.contributions(width, height, x, y, flux * self.factor, offset)
-
-    def add_dense(self, image: np.ndarray, x: float, y: float, flux: float) -> None:
-        """``KernelPSF.add_dense`` of the scaled shape (a halo's part)."""
-        self.shape.add_dense(image, x, y, flux * self.factor)  # type: ignore[attr-defined]
-
-
-def sharp_part(shape: PSFShape) -> PSFShape | None:
-    """What of a shape a fast source must be sampled finely for: a composite's core, nothing
-    of a halo alone, the whole of any other shape."""
-    if isinstance(shape, CompositePSF):
-        return shape.core_part
-    return None if getattr(shape, "smooth", False) else shape
-
-
-def smooth_part(shape: PSFShape) -> PSFShape | None:
-    """What of a shape changes slowly wherever a source moves: a composite's halo, a halo
-    alone, nothing of any other shape (``simulate`` samples it at the base rate)."""
-    if isinstance(shape, CompositePSF):
-        return shape.halo_part
-    return shape if getattr(shape, "smooth", False) else None
-
-
-@functools.lru_cache(maxsize=4)
-def halo_psf(fwhm_px: float, beta: float, half_width_px: int) -> KernelPSF:
-    """The halo of ``CompositePSF``: a Moffat of this FWHM [px] and beta, tabulated at
-    ``HALO_SUBPIXEL`` phases on a (2 h + 1)^2 window (``moffat_psf``; its taper and
-    ``captured_fraction`` apply). Cached."""
-    check_halo_shape(fwhm_px, beta, half_width_px)
-    shape = _moffat_kernel(float(fwhm_px), float(beta), 0.0, HALO_SUBPIXEL, int(half_width_px))
-    shape.kind = "halo"
-    return shape
-
-
-def with_halo(core: PSFShape, optics: Optics) -> PSFShape:
-    """``core`` as it is without a halo (``optics.halo_fraction == 0``), else a
-    ``CompositePSF`` of it and the optics' halo."""
-    if optics.halo_fraction == 0.0:
-        return core
-    return _composite(core, float(optics.halo_fwhm_px), float(optics.halo_beta),  # type: ignore[arg-type]
-                      int(optics.halo_half_width_px), float(optics.halo_fraction))
-
-
-@functools.lru_cache(maxsize=8)
-def _composite(core: PSFShape, fwhm_px: float, beta: float, half_width_px: int, fraction: float) -> CompositePSF:
-    # One object per core and halo: a scene's targets rendered with it, or with its parts,
-    # are grouped by identity (targets.psf_groups).
-    return CompositePSF(core, halo_psf(fwhm_px, beta, half_width_px), fraction)
-
-
-# -- from an Optics ----------------------------------------------------------------------------
-
-
-def from_optics(optics: Optics) -> PSFShape:
-    """The PSF an ``Optics`` describes (its ``psf`` field and the fields of that shape).
-
-    Tabulated shapes take 0.01-2 s to build; they are cached (the last 4 optics; an image
-    file is read again when its modification time changes)."""
-    if optics.psf == "image":
-        p = Path(str(optics.psf_file))
-        try:
-            stamp = p.stat().st_mtime_ns
-        except OSError:
-            stamp = -1  # load_psf_image names the missing file
-        core = _image_from_file(str(p), stamp, float(optics.psf_file_oversampling),  # type: ignore[arg-type]
-                                float(optics.extra_blur_sigma_px), optics.psf_subpixel, optics.psf_half_width_px)
-        return with_halo(core, optics)
-    return with_halo(_from_optics(optics), optics)
-
-
-@functools.lru_cache(maxsize=4)
-def _from_optics(optics: Optics) -> PSFShape:
-    if optics.psf == "gaussian":
-        return GaussianPSF(optics.psf_sigma_px)
-    blur, k, h = optics.extra_blur_sigma_px, optics.psf_subpixel, optics.psf_half_width_px
-    if optics.psf == "airy":
-        lam = optics.mean_wavelength_m * optics.f_number / optics.pixel_pitch_m
-        return airy_psf(lam, optics.obstruction_ratio, optics.spider_vanes, optics.spider_width_ratio,
-                        optics.spider_angle_deg, blur, k, h)
-    if optics.psf == "moffat":
-        beta = MOFFAT_DEFAULT_BETA if optics.moffat_beta is None else optics.moffat_beta
-        return moffat_psf(optics.moffat_fwhm, beta, blur, k, h)
-    raise ValueError(f"psf must be one of gaussian, airy, moffat, image; got psf={optics.psf!r}")
-
-
-@functools.lru_cache(maxsize=4)
-def _image_from_file(path: str, stamp: int, oversampling: float, blur: float, subpixel: int,
-                     half_width_px: int | None) -> KernelPSF:
-    return image_psf(load_psf_image(path), oversampling, blur, subpixel, half_width_px)

@@ -90,10 +90,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..optics import ARCSEC_PER_RAD, Optics, _finite, _non_negative, _positive
+from .._checks import finite, in_range, non_negative, positive
+from ..optics import Optics
 from ..psf import KernelPSF, PSFShape, from_optics, moffat_alpha_px, moffat_psf, with_halo
 from ..psf.shapes import DEFAULT_TAIL_FRACTION, _default_half, _grid
-from ..targets import LightCurve, Target, _interval, _times, adopt
+from ..targets import DriftingTarget, LightCurve, MirroredTarget, PathTarget, Target, adopt
+from ..targets.base import _interval, _times
+from .photometry import airmass_kasten_young
 
 KOLMOGOROV_MOFFAT_BETA = 4.765
 """Moffat beta of long-exposure Kolmogorov seeing (Trujillo et al. 2001, MNRAS 328, 977)."""
@@ -130,7 +133,7 @@ _PURPOSE_SCINTILLATION = 2
 
 def seeing_fwhm_px(seeing_fwhm_arcsec: float, optics: Optics) -> float:
     """The seeing FWHM in pixels: seeing [arcsec] / ``optics.plate_scale_arcsec_per_px``."""
-    seeing = _positive("seeing_fwhm_arcsec", seeing_fwhm_arcsec)
+    seeing = positive("seeing_fwhm_arcsec", seeing_fwhm_arcsec)
     return seeing / optics.plate_scale_arcsec_per_px
 
 
@@ -143,8 +146,8 @@ def seeing_psf(optics: Optics, seeing_fwhm_arcsec: float, beta: float = KOLMOGOR
     to it unchanged (a ``CompositePSF``)."""
     if not isinstance(optics, Optics):
         raise TypeError(f"optics must be an Optics; got {optics!r}")
-    seeing = _positive("seeing_fwhm_arcsec", seeing_fwhm_arcsec)
-    b = _finite("moffat_beta", beta)
+    seeing = positive("seeing_fwhm_arcsec", seeing_fwhm_arcsec)
+    b = finite("moffat_beta", beta)
     if not 1.0 < b <= 1000.0:
         raise ValueError(f"moffat_beta must be > 1 (a finite flux) and <= 1000; got moffat_beta={beta!r}")
     if optics.psf == "moffat":
@@ -272,12 +275,12 @@ class ImageMotion:
     tau_s: float
 
     def __post_init__(self) -> None:
-        _non_negative("jitter_rms_arcsec", self.rms_arcsec)
-        _positive("jitter_tau_s", self.tau_s)
+        non_negative("jitter_rms_arcsec", self.rms_arcsec)
+        positive("jitter_tau_s", self.tau_s)
 
     def grid_points(self, duration_s: float) -> int:
         """Grid values per axis over [0, duration_s]."""
-        return math.ceil(_non_negative("duration_s", duration_s) * JITTER_STEPS_PER_TAU / self.tau_s - 1e-9) + 1
+        return math.ceil(non_negative("duration_s", duration_s) * JITTER_STEPS_PER_TAU / self.tau_s - 1e-9) + 1
 
     def path(self, optics: Optics, duration_s: float, seed: int) -> MotionPath:
         """The offsets [px] over [0, duration_s] (through ``optics.plate_scale_arcsec_per_px``)."""
@@ -297,13 +300,13 @@ def young_variance(aperture_m: float, exposure_s: float, airmass: float, altitud
                    c_y: float = OSBORN_C_Y) -> float:
     """Osborn et al. (2015) eq. 7: variance of the relative flux over an exposure,
     ``1e-5 C_Y^2 D^(-4/3) t^(-1) X^3 exp(-2 h / 8000 m)`` (D in m, t in s, X airmass, h [m])."""
-    d = _positive("aperture_m", aperture_m)
-    t = _positive("exposure_s", exposure_s)
-    x = _finite("airmass", airmass)
+    d = positive("aperture_m", aperture_m)
+    t = positive("exposure_s", exposure_s)
+    x = finite("airmass", airmass)
     if x < 1.0:
         raise ValueError(f"airmass must be >= 1; got airmass={airmass!r}")
-    h = _finite("altitude_m", altitude_m)
-    c = _positive("c_y", c_y)
+    h = finite("altitude_m", altitude_m)
+    c = positive("c_y", c_y)
     return YOUNG_COEFFICIENT * c * c * d ** (-4.0 / 3.0) / t * x**3 * math.exp(-2.0 * h / SCINTILLATION_SCALE_HEIGHT_M)
 
 
@@ -333,23 +336,19 @@ class Scintillation:
     tau_s: float | None = None
 
     def __post_init__(self) -> None:
-        h = _finite("site_altitude_m", self.altitude_m)
-        if not -500.0 <= h <= 9000.0:
-            raise ValueError(f"site_altitude_m must be in [-500, 9000] m; got site_altitude_m={self.altitude_m!r}")
-        x = _finite("airmass", self.airmass)
-        if not 1.0 <= x <= 40.0:
-            raise ValueError(f"airmass must be in [1, 40] (1 at the zenith); got airmass={self.airmass!r}")
-        c = _positive("scintillation_c_y", self.c_y)
+        in_range("site_altitude_m", self.altitude_m, -500.0, 9000.0, note="m")
+        in_range("airmass", self.airmass, 1.0, 40.0, note="(1 at the zenith)")
+        c = positive("scintillation_c_y", self.c_y)
         if c > 100.0:
             raise ValueError(f"scintillation_c_y must be in (0, 100]; got scintillation_c_y={self.c_y!r}")
-        _positive("wind_speed_m_s", self.wind_speed_m_s)
+        positive("wind_speed_m_s", self.wind_speed_m_s)
         if self.tau_s is not None:
-            _positive("scintillation_tau_s", self.tau_s)
+            positive("scintillation_tau_s", self.tau_s)
 
     @staticmethod
     def effective_aperture_m(aperture_m: float) -> float:
         """max(D, r_F): the aperture Young's law is applied with [m]."""
-        return max(_positive("aperture_m", aperture_m), FRESNEL_SCALE_M)
+        return max(positive("aperture_m", aperture_m), FRESNEL_SCALE_M)
 
     def correlation_time_s(self, aperture_m: float) -> float:
         """tau_c [s]: ``tau_s`` if given, else D_eff / wind_speed_m_s."""
@@ -381,7 +380,7 @@ class Scintillation:
         (n_sources, len(t_s)), mean 1 (log-normal, module docstring). Source j's numbers
         come from its own stream (seed, purpose, j): adding a source changes no other's."""
         tau = self.correlation_time_s(aperture_m)
-        n = math.ceil(_non_negative("duration_s", duration_s) * SCINTILLATION_STEPS_PER_TAU / tau - 1e-9) + 1
+        n = math.ceil(non_negative("duration_s", duration_s) * SCINTILLATION_STEPS_PER_TAU / tau - 1e-9) + 1
         if n * n_sources > MAX_PROCESS_SAMPLES:
             raise ValueError(f"scintillation of {n_sources} sources over duration_s={duration_s:g} with a correlation time "
                              f"of {tau:.3g} s needs {n * n_sources:.3g} grid values (> {MAX_PROCESS_SAMPLES:g}): "
@@ -456,11 +455,11 @@ class Atmosphere:
 
     def __post_init__(self) -> None:
         if self.seeing_fwhm_arcsec is not None:
-            seeing = _positive("seeing_fwhm_arcsec", self.seeing_fwhm_arcsec)
+            seeing = positive("seeing_fwhm_arcsec", self.seeing_fwhm_arcsec)
             if seeing > 3600.0:
                 raise ValueError(f"seeing_fwhm_arcsec must be at most 3600 (1 degree); got "
                                  f"seeing_fwhm_arcsec={self.seeing_fwhm_arcsec!r}")
-        b = _finite("moffat_beta", self.moffat_beta)
+        b = finite("moffat_beta", self.moffat_beta)
         if not 1.0 < b <= 1000.0:
             raise ValueError(f"moffat_beta must be > 1 (a finite flux) and <= 1000; got moffat_beta={self.moffat_beta!r}")
 
@@ -505,8 +504,6 @@ class Atmosphere:
 
 def _is_ghost(target: Target) -> bool:
     """Whether a target is a MirroredTarget, bare or under offset/drift wrappers."""
-    from ..targets import DriftingTarget, MirroredTarget, PathTarget
-
     while isinstance(target, (DriftingTarget, PathTarget)):
         target = target.target
     return isinstance(target, MirroredTarget)
@@ -516,11 +513,7 @@ def airmass_from_elevation_deg(elevation_deg: float) -> float:
     """The airmass at an elevation in (0, 90] deg: Kasten & Young (1989), the one formula the
     sky uses for extinction too (``evstwin.sky.photometry.airmass_kasten_young``; 1 at the
     zenith, 37.9 at the horizon)."""
-    from .photometry import airmass_kasten_young
-
-    el = _finite("elevation_deg", elevation_deg)
-    if not 0.0 < el <= 90.0:
-        raise ValueError(f"elevation_deg must be in (0, 90] (above the horizon); got elevation_deg={elevation_deg!r}")
+    el = in_range("elevation_deg", elevation_deg, 0.0, 90.0, lo_open=True, note="(above the horizon)")
     return float(airmass_kasten_young(el))
 
 
@@ -594,7 +587,7 @@ def _number(key: str, value: Any) -> float:
 
 
 __all__ = [
-    "ARCSEC_PER_RAD", "ATMOSPHERE_KEYS", "Atmosphere", "AtmosphericTarget", "DEFAULT_WIND_SPEED_M_S", "FRESNEL_SCALE_M",
+    "ATMOSPHERE_KEYS", "Atmosphere", "AtmosphericTarget", "DEFAULT_WIND_SPEED_M_S", "FRESNEL_SCALE_M",
     "ImageMotion", "KOLMOGOROV_MOFFAT_BETA", "MotionPath", "OSBORN_C_Y", "Scintillation", "airmass_from_elevation_deg",
     "atmosphere_from_table", "ou_process", "seeing_fwhm_px", "seeing_psf", "young_variance",
 ]

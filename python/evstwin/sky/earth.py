@@ -47,6 +47,8 @@ from datetime import datetime, timedelta, timezone
 import numpy as np
 import numpy.typing as npt
 
+from .._checks import finite
+
 WGS84_A_KM = 6378.137
 """WGS-84 equatorial radius [km] (NIMA TR8350.2)."""
 WGS84_F = 1.0 / 298.257223563
@@ -124,12 +126,11 @@ class Site:
 
     def __post_init__(self) -> None:
         for name, lo, hi in (("lat_deg", -90.0, 90.0), ("lon_deg", -180.0, 360.0), ("alt_m", -500.0, 1e5)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"{name} must be a finite number; got {name}={v!r}")
+            raw = getattr(self, name)
+            v = finite(name, raw)
             if not lo <= v <= hi or (name == "lon_deg" and v == 360.0):
                 bracket = ")" if name == "lon_deg" else "]"
-                raise ValueError(f"{name} must be in [{lo:g}, {hi:g}{bracket}; got {name}={v!r}")
+                raise ValueError(f"{name} must be in [{lo:g}, {hi:g}{bracket}; got {name}={raw!r}")
 
     @property
     def ecef_km(self) -> np.ndarray:

@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from ..constants import DEG_PER_RAD
 from ..optics import Optics
 from ..targets import LightCurve, LinearTarget, StaticTarget, TabulatedTarget, Target
 from . import earth, iers, orbit, photometry
@@ -366,7 +367,7 @@ def draw_sky_stars(ctx: _Context, attitude: Attitude, density_per_deg2: float, m
     # Everything the footprint covers between two sampled boresights lies within this of one.
     reach = min(half_diag + 0.5 * float(np.max(steps)) + 1e-6, math.radians(80.0))
     cell = max(0.5 * half_diag, 1e-4)
-    per_sr = density_per_deg2 * (180.0 / math.pi) ** 2
+    per_sr = density_per_deg2 * DEG_PER_RAD ** 2
     dec_b = np.arcsin(np.clip(b[:, 2], -1.0, 1.0))
     n_bands = max(1, int(math.ceil(math.pi / cell)))
     band_h = math.pi / n_bands

@@ -35,7 +35,10 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-SPHERE_DEG2 = 4.0 * math.pi * (180.0 / math.pi) ** 2
+from .._checks import finite
+from ..constants import DEG_PER_RAD
+
+SPHERE_DEG2 = 4.0 * math.pi * DEG_PER_RAD ** 2
 """Square degrees in the whole sky (41,252.96)."""
 
 ALL_SKY_V_MAG = np.arange(0.0, 17.0)
@@ -107,10 +110,8 @@ def _range(mag_min: float, mag_max: float) -> tuple[float, float]:
 
 
 def _scale(density_scale: float) -> float:
-    if isinstance(density_scale, bool) or not isinstance(density_scale, (int, float, np.floating, np.integer)):
-        raise ValueError(f"density_scale must be a number; got density_scale={density_scale!r}")
-    s = float(density_scale)
-    if not (math.isfinite(s) and 0.0 <= s <= 1000.0):
+    s = finite("density_scale", density_scale)
+    if not 0.0 <= s <= 1000.0:
         raise ValueError(f"density_scale must be in [0, 1000]; got density_scale={density_scale!r}")
     return s
 

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from .. import analysis
+from ..analysis import same_value_groups
 
 TruthTrack = Mapping[str, np.ndarray]
 
@@ -197,30 +198,6 @@ def _bin_edges(values: np.ndarray, bins: int | Sequence[float] | np.ndarray, log
     return np.linspace(lo, hi, n + 1)
 
 
-SAME_VALUE_TOLERANCE = 1e-3
-"""Fluxes or speeds within this share of each other are one value in the timing summary and
-figure: a source's speed in pixels changes in its last digits along a track (geo-stare's
-7.8828..7.8830 px/s), and a group or axis tick per digit helps nobody."""
-
-
-def same_value_groups(values: np.ndarray, tolerance: float = SAME_VALUE_TOLERANCE) -> np.ndarray:
-    """A group number per value (0, 1, ... in increasing order of value): sorted values go in
-    one group while each is within ``tolerance`` (relative) of the group's smallest."""
-    v = np.asarray(values, dtype=np.float64)
-    if v.size == 0:
-        return np.zeros(0, np.int64)
-    order = np.argsort(v, kind="stable")
-    s = v[order]
-    group = np.zeros(s.size, np.int64)
-    start, g = s[0], 0
-    for i in range(1, s.size):  # over distinct values in practice: a handful of targets
-        if s[i] - start > tolerance * max(abs(start), abs(s[i])):
-            g += 1
-            start = s[i]
-        group[i] = g
-    out = np.empty_like(group)
-    out[order] = group
-    return out
 
 
 def timing_bias_summary(
@@ -236,7 +213,7 @@ def timing_bias_summary(
         flux bins [photons/s] between the smallest and largest, or explicit edges) or 'speed'
         (``bins`` linear speed bins [px/s], or edges). Bins are [lo, hi), the last [lo, hi];
         a flux or speed taking no more than ``bins`` values (values within
-        :data:`SAME_VALUE_TOLERANCE` of each other are one) has one group per value, named by
+        :data:`~evstwin.analysis.SAME_VALUE_TOLERANCE` of each other are one) has one group per value, named by
         its median (a single speed is one row, not a 7.883..7.883 bin).
     split_polarity: one row per group and polarity (key ``polarity``, 'ON'/'OFF'): ON and OFF
         delays differ by an order of magnitude in the dark, and a median of both describes
