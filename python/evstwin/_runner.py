@@ -329,6 +329,7 @@ class _Runner:
             calls: list[tuple[np.ndarray | None, np.ndarray, np.ndarray]] = []  # (pixels, rates, t_s)
             if fast_groups:
                 n_sub = self._n_sub(a * self.dt, b * self.dt)
+                self.sub_sampled_chunks += n_sub > 1
                 k = np.arange(a + 1, b + 1)
                 t_base = k * self.dt
                 i = np.arange(1, n_sub + 1)

@@ -90,3 +90,28 @@ def test_static_step_is_checked() -> None:
 
     with pytest.raises(ScenarioError, match=r"sampling.static_step_s .*-1"):
         simulate(resolve_scenario("mcreynolds", [*SCENE, "sampling.static_step_s=-1"]), duration_s=0.01)
+
+
+@pytest.mark.parametrize("rate_hz", [1000.0, 2.0])
+def test_background_clocks_keep_every_event_at_long_steps(rate_hz: float) -> None:
+    # Eq. 12's background alone (no shot noise, no leak, no refractory period): each pixel's ON
+    # and OFF events are Poisson processes of 20 Hz, so 32 x 32 px over 2 s hold 2 x 20 x 2 x
+    # 1024 = 81,920 events on average, whatever the step. At 2 Hz a step holds ~10 of each
+    # clock's events; when an interval kept one at most, it gave ~8,000.
+    from evstwin import PixelParams
+
+    params = PixelParams(theta_on=0.2, theta_off=0.15, refractory_s=0.0, cutoff_hz=100.0, leak_rate_hz=0.0,
+                         shot_noise_rate_hz=20.0, dark_model="none", photon_shot_noise=False)
+    t = np.arange(0, round(2.0 * rate_hz) + 1) / rate_hz
+    runs = []
+    for kernel in ("auto", "per_pixel"):
+        sensor = Sensor(32, 32, params, seed=4, num_threads=1)
+        sensor.kernel = kernel
+        runs.append(sensor.run(np.broadcast_to(np.full((1, 32, 32), 1e3), (t.size, 32, 32)), t))
+    assert runs[0].tobytes() == runs[1].tobytes()
+    on = int(np.count_nonzero(runs[0]["p"]))
+    off = len(runs[0]) - on
+    for n in (on, off):
+        assert abs(n - 40_960) < 4 * math.sqrt(40_960), (on, off)
+    # Each in time order within its pixel, inside the run.
+    assert runs[0]["t"].min() >= 0 and runs[0]["t"].max() <= 2_000_000

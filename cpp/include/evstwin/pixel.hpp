@@ -40,6 +40,34 @@ EVSTWIN_FP_STRICT_BEGIN
 
 namespace evstwin {
 
+/// Eq. 12's background events of one sample interval, in time order, as the comparator takes
+/// them (PixelModel::compare): each resets the reference where the pixel is not refractory. The
+/// sampled model draws at most one an interval; the continuous model's clocks fire as often as
+/// they run out, so a long interval keeps every event of a busy clock (MAX: a clock of 100 Hz
+/// over 0.2 s fires ~20 times; the 65th of one interval and later are dropped).
+struct NoisePulses {
+    static constexpr int MAX = 64;
+    int n = 0, next = 0;
+    double t[MAX];
+    std::uint8_t pol[MAX];
+    /// Whether a pulse not yet taken lies at or before t1 (the comparator's interval end).
+    bool due(double t1) const { return next < n && t[next] <= t1; }
+    double time() const { return t[next]; }
+    int polarity() const { return pol[next]; }
+    void take() { ++next; }
+    void add(double t_s, int polarity) {
+        if (n == MAX) return;
+        // Insertion in time order (a few, most often one): ties keep the order they came in.
+        int i = n++;
+        for (; i > 0 && t[i - 1] > t_s; --i) {
+            t[i] = t[i - 1];
+            pol[i] = pol[i - 1];
+        }
+        t[i] = t_s;
+        pol[i] = static_cast<std::uint8_t>(polarity);
+    }
+};
+
 /// Parameters turned into the numbers the hot loop needs.
 struct PixelModel {
     /// The parameters, fixed at construction (checked by validate()): the numbers below are
@@ -441,27 +469,23 @@ struct PixelModel {
     /// Eq. 12-15 as the paper draws them (sampled model): one uniform u decides OFF
     /// (u < p_off), ON (u > 1 - p_on) or nothing, p = r dt, and, given an event, its time
     /// inside the interval (u / p is uniform). Returns the polarity or -1.
-    EVSTWIN_ALWAYS_INLINE int shot_noise(const PixelState& s, double u, double current_a, const SampleConstants& c,
-                                         double& t_noise) const {
+    EVSTWIN_ALWAYS_INLINE void shot_noise(const PixelState& s, double u, double current_a, const SampleConstants& c,
+                                          NoisePulses& pulses) const {
         const double f = background_factor(current_a) * c.dt;
         const double p_off = s.bg_off_hz * f, p_on = s.bg_on_hz * f;
         if (u < p_off) {
-            t_noise = c.t0 + c.dt * (u / p_off);
-            return OFF;
+            pulses.add(c.t0 + c.dt * (u / p_off), OFF);
+        } else if (u > 1.0 - p_on) {
+            pulses.add(c.t0 + c.dt * ((1.0 - u) / p_on), ON);
         }
-        if (u > 1.0 - p_on) {
-            t_noise = c.t0 + c.dt * ((1.0 - u) / p_on);
-            return ON;
-        }
-        return -1;
     }
 
     /// Eq. 12's background as continuous-time processes (continuous model): ON and OFF events
     /// are two Poisson processes whose rates follow the light, each run on its own clock: an
     /// exponential budget, drawn at each event, spent at the rate r dt per interval; the event
     /// fires where the budget runs out (exact for rates constant over an interval), so a
-    /// sample costs two multiply-adds and no random number. If both fire in one interval, the
-    /// earlier reaches the comparator and the later is dropped (rare: r dt is small).
+    /// sample costs two multiply-adds and no random number. Each clock fires as often as it runs
+    /// out in the interval, so the events do not depend on the sampling (a long step keeps them).
     ///
     /// background_spend (each interval) then background_fire (where a clock ran out).
     ///
@@ -477,26 +501,31 @@ struct PixelModel {
         return detail::clock_ran_out(on, off);
     }
 
-    /// The second half: after background_spend, the event of a clock that ran out (its polarity,
-    /// its time in t_noise, fresh budgets) or -1.
-    EVSTWIN_ALWAYS_INLINE int background_fire(PixelState& s, double current_a, const SampleConstants& c,
-                                              Philox4x32Key key, std::uint32_t pixel, double& t_noise) const {
-        if (s.bg_clock_on > 0.0 && s.bg_clock_off > 0.0) return -1;
+    /// The second half: after background_spend, the events of the clocks that ran out, into
+    /// `pulses` in time order, each clock given a fresh budget counted from where it ran out
+    /// (its budget left at t1 is negative by r (t1 - t)) until both are positive again. The
+    /// uniforms come in rounds, ON's then OFF's: one clock running out once draws what it did
+    /// when an interval held one event at most.
+    EVSTWIN_ALWAYS_INLINE void background_fire(PixelState& s, double current_a, const SampleConstants& c,
+                                               Philox4x32Key key, std::uint32_t pixel, NoisePulses& pulses) const {
+        if (s.bg_clock_on > 0.0 && s.bg_clock_off > 0.0) return;
         const double f = background_factor(current_a);
         const double r_on = s.bg_on_hz * f, r_off = s.bg_off_hz * f;
-        // The time each clock ran out: its budget left at t1 is negative by r (t1 - t).
-        const double t_on = s.bg_clock_on > 0.0 ? std::numeric_limits<double>::infinity()
-                                                : c.t1 + s.bg_clock_on / r_on;
-        const double t_off = s.bg_clock_off > 0.0 ? std::numeric_limits<double>::infinity()
-                                                  : c.t1 + s.bg_clock_off / r_off;
         CounterStream more(key, pixel, s.n, PURPOSE_BACKGROUND);
-        // A fresh budget for each clock that ran out, counted from where it ran out (the time
-        // left in the interval is spent at once; a second event in it is dropped).
-        if (s.bg_clock_on <= 0.0) s.bg_clock_on = std::max(0.0, -std::log(more.uniform()) + s.bg_clock_on) + 1e-300;
-        if (s.bg_clock_off <= 0.0) s.bg_clock_off = std::max(0.0, -std::log(more.uniform()) + s.bg_clock_off) + 1e-300;
-        const bool on = t_on < t_off;
-        t_noise = std::min(c.t1, std::max(c.t0, on ? t_on : t_off));
-        return on ? ON : OFF;
+        const auto renew = [&more](double& clock) {
+            const double left = -std::log(more.uniform()) + clock;
+            clock = left > 0.0 ? left + 1e-300 : left;
+        };
+        while (s.bg_clock_on <= 0.0 || s.bg_clock_off <= 0.0) {
+            if (s.bg_clock_on <= 0.0) {
+                pulses.add(std::min(c.t1, std::max(c.t0, c.t1 + s.bg_clock_on / r_on)), ON);
+                renew(s.bg_clock_on);
+            }
+            if (s.bg_clock_off <= 0.0) {
+                pulses.add(std::min(c.t1, std::max(c.t0, c.t1 + s.bg_clock_off / r_off)), OFF);
+                renew(s.bg_clock_off);
+            }
+        }
     }
 
     /// Advance one pixel over (c.t0, c.t1] to the sample `photon_rate` and emit its events
@@ -558,10 +587,10 @@ struct PixelModel {
         const double y = detail::source_follower(has_filter, euler, s.y, s.z, z, c.sf_decay, c.sf_ramp);
 
         // Statistical shot noise, eq. 12-15.
-        double t_noise = 0.0;
-        const int noise_pol = has_background() ? shot_noise(s, uniform_open(w[1]), current_a, c, t_noise) : -1;
+        NoisePulses pulses;
+        if (has_background()) shot_noise(s, uniform_open(w[1]), current_a, c, pulses);
 
-        compare(s, y, 0.0, c, leak_slope(s, leak_rate_hz(photon_rate)), noise_pol, t_noise, emit);
+        compare(s, y, 0.0, c, leak_slope(s, leak_rate_hz(photon_rate)), pulses, emit);
         if (trace) *trace = {current_a, x, y, s.ref};
         s.x = x;
         s.z = z;
@@ -734,8 +763,8 @@ struct PixelModel {
                                                  const SampleConstants& c, Philox4x32Key key, std::uint32_t pixel,
                                                  Emit& emit, TraceSample* trace, const BridgePre* pre = nullptr) const {
         const double leak_g = leak_slope(s, leak_hz);
-        double t_noise = 0.0;
-        const int noise_pol = has_background() ? background_fire(s, current_a, c, key, pixel, t_noise) : -1;
+        NoisePulses pulses;
+        if (has_background()) background_fire(s, current_a, c, key, pixel, pulses);
 
         // With a photoreceptor pole faster than the sampling (a dt > 1), the noise is smooth
         // below 1 / a but rough at the sample's scale, which neither the straight line nor a
@@ -753,12 +782,12 @@ struct PixelModel {
         const double b_sf = sf_rate();
         const bool sf_noise = D > 0.0 && !p.pr_pole && has_filter && !euler;
         if (two_poles && a * c.dt > 1.0 && crossing_plausible(s, y, c, leak_g, bridge_var)) {
-            refine_and_compare(s, x, z, y - ny, nz, ny, c, leak_g, a, D, noise_pol, t_noise, key, pixel, emit);
+            refine_and_compare(s, x, z, y - ny, nz, ny, c, leak_g, a, D, pulses, key, pixel, emit);
         } else if (sf_noise && b_sf * c.dt > SF_REFINE_BH &&
                    crossing_plausible(s, y, c, leak_g, bridge_var, std::min(b_sf * c.dt, MAX_EXCURSIONS))) {
-            refine_sf_and_compare(s, x, y - ny, ny, c, leak_g, b_sf, D, noise_pol, t_noise, key, pixel, emit);
+            refine_sf_and_compare(s, x, y - ny, ny, c, leak_g, b_sf, D, pulses, key, pixel, emit);
         } else {
-            compare_bridged(s, y, ny, c, leak_g, bridge_var, noise_pol, t_noise, key, pixel, PURPOSE_BRIDGE, emit, pre);
+            compare_bridged(s, y, ny, c, leak_g, bridge_var, pulses, key, pixel, PURPOSE_BRIDGE, emit, pre);
         }
         if (trace) *trace = {current_a, x, y, s.ref};
         s.x = x;
@@ -790,7 +819,7 @@ struct PixelModel {
     /// leak_g: leak_slope() of the sample.
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void compare_bridged(PixelState& s, double y, double ny, const SampleConstants& c,
-                                               double leak_g, double bridge_var, int noise_pol, double t_noise, Philox4x32Key key,
+                                               double leak_g, double bridge_var, NoisePulses& pulses, Philox4x32Key key,
                                                std::uint32_t pixel, std::uint32_t purpose, Emit& emit,
                                                const BridgePre* pre = nullptr) const {
         // `pre` (bridge_decisions): its `known` is the tests below (a variance, an interval left
@@ -851,18 +880,19 @@ struct PixelModel {
                             const bool timed = decided && pre->timed;
                             first.inv_dt = timed ? pre->inv_first_dt : 1.0 / first.dt;
                             second.inv_dt = timed ? pre->inv_second_dt : 1.0 / second.dt;
-                            const bool noise_first = noise_pol >= 0 && t_noise <= tc;
-                            compare(s, y_c, ny_c, first, leak_g, noise_first ? noise_pol : -1, t_noise, emit);
+                            // The background's events up to tc go to the first part (compare takes
+                            // those due by its end), the rest to the second.
+                            compare(s, y_c, ny_c, first, leak_g, pulses, emit);
                             s.y = y_c;
                             s.ny = ny_c;
-                            compare(s, y, ny, second, leak_g, noise_first ? -1 : noise_pol, t_noise, emit);
+                            compare(s, y, ny, second, leak_g, pulses, emit);
                             return;
                         }
                     }
                 }
             }
         }
-        compare(s, y, ny, c, leak_g, noise_pol, t_noise, emit);
+        compare(s, y, ny, c, leak_g, pulses, emit);
     }
 
     /// The interval (c.t0, c.t1] cut into m = 2^L pieces with a h <= 1 (h = dt / m), the noise
@@ -873,7 +903,7 @@ struct PixelModel {
     /// the sample's values at c.t1 (already drawn); s still holds those at c.t0.
     template <class Emit>
     void refine_and_compare(PixelState& s, double x1, double z1, double yd1, double nz1, double ny1,
-                            const SampleConstants& c, double leak_g, double a, double D, int noise_pol, double t_noise,
+                            const SampleConstants& c, double leak_g, double a, double D, NoisePulses& pulses,
                             Philox4x32Key key, std::uint32_t pixel, Emit& emit) const {
         constexpr int MAX_LEVELS = 10;
         int levels = 1;
@@ -947,8 +977,8 @@ struct PixelModel {
             piece.t1 = i == m ? c.t1 : c.t0 + i * h;
             piece.dt = piece.t1 - piece.t0;
             piece.inv_dt = 1.0 / piece.dt;
-            const bool here = noise_pol >= 0 && t_noise > piece.t0 - (i == 1 ? 1.0 : 0.0) && t_noise <= piece.t1;
-            compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, here ? noise_pol : -1, t_noise, key, pixel,
+            // The background's events due by the piece's end are its own (compare takes them).
+            compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, pulses, key, pixel,
                             PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
             s.y = ydi + nys[i];
             s.ny = nys[i];
@@ -969,7 +999,7 @@ struct PixelModel {
     /// holds those at c.t0.
     template <class Emit>
     void refine_sf_and_compare(PixelState& s, double x1, double yd1, double ny1, const SampleConstants& c, double leak_g,
-                               double b, double D, int noise_pol, double t_noise, Philox4x32Key key, std::uint32_t pixel,
+                               double b, double D, NoisePulses& pulses, Philox4x32Key key, std::uint32_t pixel,
                                Emit& emit) const {
         constexpr int MAX_LEVELS = 10;
         int levels = 1;
@@ -1008,8 +1038,8 @@ struct PixelModel {
             piece.t1 = i == m ? c.t1 : c.t0 + i * h;
             piece.dt = piece.t1 - piece.t0;
             piece.inv_dt = 1.0 / piece.dt;
-            const bool here = noise_pol >= 0 && t_noise > piece.t0 - (i == 1 ? 1.0 : 0.0) && t_noise <= piece.t1;
-            compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, here ? noise_pol : -1, t_noise, key, pixel,
+            // The background's events due by the piece's end are its own (compare takes them).
+            compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, pulses, key, pixel,
                             PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
             s.y = ydi + nys[i];
             s.ny = nys[i];
@@ -1048,7 +1078,7 @@ struct PixelModel {
     /// y1 (0 in the sampled model), for the events' labels.
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void compare(PixelState& s, double y1, double ny1, const SampleConstants& c, double leak_g,
-                                       int noise_pol, double t_noise, Emit& emit) const {
+                                       NoisePulses& pulses, Emit& emit) const {
         const double th_on = s.theta_on, th_off = s.theta_off, refr = p.refractory_s;
         const double g = detail::comparator_slope(s.y, y1, leak_g, c.inv_dt);  // d(d)/dt
         double tb = c.t0;
@@ -1056,7 +1086,7 @@ struct PixelModel {
         // Fast path: no noise event, not refractory, and the line stays inside both thresholds.
         const double d1 = detail::comparator_end(s.y, s.ref, g, c.dt);
         // Evaluated without short-circuits: one well-predicted branch instead of several.
-        const bool quiet = (noise_pol < 0) & (s.refr_until <= tb) & detail::inside_levels(db, d1, th_on, th_off);
+        const bool quiet = !pulses.due(c.t1) & (s.refr_until <= tb) & detail::inside_levels(db, d1, th_on, th_off);
         if (quiet) {
             s.ref = y1 - d1;
             return;
@@ -1077,7 +1107,7 @@ struct PixelModel {
         };
         for (;;) {
             if (s.refr_until > tb) {
-                if (noise_pol >= 0 && t_noise < s.refr_until) noise_pol = -1;  // dead pixel
+                while (pulses.due(c.t1) && pulses.time() < s.refr_until) pulses.take();  // a dead pixel's
                 if (s.refr_until >= c.t1) break;
                 db += g * (s.refr_until - tb);
                 tb = s.refr_until;
@@ -1107,12 +1137,12 @@ struct PixelModel {
                 tc = tb + (-th_off - db) / g;
                 pol = OFF;
             }
-            if (noise_pol >= 0 && t_noise < tc) {
+            if (pulses.due(c.t1) && pulses.time() < tc) {
                 // The noise pulse trips the comparator first; ref resets to the level there.
-                db += g * (t_noise - tb);
-                tb = t_noise;
-                fire(tb, noise_pol, db, 0.0, LABEL_BACKGROUND);
-                noise_pol = -1;
+                db += g * (pulses.time() - tb);
+                tb = pulses.time();
+                fire(tb, pulses.polarity(), db, 0.0, LABEL_BACKGROUND);
+                pulses.take();
                 db = 0.0;
                 s.refr_until = tb + refr;
                 continue;

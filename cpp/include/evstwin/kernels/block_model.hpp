@@ -995,9 +995,9 @@ struct BlockModel : PixelModel {
             PixelState& si = st[at(j)];
             if (busy[j]) {
                 pixel = v.ids[at(j)];
-                double t_noise = 0.0;
-                const int pol = shot ? shot_noise(si, u_noise[j], cur[j], c, t_noise) : -1;
-                compare(si, y[j], 0.0, c, leak[j], pol, t_noise, emit);
+                NoisePulses pulses;
+                if (shot) shot_noise(si, u_noise[j], cur[j], c, pulses);
+                compare(si, y[j], 0.0, c, leak[j], pulses, emit);
                 if (si.next_hot_t <= c.t1) hot_events(si, c.t1, key, pixel, emit);
             }
             si.x = x[j];
