@@ -40,7 +40,8 @@ The package is laid out by the user's verbs and what they share:
   histograms, Pearson terms of the seeds' mean).
 * :mod:`.execution` -- jobs on local worker processes or a Dask cluster, retries, progress.
 * :mod:`.fit`, :mod:`.sweep`, :mod:`.limits` -- the three verbs; each returns data and
-  writes its tables.
+  writes its tables. The fit's parts: :mod:`.options` (:class:`FitOptions`), :mod:`.search`
+  (the searches and why they stop), :mod:`.intervals`, :mod:`.result` (:class:`FitResult`).
 * :mod:`.figures` -- the figures of those results (matplotlib, the ``plot`` extra); no
   compute module imports it.
 """
@@ -65,7 +66,7 @@ from .figures import (
     plot_limiting_magnitude,
     plot_sweep,
 )
-from .fit import DISTANCES, SAMPLERS, FitResult, TrialRecord, fit
+from .fit import fit
 from .limits import (
     DEFAULT_MAGNITUDES,
     DEFAULT_RATES_ARCSEC_S,
@@ -88,6 +89,8 @@ from .objectives import (
     detect_metrics,
     make_objective,
 )
+from .options import DISTANCES, SAMPLERS, STATISTICS, FitOptions
+from .result import FitResult, TrialRecord
 from .sweep import SweepResult, parse_grid, sweep
 
 __all__ = [
@@ -100,6 +103,7 @@ __all__ = [
     "FIT_BOUNDS",
     "DaskExecutor",
     "DetectObjective",
+    "FitOptions",
     "FitResult",
     "JOB_RETRIES",
     "JobFailure",
@@ -116,6 +120,7 @@ __all__ = [
     "Objective",
     "ParamBound",
     "SAMPLERS",
+    "STATISTICS",
     "SweepResult",
     "TrialRecord",
     "canonical_key",
