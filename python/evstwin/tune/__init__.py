@@ -91,7 +91,7 @@ from .objectives import (
 )
 from .options import DISTANCES, SAMPLERS, STATISTICS, FitOptions
 from .result import FitResult, TrialRecord
-from .sweep import SweepResult, parse_grid, sweep
+from .sweep import FitMatchObjective, SweepResult, parse_grid, sweep
 
 __all__ = [
     "CHI2_FORMULA",
@@ -103,6 +103,7 @@ __all__ = [
     "FIT_BOUNDS",
     "DaskExecutor",
     "DetectObjective",
+    "FitMatchObjective",
     "FitOptions",
     "FitResult",
     "JOB_RETRIES",
