@@ -77,8 +77,8 @@ def register(subparsers: Any) -> None:
         "--sampler",
         default="ls",
         choices=SAMPLERS,
-        help="ls: least squares on the chi-square of per-pixel counts from the scenario's values, each "
-        "step's derivatives one parallel batch (default; 9/10 on the full-size recovery benchmark); nm: "
+        help="ls: least squares on the chi-square of per-pixel counts and event timing (--statistics) from the "
+        "scenario's values, each step's derivatives one parallel batch (default); nm: "
         "Nelder-Mead on compare's distance; tpe: Optuna TPE, global; tpe+nm: TPE then Nelder-Mead; "
         "cmaes: CMA-ES (cmaes package), a generation a batch; random",
     )

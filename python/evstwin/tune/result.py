@@ -128,6 +128,9 @@ class FitResult:
     def to_json_dict(self) -> dict[str, Any]:
         from ..validation import DISTANCE_FORMULA
         from .counts import CHI2_FORMULA
+        from .timing import TIMING_FORMULA
+
+        statistics = None if self.options is None or self.distance != "chi2" else self.options.statistics
 
         return _jsonable(
             {
@@ -155,8 +158,9 @@ class FitResult:
                 "stop": {"reason": self.stop_reason, "detail": self.stop_detail},
                 "interval_kind": self.interval_kind,
                 "identifiability": None if self.identifiability is None else self.identifiability.to_json_dict(),
-                "statistics": None if self.options is None or self.distance != "chi2" else self.options.statistics,
-                "distance_formula": CHI2_FORMULA if self.distance == "chi2" else DISTANCE_FORMULA,
+                "statistics": statistics,
+                "distance_formula": (DISTANCE_FORMULA if self.distance != "chi2" else CHI2_FORMULA if statistics != "timing"
+                                     else f"{CHI2_FORMULA}; {TIMING_FORMULA}"),
                 "roi": list(self.roi) if self.roi is not None else None,
                 "masked_pixels": (
                     [] if self.mask is None

@@ -51,6 +51,13 @@ import numpy as np
 
 from .counts import GROUP_LEVELS, CountsObjective, count_statistics
 
+TIMING_FORMULA = (
+    "and, the same Pearson terms, the timing statistics: per lit group and polarity the events' delays after "
+    "their pixel's source passage, per group and transition (ON->ON, ON->OFF, OFF->ON, OFF->OFF) the intervals "
+    "between a pixel's successive events, each counted in the bins between the real recording's quantiles"
+)
+"""What the timing statistics add to :data:`evstwin.tune.counts.CHI2_FORMULA` (fit.json)."""
+
 DELAY_QUANTILES: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 0.9)
 """The real recording's quantiles of each lit group's and polarity's delays that bound the
 delay bins (six bins, the outer two open)."""
