@@ -325,6 +325,10 @@ def test_sweep_match_scores_the_truth_best() -> None:
     )
     d = [r["mean_distance"] for r in result.summary]
     assert d[1] < d[0] and d[1] < d[2]
+    # 'distance' is the fit's (counts and timing); compare's ranks the same way beside it.
+    assert result.metrics[:2] == ("distance", "compare_distance")
+    c = [r["mean_compare_distance"] for r in result.summary]
+    assert c[1] < c[0] and c[1] < c[2]
 
 
 # -- detect -------------------------------------------------------------------------------------
