@@ -3,6 +3,7 @@
     PYTHONPATH=python python bench/bench_recovery.py [--settings 10] [--budget 60]
         [--samplers ls,nm] [--duration 0.5] [--runs-per-trial 2] [--seed 0] [--csv FILE]
     PYTHONPATH=python python bench/bench_recovery.py --profile [--settings 3]
+    PYTHONPATH=python python bench/bench_recovery.py --default-command [--statistics timing,counts]
 
 The scene is ``mcreynolds`` (346 x 260 px, five rotating LEDs, the default continuous noise
 model and the photoreceptor pole) shortened to --duration. Each hidden setting is drawn from
@@ -14,6 +15,15 @@ the five parameters with --budget trials of --runs-per-trial seeds from a pertur
 both thresholds are within 10 % and the three rates within x1.5 of the hidden values.
 Prints a row per (setting, optimiser) and a summary; no asserts. A sampler may name its
 distance: ``nm:chi2``, ``cmaes:chi2`` (default: each sampler's own, see ``tune.fit``).
+
+``--default-command`` measures issue 34's goal instead: the command a user runs, ``evstwin fit
+REAL --scenario mcreynolds --budget 60`` (the seven default parameters, FitOptions' defaults:
+one run per trial, the start at the scenario's values) on a 1 s recording (--duration 1 unless
+given) of each setting's hidden thresholds and dark rate (drawn as above; the other parameters
+keep the scenario's values, as ``--set`` would leave them). Success: both thresholds within 10 %
+and the dark rate within x1.5. ``--statistics`` lists the chi-square's statistics compared
+(``timing``, ``counts``; default both); each row also gives the identifiability report's
+correlation of theta_on and the dark rate, and why the fit stopped.
 
 ``--profile`` instead measures the two distances themselves on each setting: at the hidden
 values and with each threshold 10 % higher, over --profile-pairs pairs of engine seeds (the
@@ -134,6 +144,59 @@ def profile(base: dict[str, Any], seed: int, setting: int, pairs: int) -> None:
         print(f"  {dist:8s} " + "; ".join(cells), flush=True)
 
 
+GOAL_PARAMS = ("pixel.theta_on", "pixel.theta_off", "pixel.dark_rate_e_per_s")
+"""What --default-command hides (the issue's ``--set`` of the thresholds and the dark rate)."""
+
+
+def default_command(args: argparse.Namespace) -> None:
+    """--default-command: issue 34's goal (see the module docstring)."""
+    duration_s = 1.0 if "--duration" not in sys.argv else args.duration
+    base = scene(duration_s)
+    statistics = [s.strip() for s in args.statistics.split(",") if s.strip()]
+    budget = args.budget
+    print(f"default command: mcreynolds {duration_s:g} s, budget {budget}, 7 default parameters, "
+          f"FitOptions' runs per trial ({tune.FitOptions().runs_per_trial}), start at the scenario's values; "
+          f"{os.cpu_count()} cores", flush=True)
+    rows: list[dict[str, Any]] = []
+    for i in range(args.first, args.first + args.settings):
+        hidden = {k: v for k, v in draw(args.seed, i)[0].items() if k in GOAL_PARAMS}
+        s = base
+        for key, v in hidden.items():
+            s = set_value(s, key, v)
+        real = simulate(s, seed=1000 + i, num_threads=os.cpu_count() or 1)
+        print(f"setting {i}: " + ", ".join(f"{SHORT[k]} {hidden[k]:.4g}" for k in GOAL_PARAMS)
+              + f"; {real.events.size} events", flush=True)
+        for stats in statistics:
+            t0 = time.perf_counter()
+            res = tune.fit(real.events, real.meta, base, tune.FitOptions(budget=budget, statistics=stats),
+                           workers=args.workers)
+            elapsed = time.perf_counter() - t0
+            found = res.best_params
+            ok = (all(abs(found[k] / hidden[k] - 1.0) <= THRESHOLD_TOL for k in GOAL_PARAMS if "theta" in k)
+                  and 1.0 / RATE_FACTOR <= found["pixel.dark_rate_e_per_s"] / hidden["pixel.dark_rate_e_per_s"]
+                  <= RATE_FACTOR)
+            rep = res.identifiability
+            r = math.nan if rep is None else float(rep.correlation[rep.params.index("pixel.theta_on"),
+                                                                   rep.params.index("pixel.dark_rate_e_per_s")])
+            rows.append({"setting": i, "statistics": stats, "ok": ok, "seconds": elapsed, "r": r})
+            ratios = " ".join(f"{SHORT[k]} {found[k] / hidden[k]:.3f}" for k in GOAL_PARAMS)
+            print(f"  {stats:7s} {'ok  ' if ok else 'FAIL'} d={res.best_distance:.4f} {elapsed:6.1f} s  found/hidden: "
+                  f"{ratios}; r(th_on, dark) {r:+.2f}; stopped: {res.stop_reason}, {len(res.history)} trials",
+                  flush=True)
+    if args.csv:
+        with open(args.csv, "w", newline="", encoding="utf-8") as fh:
+            w = csv.DictWriter(fh, fieldnames=["setting", "statistics", "ok", "seconds", "r"])
+            w.writeheader()
+            w.writerows(rows)
+    print()
+    print("| statistics | recovered | median r(theta_on, dark) | mean time per fit |")
+    print("|---|---|---|---|")
+    for stats in statistics:
+        mine = [r for r in rows if r["statistics"] == stats]
+        print(f"| {stats} | {sum(r['ok'] for r in mine)}/{len(mine)} | {np.nanmedian([r['r'] for r in mine]):+.2f} | "
+              f"{np.mean([r['seconds'] for r in mine]):.1f} s |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--settings", type=int, default=10, help="hidden settings (default 10)")
@@ -150,8 +213,17 @@ def main() -> None:
     ap.add_argument("--score-hidden", action="store_true",
                     help="also print each setting's hidden values' distance with the fits' seeds (one trial)")
     ap.add_argument("--profile", action="store_true", help="measure the distances' noise and sensitivity instead")
+    ap.add_argument("--default-command", action="store_true",
+                    help="issue 34's goal: the default fit command (7 parameters, 1 run per trial, the scenario's "
+                         "start) on hidden thresholds and dark rate, 1 s (see the module docstring)")
+    ap.add_argument("--statistics", default="timing,counts",
+                    help="the chi-square's statistics compared with --default-command (default timing,counts; "
+                         "otherwise the first is used)")
     ap.add_argument("--profile-pairs", type=int, default=5, help="seed pairs per point of --profile (default 5)")
     args = ap.parse_args()
+    if args.default_command:
+        default_command(args)
+        return
     if args.profile:
         for i in range(args.first, args.first + args.settings):
             profile(scene(args.duration), args.seed, i, args.profile_pairs)
@@ -174,9 +246,10 @@ def main() -> None:
         for sampler in samplers:
             t0 = time.perf_counter()
             name, _, distance = sampler.partition(":")
-            res = tune.fit(real.events, real.meta, base, params=PARAMS, budget=args.budget,
-                           runs_per_trial=args.runs_per_trial, seed=0, sampler=name, start=start,
-                           workers=args.workers, distance=distance or None, batch_size=args.batch_size)
+            opts = tune.FitOptions(params=PARAMS, budget=args.budget, runs_per_trial=args.runs_per_trial, seed=0,
+                                   sampler=name, start=start, distance=distance or None, batch_size=args.batch_size,
+                                   statistics=args.statistics.split(",")[0])
+            res = tune.fit(real.events, real.meta, base, opts, workers=args.workers)
             elapsed = time.perf_counter() - t0
             found = res.best_params
             ok = success(hidden, found)
@@ -190,8 +263,10 @@ def main() -> None:
             print(f"  {sampler:11s} {'ok  ' if ok else 'FAIL'} d={res.best_distance:.4f} {elapsed:5.1f} s  "
                   f"found/hidden: {ratios}", flush=True)
             if args.score_hidden:  # the hidden values as the one trial of a fit: same seeds, same distance
-                at = tune.fit(real.events, real.meta, base, params=PARAMS, budget=1, runs_per_trial=args.runs_per_trial,
-                              seed=0, sampler=name, start=hidden, workers=args.workers, distance=distance or None)
+                at = tune.fit(real.events, real.meta, base,
+                              tune.FitOptions(params=PARAMS, budget=1, runs_per_trial=args.runs_per_trial, seed=0,
+                                              sampler=name, start=hidden, distance=distance or None,
+                                              statistics=args.statistics.split(",")[0]), workers=args.workers)
                 print(f"  {'':11s} the hidden values score d={at.history[0].distance:.4f}", flush=True)
     if args.csv:
         with open(args.csv, "w", newline="", encoding="utf-8") as fh:

@@ -251,7 +251,8 @@ def test_match_objective_and_fit_survive_a_recording_without_off_events() -> Non
     obj = tune.MatchObjective(real, meta, roi=(2, 3, 12, 8))
     assert (obj.width, obj.height, obj.sensor_width, obj.sensor_height) == (12, 8, 20, 15)
     assert obj.prepare(scene)["sensor"]["roi"] == [2, 3, 12, 8]
-    result = tune.fit(real, meta, scene, params=["leak_rate_hz"], budget=2, roi=(2, 3, 12, 8), mask_pixels=[(5, 5)])
+    result = tune.fit(real, meta, scene,
+                      tune.FitOptions(params=["leak_rate_hz"], budget=2, roi=(2, 3, 12, 8), mask_pixels=[(5, 5)]))
     assert all(math.isfinite(r.distance) for r in result.history)
     assert result.roi == (2, 3, 12, 8) and result.mask is not None and result.mask[2, 3]
     report = result.to_json_dict()
@@ -264,7 +265,7 @@ def test_bad_regions_fail_before_anything_runs() -> None:
     with pytest.raises(ValueError, match=r"roi 15,0,10,10 .* not inside the 20x15 sensor"):
         tune.MatchObjective(ev, meta, roi=(15, 0, 10, 10))
     with pytest.raises(ValueError, match=r"roi 0,0,5,0 is empty"):
-        tune.fit(ev, meta, noise_scene(20, 15, 0.5), params=["leak_rate_hz"], budget=1, roi=(0, 0, 5, 0))
+        tune.fit(ev, meta, noise_scene(20, 15, 0.5), tune.FitOptions(params=["leak_rate_hz"], budget=1, roi=(0, 0, 5, 0)))
     with pytest.raises(ValueError, match=r"leaves no pixel of the roi 0,0,2,1"):
         tune.MatchObjective(ev, meta, roi=(0, 0, 2, 1), mask_pixels=[(0, 0), (1, 0)])
     with pytest.raises(ValueError, match="for objective 'match'"):

@@ -15,6 +15,8 @@ from ..tune import (
     DEFAULT_RATES_ARCSEC_S,
     OBJECTIVES,
     SAMPLERS,
+    STATISTICS,
+    FitOptions,
     draw_fit,
     draw_limiting_magnitude,
     draw_sweep,
@@ -75,13 +77,19 @@ def register(subparsers: Any) -> None:
         "--sampler",
         default="ls",
         choices=SAMPLERS,
-        help="ls: least squares on the chi-square of per-pixel counts from the scenario's values, each "
-        "step's derivatives one parallel batch (default; 9/10 on the full-size recovery benchmark); nm: "
+        help="ls: least squares on the chi-square of per-pixel counts and event timing (--statistics) from the "
+        "scenario's values, each step's derivatives one parallel batch (default); nm: "
         "Nelder-Mead on compare's distance; tpe: Optuna TPE, global; tpe+nm: TPE then Nelder-Mead; "
         "cmaes: CMA-ES (cmaes package), a generation a batch; random",
     )
     p.add_argument(
         "--batch-size", type=int, default=4, help="Optuna trials run in parallel per round (default 4)"
+    )
+    p.add_argument(
+        "--statistics", default=FitOptions.statistics, choices=STATISTICS,
+        help="the chi-square's statistics (--sampler ls): timing: the per-pixel counts and the statistics that "
+        "carry timing (delays after a source's passage, intervals between a pixel's events, ON/OFF "
+        "alternation); counts: the per-pixel counts alone (default %(default)s)",
     )
     p.add_argument(
         "--set",
@@ -216,33 +224,31 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     roi, pixels, mask_hot = region_args(args)
     out = check_output_dir(args.out if args.out else f"{Path(args.real).stem}_fit", args.force)
     events, meta = read_events(args.real, size=args.size)
-    result = fit(
-        events,
-        meta,
-        scenario,
+    options = FitOptions(
         params=params,
         budget=args.budget,
         runs_per_trial=args.runs_per_trial,
         seed=args.seed,
         bounds=bounds,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        progress=not args.no_progress,
         sampler=args.sampler,
         batch_size=args.batch_size,
         roi=roi,
         mask_pixels=pixels,
         mask_hot=mask_hot,
         intervals=args.intervals,
+        statistics=args.statistics,
     )
+    result = fit(events, meta, scenario, options, scheduler=args.scheduler, workers=args.workers,
+                 progress=not args.no_progress)
     with staged_folder(out) as stage:  # whole or not at all: Ctrl-C leaves no folder
         paths = result.write(stage.path)
         paths.update(draw_fit(result, stage.path))
     paths = {k: stage.final_of(v) for k, v in paths.items()}
     print(result.to_text())
+    figures = ", ".join(str(paths[k]) for k in ("convergence", "correlation") if k in paths)
     print(
         f"wrote {paths['best_toml']} (evstwin simulate {paths['best_toml']} -o OUT), {paths['history']}, "
-        f"{paths['json']}, {paths['convergence']} and the comparison in {out / 'compare'}"
+        f"{paths['json']}, {figures} and the comparison in {out / 'compare'}"
     )
     for f in result.failed:
         print(f"failed trial {f.key}: {f.error}", file=sys.stderr)

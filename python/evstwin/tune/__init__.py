@@ -6,7 +6,9 @@ Three entry points, each a grid or a search of independent simulations ("jobs"):
   (:data:`FIT_BOUNDS`) minimising a distance between a real recording and the simulated
   scenario: by default SciPy's trust-region least squares (``sampler='ls'``) from the
   scenario's values on the residuals of a low-noise chi-square of grouped per-pixel counts
-  (:mod:`.counts`, the ``runs_per_trial`` seeds averaged), its Jacobian one parallel batch of
+  (:mod:`.counts`) and of statistics that carry timing (:mod:`.timing`: delays after a
+  source's passage, intervals between a pixel's events, ON/OFF alternation), the
+  ``runs_per_trial`` seeds averaged, its Jacobian one parallel batch of
   trials; or SciPy's Nelder-Mead and Optuna (seeded TPE, CMA-ES, random; ask/tell, trials
   batched to the workers) on :func:`evstwin.validation.compare`'s distance (mean over the
   seeds) or, with ``distance='chi2'``, on the chi-square; see :data:`SAMPLERS`.
@@ -37,10 +39,13 @@ The package is laid out by the user's verbs and what they share:
 * :mod:`.bounds` -- parameter names, documented search bounds, scenario keys.
 * :mod:`.objectives` -- what a job measures: ``match``, ``detect``, ``noise``.
 * :mod:`.counts` -- the fit's chi-square distance (pixel groups by source light, count
-  histograms, Pearson terms of the seeds' mean).
+  histograms, Pearson terms of the seeds' mean); :mod:`.timing` -- the statistics that carry
+  timing beside the counts; :mod:`.identify` -- what the statistics can and cannot separate
+  (the identifiability report every least-squares fit prints).
 * :mod:`.execution` -- jobs on local worker processes or a Dask cluster, retries, progress.
 * :mod:`.fit`, :mod:`.sweep`, :mod:`.limits` -- the three verbs; each returns data and
-  writes its tables.
+  writes its tables. The fit's parts: :mod:`.options` (:class:`FitOptions`), :mod:`.search`
+  (the searches and why they stop), :mod:`.intervals`, :mod:`.result` (:class:`FitResult`).
 * :mod:`.figures` -- the figures of those results (matplotlib, the ``plot`` extra); no
   compute module imports it.
 """
@@ -65,7 +70,7 @@ from .figures import (
     plot_limiting_magnitude,
     plot_sweep,
 )
-from .fit import DISTANCES, SAMPLERS, FitResult, TrialRecord, fit
+from .fit import fit
 from .limits import (
     DEFAULT_MAGNITUDES,
     DEFAULT_RATES_ARCSEC_S,
@@ -88,7 +93,9 @@ from .objectives import (
     detect_metrics,
     make_objective,
 )
-from .sweep import SweepResult, parse_grid, sweep
+from .options import DISTANCES, SAMPLERS, STATISTICS, FitOptions
+from .result import FitResult, TrialRecord
+from .sweep import FitMatchObjective, SweepResult, parse_grid, sweep
 
 __all__ = [
     "CHI2_FORMULA",
@@ -100,6 +107,8 @@ __all__ = [
     "FIT_BOUNDS",
     "DaskExecutor",
     "DetectObjective",
+    "FitMatchObjective",
+    "FitOptions",
     "FitResult",
     "JOB_RETRIES",
     "JobFailure",
@@ -116,6 +125,7 @@ __all__ = [
     "Objective",
     "ParamBound",
     "SAMPLERS",
+    "STATISTICS",
     "SweepResult",
     "TrialRecord",
     "canonical_key",

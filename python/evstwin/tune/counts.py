@@ -67,14 +67,22 @@ def source_flux_map(scene: Any) -> np.ndarray:
     """(height, width) [photons/s]: per pixel, the largest photon rate any one of the
     scene's targets brings it over [0, duration] (the uniform background excluded). The
     targets are sampled at steps of at most :data:`FLUX_MAP_SHIFT_PX` of travel."""
+    return source_light_and_time(scene)[0]
+
+
+def source_light_and_time(scene: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(flux, passage), each (height, width): :func:`source_flux_map` and the time [s] of
+    that largest rate (the source's passage over the pixel; the earliest sample of a tie, to
+    the sampling of :data:`FLUX_MAP_SHIFT_PX` of travel; nan where no source light arrives)."""
     from .. import psf as psf_mod
 
     w, h = int(scene.width), int(scene.height)
     flat = np.zeros(w * h)
+    when = np.full(w * h, math.nan)
     duration_s = float(scene.duration_s)
     targets = list(scene.targets)
     if not targets:
-        return flat.reshape(h, w)
+        return flat.reshape(h, w), when.reshape(h, w)
     speed = max(float(t.max_speed_px_s(0.0, duration_s)) for t in targets)
     n = max(2, math.ceil(duration_s * speed / FLUX_MAP_SHIFT_PX) + 1)
     times = np.linspace(0.0, duration_s, n)
@@ -105,8 +113,16 @@ def source_flux_map(scene: Any) -> np.ndarray:
                     continue
                 keys, inverse = np.unique(np.concatenate([p[0] for p in parts]), return_inverse=True)
                 summed = np.bincount(inverse.reshape(-1), weights=np.concatenate([p[1] for p in parts]))
-                np.maximum.at(flat, keys % (w * h), summed)
-    return flat.reshape(h, w)
+                pix, sample = keys % (w * h), s0 + keys // (w * h)
+                # Each pixel's largest in this block (the earliest sample of a tie), then
+                # against the largest so far.
+                order = np.lexsort((sample, -summed, pix))
+                first = np.r_[True, pix[order][1:] != pix[order][:-1]]
+                top = order[first]
+                better = summed[top] > flat[pix[top]]
+                flat[pix[top][better]] = summed[top][better]
+                when[pix[top][better]] = t[sample[top][better] % t.size]
+    return flat.reshape(h, w), when.reshape(h, w)
 
 
 def pixel_groups(flux_map: np.ndarray, mask: np.ndarray | None = None,
@@ -186,7 +202,8 @@ class CountsObjective(MatchObjective):
         from ..scenario import build, set_value
 
         scene = build(set_value(self.prepare(dict(scenario)), "duration_s", self.duration_s))
-        self.groups = pixel_groups(source_flux_map(scene), self.mask, levels)
+        flux, self.passage_s = source_light_and_time(scene)
+        self.groups = pixel_groups(flux, self.mask, levels)
         self.n_groups = len(levels) + 1
         real = self.real_events
         top = 0
@@ -200,8 +217,20 @@ class CountsObjective(MatchObjective):
         self.edges = count_bin_edges(top)
         self.real_stats = count_statistics(real, self.width, self.height, self.groups, self.n_groups, self.edges)
 
+    def statistics(self, events: np.ndarray) -> np.ndarray:
+        """The statistics vector of one recording (of the compared region)."""
+        return count_statistics(events, self.width, self.height, self.groups, self.n_groups, self.edges)
+
+    def describe_statistics(self) -> list[str]:
+        """One label per statistic, for reports: 'counts g<group> ON|OFF bin <lower edge>' or '... total'."""
+        labels = []
+        for polarity in ("ON", "OFF"):
+            for g in range(self.n_groups):
+                labels += [f"counts g{g} {polarity} >= {e}" for e in self.edges] + [f"counts g{g} {polarity} total"]
+        return labels
+
     def evaluate(self, result: Any) -> dict[str, Any]:  # type: ignore[override]
-        stats = count_statistics(result.events, self.width, self.height, self.groups, self.n_groups, self.edges)
+        stats = self.statistics(result.events)
         return {"distance": chi2_distance(self.real_stats, [stats]), "stats": stats}
 
     def residuals(self, sims: Sequence[np.ndarray]) -> np.ndarray:

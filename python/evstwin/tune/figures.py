@@ -11,8 +11,9 @@ import numpy as np
 
 from .._extras import require
 from ._types import PathLike
-from .fit import FitResult, TrialRecord
+from .identify import Identifiability, short
 from .limits import LimitingMagnitudeResult
+from .result import FitResult, TrialRecord
 from .sweep import SweepResult, _fmt_value
 
 
@@ -49,6 +50,44 @@ def plot_convergence(history: Sequence[TrialRecord], path: PathLike) -> Path:
     ax.legend()
     fig.tight_layout()
     return plots.save(fig, Path(path))
+
+
+def plot_correlation(report: Identifiability, path: PathLike) -> Path:
+    """The identifiability report's correlation matrix as a heatmap (-1 blue .. +1 red, the
+    values written in), pairs beyond the warning level framed, and the weakest direction."""
+    Figure = require("matplotlib.figure").Figure
+
+    from .. import plots
+    from .options import CORRELATION_WARN
+
+    names = [short(p) for p in report.params]
+    n = len(names)
+    fig = Figure(figsize=(2.0 + 0.9 * n, 1.6 + 0.8 * n))
+    ax = fig.add_subplot(1, 1, 1)
+    corr = np.ma.masked_invalid(report.correlation)
+    im = ax.imshow(corr, cmap="RdBu_r", vmin=-1.0, vmax=1.0)
+    for i in range(n):
+        for j in range(n):
+            c = report.correlation[i, j]
+            ax.text(j, i, "nan" if not np.isfinite(c) else f"{c:+.2f}", ha="center", va="center", fontsize=8,
+                    color="white" if np.isfinite(c) and abs(c) > 0.6 else "black")
+            if i != j and np.isfinite(c) and abs(c) > CORRELATION_WARN:
+                ax.add_patch(plots_rectangle(j, i))
+    ax.set_xticks(range(n), names, rotation=40, ha="right", fontsize=8)
+    ax.set_yticks(range(n), names, fontsize=8)
+    fig.colorbar(im, ax=ax, label="correlation of the estimates")
+    sd, comp = report.weak_directions()[0] if n else (float("nan"), {})
+    along = ", ".join(f"{c:+.2f} {short(p)}" for p, c in sorted(comp.items(), key=lambda kv: -abs(kv[1])))
+    ax.set_title(textwrap.fill(f"weakest direction: sd {sd:.3g} of the (log) bound widths along {along}", 60),
+                 fontsize=8)
+    fig.tight_layout()
+    return plots.save(fig, Path(path))
+
+
+def plots_rectangle(x: int, y: int) -> Any:
+    """A black frame around cell (x, y) of a heatmap."""
+    Rectangle = require("matplotlib.patches").Rectangle
+    return Rectangle((x - 0.5, y - 0.5), 1.0, 1.0, fill=False, edgecolor="black", linewidth=2.0)
 
 
 _LABELS = {
@@ -263,12 +302,15 @@ def plot_limiting_magnitude(result: LimitingMagnitudeResult, path: PathLike) -> 
 
 
 def draw_fit(result: FitResult, out_dir: PathLike, comparison: bool = True) -> dict[str, Path]:
-    """``convergence.png`` and, with ``comparison``, the comparison of the best fit (simulated
+    """``convergence.png``, ``correlation.png`` (the identifiability report's, where the fit has
+    one) and, with ``comparison``, the comparison of the best fit (simulated
     with the first fit seed) in ``compare/`` (figures and compare.json of
     :func:`evstwin.validation.compare_files`). Returns {name: path}."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"convergence": plot_convergence(result.history, out / "convergence.png")}
+    if result.identifiability is not None:
+        paths["correlation"] = plot_correlation(result.identifiability, out / "correlation.png")
     if comparison:
         paths.update(_fit_comparison(result, out / "compare"))
     return paths

@@ -194,6 +194,45 @@ def _read_done(
     return list(rows.values())
 
 
+class FitMatchObjective(Objective):
+    """``sweep``'s objective 'match': the distance ``fit`` minimises by default, so that a sweep
+    and a fit rank the same points the same way. Metrics: ``distance``, the fit's chi-square
+    of this seed alone (K = 1; :mod:`evstwin.tune.counts`' counts and
+    :mod:`evstwin.tune.timing`'s statistics, the pixel groups of the sweep's scenario);
+    ``compare_distance``, :func:`evstwin.validation.compare`'s (the paper's figure of merit);
+    and compare's ``total_rel_error``, ``on_off_ratio_rel_error``, ``sim_events``. The region
+    (ROI, masks) and the duration are ``match``'s."""
+
+    name = "match"
+    metrics: tuple[str, ...] = ("distance", "compare_distance", "total_rel_error", "on_off_ratio_rel_error",
+                                "sim_events")
+    headline = ("distance",)
+
+    def __init__(self, match: MatchObjective, chi2: Any) -> None:
+        self.match = match
+        self.chi2 = chi2
+        self.duration_s = match.duration_s
+
+    def prepare(self, scenario: dict[str, Any]) -> dict[str, Any]:
+        return self.match.prepare(scenario)
+
+    def check(self, scene: Any) -> None:
+        self.match.check(scene)
+
+    def evaluate(self, result: Any) -> dict[str, float]:
+        from .counts import chi2_distance
+
+        m = self.match.evaluate(result)
+        stats = self.chi2.statistics(result.events)
+        return {
+            "distance": chi2_distance(self.chi2.real_stats, [stats]),
+            "compare_distance": m["distance"],
+            "total_rel_error": m["total_rel_error"],
+            "on_off_ratio_rel_error": m["on_off_ratio_rel_error"],
+            "sim_events": m["sim_events"],
+        }
+
+
 def sweep(
     scenario: str | Path | dict,
     grid: Mapping[str, Sequence[Any]],
@@ -219,8 +258,10 @@ def sweep(
     grid: {scenario key: [values]} (keys as in ``--set``; bare PixelParams fields mean
         ``pixel.<name>``, bare bias currents ``biases.<name>``); points in product order,
         the first key varying slowest.
-    objective: 'match' (needs ``real``: events and meta, or a file), 'detect' (``target``:
-        a moving target's label, default the first), 'noise', or an :class:`Objective`.
+    objective: 'match' (needs ``real``: events and meta, or a file; scored by
+        :class:`FitMatchObjective`: the fit's default distance, and compare's), 'detect'
+        (``target``: a moving target's label, default the first), 'noise', or an
+        :class:`Objective`.
     duration_s: simulated duration [s] (default the scenario's; for 'match' the real one).
     sets: extra ``key=value`` overrides of the scenario.
     roi, mask_pixels, mask_hot: for 'match', the region compared (see :class:`MatchObjective`):
@@ -261,6 +302,13 @@ def sweep(
                 f"scenario sensor is {w}x{h} px but the real recording is {obj.sensor_width}x{obj.sensor_height}: "
                 "set sensor.width / sensor.height"
             )
+        if objective == "match" and real is not None:  # by name: the fit's distance beside compare's
+            from .objectives import _read_real
+            from .timing import TimingObjective
+
+            events, meta = _read_real(real)
+            obj = FitMatchObjective(obj, TimingObjective(events, meta, base, roi=roi, mask_pixels=mask_pixels,
+                                                         mask_hot=mask_hot))
     seeds = [seed + k for k in range(runs)]
     header = ["point", *keys, "seed", *obj.metrics]
     csv_path = summary_path = None
