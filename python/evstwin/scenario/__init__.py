@@ -95,16 +95,11 @@ dict can be written beside the events and read back; ``set_value`` applies the C
 
 from __future__ import annotations
 
-from ..constants import RAD_PER_ARCSEC
 from .assignment import parse_assignment, set_value
 from .building import Scene, build
 from .hot_pixels import HOT_PIXEL_CHAIN_KEYS, MAX_HOT_PIXEL_RATE_HZ
 from .limits import MAX_CHUNK_BYTES, MAX_PHOTON_RATE, MAX_PSF_SIGMA_PX, MAX_SAMPLES, pre_roll_samples
 from .schema import DEFAULT_SAMPLING, SCHEMA, ScenarioError, builtin_names, load, resolve, to_toml
-
-ARCSEC_RAD = RAD_PER_ARCSEC
-"""Radians per arcsecond: the old name of :data:`evstwin.constants.RAD_PER_ARCSEC`, kept only
-for ``tune/limits.py`` until it uses ``Optics.plate_scale_arcsec_per_px``."""
 
 __all__ = [
     "DEFAULT_SAMPLING",

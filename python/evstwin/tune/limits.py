@@ -28,8 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from ..optics import ARCSEC_PER_RAD, PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M
-from ..scenario import ARCSEC_RAD, build, load, parse_assignment, set_value
+from .._checks import finite, positive
+from ..constants import ARCSEC_PER_RAD
+from ..optics import PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M
+from ..scenario import build, load, parse_assignment, set_value
 from ..sky.earth import EARTH_ROTATION_RAD_S
 from ._types import PathLike
 from .objectives import DetectObjective
@@ -130,16 +132,16 @@ class Setup:
         if self.pointing not in POINTINGS:
             raise ValueError(f"pointing must be one of {', '.join(POINTINGS)}; got pointing={self.pointing!r}")
         for name in ("focal_length_m", "duration_s", "rate_hz"):
-            _check_positive(name, getattr(self, name))
+            positive(name, getattr(self, name))
         if self.f_number is None and self.aperture_diameter_m is None:
             raise ValueError("give f_number or aperture_diameter_m (the lens); got neither")
         for name in ("f_number", "aperture_diameter_m", "seeing_fwhm_arcsec"):
             if getattr(self, name) is not None:
-                _check_positive(name, getattr(self, name))
-        dec = _check_finite("declination_deg", self.declination_deg)
+                positive(name, getattr(self, name))
+        dec = finite("declination_deg", self.declination_deg)
         if not -90.0 < dec < 90.0:
             raise ValueError(f"declination_deg must be in (-90, 90); got declination_deg={self.declination_deg!r}")
-        sky = _check_finite("sky_mag_per_arcsec2", self.sky_mag_per_arcsec2)
+        sky = finite("sky_mag_per_arcsec2", self.sky_mag_per_arcsec2)
         if not 10.0 <= sky <= 30.0:
             raise ValueError(f"sky_mag_per_arcsec2 must be in [10, 30]; got sky_mag_per_arcsec2={self.sky_mag_per_arcsec2!r}")
         for name in ("width_px", "height_px"):
@@ -193,7 +195,7 @@ class Setup:
 
         preset = get_preset(self.preset)
         d = self.aperture_diameter_m if self.aperture_diameter_m is not None else self.focal_length_m / self.f_ratio
-        scale = preset.pixel_pitch_m / self.focal_length_m * 180.0 * 3600.0 / math.pi
+        scale = preset.pixel_pitch_m / self.focal_length_m * ARCSEC_PER_RAD
         bias = f", biases {self.bias_set}" if self.bias_set else ""
         seeing = "no seeing" if self.seeing_fwhm_arcsec is None else f"seeing {self.seeing_fwhm_arcsec:g}\""
         extra = (f", jitter {self.jitter_rms_arcsec:g}\"" if self.jitter_rms_arcsec > 0 else "") + (
@@ -201,19 +203,6 @@ class Setup:
         return (f"{preset.name}{bias}; {self.focal_length_m * 1e3:g} mm f/{self.f_ratio:.3g} (D {d * 1e3:.3g} mm), "
                 f"{scale:.3g}\"/px; sky {self.sky_mag_per_arcsec2:g} mag/arcsec2, {seeing}{extra}; {self.pointing} "
                 f"pointing, dec {self.declination_deg:g} deg")
-
-
-def _check_finite(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number; got {name}={value!r}")
-    return float(value)
-
-
-def _check_positive(name: str, value: Any) -> float:
-    v = _check_finite(name, value)
-    if not v > 0.0:
-        raise ValueError(f"{name} must be > 0; got {name}={value!r}")
-    return v
 
 
 def static_detect_metrics(events: np.ndarray, width: int, height: int, duration_s: float, x_px: float, y_px: float,
@@ -267,7 +256,7 @@ class PointingDetectObjective(DetectObjective):
         super().__init__(target=target, radius_px=radius_px, tail_s=tail_s, exclude_px=exclude_px)
         if pointing not in POINTINGS:
             raise ValueError(f"pointing must be one of {', '.join(POINTINGS)}; got pointing={pointing!r}")
-        dec = _check_finite("declination_deg", declination_deg)
+        dec = finite("declination_deg", declination_deg)
         if not -90.0 < dec < 90.0:
             raise ValueError(f"declination_deg must be in (-90, 90); got declination_deg={declination_deg!r}")
         self.pointing = pointing
@@ -508,7 +497,7 @@ def limiting_magnitude(
         progress=progress,
         job_seconds=job_seconds,
     )
-    plate_arcsec = build(base).optics.plate_scale_rad_per_px / ARCSEC_RAD
+    plate_arcsec = build(base).optics.plate_scale_arcsec_per_px
     setup_text = setup.describe() if setup is not None else f"scenario {base['name']}; {pointing} pointing"
     if sets:
         setup_text += "; " + ", ".join(sets)
