@@ -64,7 +64,9 @@ def preset_stats(preset: str, photon_rate: float, rate_hz: float, duration_s: fl
     on = off = 0
     counts = np.zeros(side * side, np.int64)
     frame = np.full((1, side, side), photon_rate)
-    for k0 in range(1, n + 1, per):
+    # The first sample, at t = 0, only sets the steady state (Sensor.run): every rate then
+    # simulates the whole duration.
+    for k0 in range(0, n + 1, per):
         t = np.arange(k0, min(n + 1, k0 + per)) / rate_hz
         ev = sensor.run(np.broadcast_to(frame, (len(t), side, side)), t)
         n_on = int(np.count_nonzero(ev["p"]))

@@ -31,7 +31,8 @@ The tables mirror the Python objects:
                   ``pre_roll_rate_hz`` (its sampling rate; default ``rate_hz``) and
                   ``static_step_s`` (the longest step of a pixel whose light is constant,
                   in a sparse run with the continuous noise model and the exact low-pass;
-                  default 0.2, 0 = every pixel at ``rate_hz``; ``simulate``).
+                  default 0: every pixel at ``rate_hz``; the noise model page says where
+                  long steps keep the statistics; ``simulate``).
 ``[background]``  ``photon_rate_ph_s`` per pixel, or ``sky_mag_per_arcsec2``.
 ``[photometry]``  how magnitudes become electrons on a preset with a QE curve
                   (``evstwin.spectra``): ``band`` (``"V"``, default, ``"G"`` or a CSV of

@@ -95,7 +95,7 @@ SCHEMA: dict[str, Any] = {
     "pointing": {k: Any for k in sky_scene.POINTING_KEYS},
 }
 DEFAULT_SAMPLING = {"rate_hz": 1000.0, "max_shift_px": 0.25, "sparse": True, "chunk_samples": 50,
-                    "static_step_s": 0.2}
+                    "static_step_s": 0.0}
 
 
 # -- loading ------------------------------------------------------------------------------------
