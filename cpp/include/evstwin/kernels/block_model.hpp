@@ -705,11 +705,12 @@ struct BlockModel : PixelModel {
         q.l_zz = common.k.l_zz; q.l_yz = common.k.l_yz; q.l_yy = common.k.l_yy;
         q.bridge_bound = common.bridge_bound;
         q.sf_decay = c.sf_decay; q.sf_ramp = c.sf_ramp; q.dt = c.dt; q.inv_dt = c.inv_dt; q.t0 = c.t0; q.t1 = c.t1;
-        // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling,
-        // and with the source follower alone over an interval longer than SF_REFINE_BH / b.
+        // continuous_finish() refines (rather than bridges) behind a pole faster than the sampling
+        // (pole_refine_ah), and with the source follower alone over an interval longer than
+        // SF_REFINE_BH / b.
         q.bridge_stage = common.k.bridge_var > 0.0 &&
                          (sf_only ? !(noise && sf_rate() * c.dt > SF_REFINE_BH)
-                                  : !(noise && common.a > 0.0 && common.a * c.dt > 1.0));
+                                  : !(noise && common.a > 0.0 && common.a * c.dt > pole_refine_ah(common.a)));
         h.sf_only = sf_only;
         detail::quiet_pass<Chain>(q, rate, noise, background);
         std::uint64_t* busy = h.busy.data();
