@@ -173,6 +173,34 @@ struct TraceSample {
     double reference;    ///< the comparator reference at the end of the interval
 };
 
+/// Eq. 12's background events of one sample interval, in time order, as the comparator takes
+/// them (PixelModel::compare): each resets the reference where the pixel is not refractory. The
+/// sampled model draws at most one an interval; the continuous model's clocks fire as often as
+/// they run out, so a long interval keeps every event of a busy clock (MAX: a clock of 100 Hz
+/// over 0.2 s fires ~20 times; the 65th of one interval and later are dropped).
+struct NoisePulses {
+    static constexpr int MAX = 64;
+    int n = 0, next = 0;
+    double t[MAX];
+    std::uint8_t pol[MAX];
+    /// Whether a pulse not yet taken lies at or before t1 (the comparator's interval end).
+    bool due(double t1) const { return next < n && t[next] <= t1; }
+    double time() const { return t[next]; }
+    int polarity() const { return pol[next]; }
+    void take() { ++next; }
+    void add(double t_s, int polarity) {
+        if (n == MAX) return;
+        // Insertion in time order (a few, most often one): ties keep the order they came in.
+        int i = n++;
+        for (; i > 0 && t[i - 1] > t_s; --i) {
+            t[i] = t[i - 1];
+            pol[i] = pol[i - 1];
+        }
+        t[i] = t_s;
+        pol[i] = static_cast<std::uint8_t>(polarity);
+    }
+};
+
 }  // namespace evstwin
 
 EVSTWIN_FP_STRICT_END
