@@ -243,12 +243,7 @@ class _Runner:
             else:
                 # A sub-sampled unit, whole: a base-rate chunk never ends inside one.
                 self.sub_sampled_chunks += 1
-                k = np.arange(a + 1, b + 1)
-                t_base = k * self.dt
-                i = np.arange(1, n_sub + 1)
-                # Fine times: the base times themselves where i == n_sub, exactly.
-                t_fine = np.where(i[None, :] == n_sub, (k[:, None]) * self.dt,
-                                  (k[:, None] - 1 + i[None, :] / n_sub) * self.dt).reshape(-1)
+                t_base, t_fine = self._fine_times(a, b, n_sub)
                 if self.scene.sparse:
                     yield self._sparse(t_fine, t_base)
                 else:
@@ -330,11 +325,7 @@ class _Runner:
             if fast_groups:
                 n_sub = self._n_sub(a * self.dt, b * self.dt)
                 self.sub_sampled_chunks += n_sub > 1
-                k = np.arange(a + 1, b + 1)
-                t_base = k * self.dt
-                i = np.arange(1, n_sub + 1)
-                t_fine = np.where(i[None, :] == n_sub, (k[:, None]) * self.dt,
-                                  (k[:, None] - 1 + i[None, :] / n_sub) * self.dt).reshape(-1)
+                t_base, t_fine = self._fine_times(a, b, n_sub)
                 x, y, f = self._sources(t_fine)
                 lit = self._lit(x, y, f, fast_groups)
                 settling = (self.settle_until > a * self.dt) & ~lit
@@ -370,6 +361,15 @@ class _Runner:
                 bar.n = min(round(b * self.dt, 6), bar.total)
                 bar.update(0)
             a = b
+
+    def _fine_times(self, a: int, b: int, n_sub: int) -> tuple[np.ndarray, np.ndarray]:
+        """The base times of intervals a+1..b and their n_sub fine times each [s]: the base
+        times themselves where the fine index reaches n_sub, exactly."""
+        k = np.arange(a + 1, b + 1)
+        i = np.arange(1, n_sub + 1)
+        t_fine = np.where(i[None, :] == n_sub, (k[:, None]) * self.dt,
+                          (k[:, None] - 1 + i[None, :] / n_sub) * self.dt).reshape(-1)
+        return k * self.dt, t_fine
 
     def _n_sub(self, t0: float, t1: float) -> int:
         if not self.moving:

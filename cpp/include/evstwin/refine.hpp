@@ -16,6 +16,19 @@ EVSTWIN_FP_STRICT_BEGIN
 
 namespace evstwin {
 
+namespace detail {
+/// Piece i (1..m) of an interval c cut into m pieces of length h: its ends exactly the
+/// interval's at i = 1 and i = m.
+inline SampleConstants refined_piece(const SampleConstants& c, int i, int m, double h) {
+    SampleConstants piece = c;
+    piece.t0 = i == 1 ? c.t0 : c.t0 + (i - 1) * h;
+    piece.t1 = i == m ? c.t1 : c.t0 + i * h;
+    piece.dt = piece.t1 - piece.t0;
+    piece.inv_dt = 1.0 / piece.dt;
+    return piece;
+}
+}  // namespace detail
+
 template <class Emit>
 void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double yd1, double nz1, double ny1,
                                     const SampleConstants& c, double leak_g, double a, double D, NoisePulses& pulses,
@@ -87,11 +100,7 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
             zi = detail::low_pass_exact(z_prev, x_prev, xi, pole_decay, pole_ramp);
             ydi = detail::low_pass_exact(yd_prev, z_prev, zi, sf_decay, sf_ramp);
         }
-        SampleConstants piece = c;
-        piece.t0 = i == 1 ? c.t0 : c.t0 + (i - 1) * h;
-        piece.t1 = i == m ? c.t1 : c.t0 + i * h;
-        piece.dt = piece.t1 - piece.t0;
-        piece.inv_dt = 1.0 / piece.dt;
+        const SampleConstants piece = detail::refined_piece(c, i, m, h);
         // The background's events due by the piece's end are its own (compare takes them).
         compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, pulses, key, pixel,
                         PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
@@ -139,11 +148,7 @@ void PixelModel::refine_sf_and_compare(PixelState& s, double x1, double yd1, dou
             xi = s.z + (x1 - s.z) * (static_cast<double>(i) / m);
             ydi = detail::low_pass_exact(yd_prev, x_prev, xi, sf_decay, sf_ramp);
         }
-        SampleConstants piece = c;
-        piece.t0 = i == 1 ? c.t0 : c.t0 + (i - 1) * h;
-        piece.t1 = i == m ? c.t1 : c.t0 + i * h;
-        piece.dt = piece.t1 - piece.t0;
-        piece.inv_dt = 1.0 / piece.dt;
+        const SampleConstants piece = detail::refined_piece(c, i, m, h);
         // The background's events due by the piece's end are its own (compare takes them).
         compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, pulses, key, pixel,
                         PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
