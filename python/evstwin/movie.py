@@ -7,7 +7,11 @@ linear, window or cumulative with time constant ``tau_s``) through a diverging c
 OFF colour -> background -> ON colour, then encoded by faery's MP4 (H.264) or GIF encoder.
 Where the file holds the simulation's ground truth (``meta['truth']``: ``t_s``, ``x_px``,
 ``y_px`` of each target), each target's true place at the frame's time is drawn as a square
-outline in its own colour (the legend is printed). The file appears under its name only once
+outline in its own colour (the legend is printed). With ``color_by='label'`` a file with a label
+column (``evstwin simulate --labels``) shows why each event fired: the signal's events in the
+ON/OFF colours, each kind of noise (shot noise, leak, background, hot pixel) in its own colour;
+faery renders each kind as its own layer, with the same decay, and a pixel takes the colour of
+the layer that stands out most from the background there. The file appears under its name only once
 it is complete: it is written under a hidden name beside it and renamed at the end; an error
 or Ctrl-C removes it.
 """
@@ -28,7 +32,7 @@ import numpy as np
 from ._extras import require
 from .io import iter_events
 from .io._common import one_line, remove_quietly, temporary_path, to_faery
-from .sensor import EVENT_DTYPE
+from .sensor import EVENT_DTYPE, EVENT_LABELS
 
 DECAYS = ("exponential", "linear", "window", "cumulative")
 SUFFIXES = (".mp4", ".gif")
@@ -36,6 +40,11 @@ MAX_FRAMES = 100_000
 """Most frames one movie may have (a typo in --frame-rate or --speed otherwise renders for hours)."""
 TRUTH_COLORS = ("#FFD700", "#00BFFF", "#FF69B4", "#7FFF00", "#FFA500", "#BA55D3", "#40E0D0", "#FFFFFF")
 """Colours of the ground-truth markers, one per target in the file's order (repeating)."""
+COLOR_BY = ("polarity", "label")
+LABEL_COLORS: dict[int, str] = {1: "#E040FB", 2: "#FF7043", 3: "#9E9E9E", 4: "#FF1744"}
+"""Colour of each noise label (codes of ``EVENT_LABELS`` other than 0, the signal) with ``color_by='label'``."""
+SIGNAL = 0
+"""The label code of the signal's events (``EVENT_LABELS[0]``)."""
 _HEX = re.compile(r"^#?([0-9a-fA-F]{6})$")
 
 
@@ -60,6 +69,8 @@ class MovieOptions:
     scale: int = 1
     """Each sensor pixel becomes scale x scale video pixels (nearest)."""
     truth: bool = True
+    color_by: str = "polarity"
+    """'polarity': every event in the ON/OFF colours; 'label': noise events in their label's colour."""
 
     @property
     def frame_span_s(self) -> float:
@@ -77,6 +88,7 @@ class MovieOptions:
             (self.tau_s is None or (math.isfinite(self.tau_s) and self.tau_s > 0), "--tau", self.tau_s,
              "must be > 0 s"),
             (1 <= self.scale <= 16, "--scale", self.scale, "must be an integer in 1..16"),
+            (self.color_by in COLOR_BY, "--color-by", self.color_by, f"must be one of {', '.join(COLOR_BY)}"),
         ]
         for ok, option, value, rule in checks:
             if not ok:
@@ -105,6 +117,7 @@ class Movie:
     window_us: tuple[int, int]
     events: int
     legend: dict[str, str]
+    """What each colour means: a label or a target ("truth NAME") -> its colour(s)."""
 
 
 def render_movie(path_in: str | os.PathLike[str], out: str | os.PathLike[str], options: MovieOptions,
@@ -118,7 +131,7 @@ def render_movie(path_in: str | os.PathLike[str], out: str | os.PathLike[str], o
     if out.suffix.lower() not in SUFFIXES:
         raise ValueError(f"--out {out}: a movie is .mp4 or .gif; got the suffix {out.suffix!r}")
     faery = require("faery", "movies")
-    events, meta, window = _window(path_in, options, size)
+    events, labels, meta, window = _window(path_in, options, size)
     width, height = int(meta["width"]), int(meta["height"])
     span_us = window[1] - window[0]
     period_us = options.frame_span_s * 1e6
@@ -132,20 +145,36 @@ def render_movie(path_in: str | os.PathLike[str], out: str | os.PathLike[str], o
     off, bg, on = (parse_color(c, o) for c, o in ((options.off_color, "--off-color"),
                                                   (options.background, "--background"),
                                                   (options.on_color, "--on-color")))
-    colormap = faery.Colormap.diverging_from_triplet("evstwin-on-off", _hex(off), _hex(bg), _hex(on))
-    stream = (faery.events_stream_from_array(to_faery(events), (width, height))
-              .time_slice(window[0] * faery.us, (window[0] + round(frames * period_us)) * faery.us)
-              .regularize(frequency_hz=1e6 / period_us, start=window[0] * faery.us)
-              .render(decay=options.decay, tau=tau_us * faery.us, colormap=colormap))
-    if options.scale > 1:
-        stream = stream.scale(options.scale)
+    frames_us = (window[0], window[0] + round(frames * period_us))
+
+    def rendered(chosen: np.ndarray, low: tuple[int, int, int], high: tuple[int, int, int]) -> Any:
+        """faery's frames of ``chosen`` events over the whole window (empty frames included)."""
+        colormap = faery.Colormap.diverging_from_triplet("evstwin", _hex(low), _hex(bg), _hex(high))
+        stream = (_window_array_class()(to_faery(chosen), (width, height), frames_us)
+                  .regularize(frequency_hz=1e6 / period_us, start=window[0] * faery.us)
+                  .render(decay=options.decay, tau=tau_us * faery.us, colormap=colormap))
+        return stream.scale(options.scale) if options.scale > 1 else stream
+
+    legend: dict[str, str] = {}
+    layers: list[Any] = []
+    if labels is None:
+        stream = rendered(events, off, on)
+    else:  # the signal in the ON/OFF colours below one layer per kind of noise in the window
+        stream = rendered(events[labels == SIGNAL], off, on)
+        legend[EVENT_LABELS[SIGNAL]] = f"ON {_hex(on)}, OFF {_hex(off)}"
+        for code, color in LABEL_COLORS.items():
+            if (labels == code).any():
+                rgb = parse_color(color, "label colour")
+                layers.append(rendered(events[labels == code], rgb, rgb))
+                legend[EVENT_LABELS[code]] = color
     tracks = _truth_tracks(meta) if options.truth else {}
-    legend = {name: TRUTH_COLORS[i % len(TRUTH_COLORS)] for i, name in enumerate(tracks)}
+    truth_legend = {name: TRUTH_COLORS[i % len(TRUTH_COLORS)] for i, name in enumerate(tracks)}
+    legend.update({f"truth {name}": f"{color} square" for name, color in truth_legend.items()})
     video = (width * options.scale, height * options.scale)
     if out.suffix.lower() == ".mp4":  # H.264 (yuv420) takes even sizes: one background row/column more
         video = (video[0] + video[0] % 2, video[1] + video[1] % 2)
-    if tracks or video != (width * options.scale, height * options.scale):
-        stream = _Finish(stream, tracks, legend, options.scale, (width, height), video, bg)
+    if tracks or layers or video != (width * options.scale, height * options.scale):
+        stream = _Finish(stream, layers, tracks, truth_legend, options.scale, (width, height), video, bg)
     done = [0]
 
     def on_progress(state: Any) -> None:
@@ -178,16 +207,24 @@ def _hex(rgb: tuple[int, int, int]) -> str:
     return "#{:02X}{:02X}{:02X}".format(*rgb)
 
 
-def _window(path: str | os.PathLike[str], options: MovieOptions,
-            size: tuple[int, int] | None) -> tuple[np.ndarray, Mapping[str, Any], tuple[int, int]]:
+def _window(path: str | os.PathLike[str], options: MovieOptions, size: tuple[int, int] | None
+            ) -> tuple[np.ndarray, np.ndarray | None, Mapping[str, Any], tuple[int, int]]:
     """The events of the window [first + t0, first + t0 + duration) in one pass over the file
-    (memory: the window's events), the file's meta and the window [us]."""
+    (memory: the window's events), their labels (``color_by='label'``; else None), the file's
+    meta and the window [us]."""
     stream = iter_events(path, size=size)
+    by_label = options.color_by == "label"
+    if by_label and not stream.meta.get("has_labels"):
+        raise ValueError(f"--color-by label: {path} has no label column (simulate with --labels; "
+                         ".h5, .npz, .txt and .csv files carry one)")
+    chunks: Iterator[tuple[np.ndarray, np.ndarray | None]] = (
+        stream.labeled() if by_label else ((chunk, None) for chunk in stream))
     kept: list[np.ndarray] = []
+    kept_labels: list[np.ndarray] = []
     first: int | None = None
     last: int | None = None
     start = end = 0
-    for chunk in stream:
+    for chunk, chunk_labels in chunks:
         if not len(chunk):
             continue
         if first is None:
@@ -199,6 +236,8 @@ def _window(path: str | os.PathLike[str], options: MovieOptions,
         keep = (t >= start) if options.duration_s is None else ((t >= start) & (t < end))
         if keep.any():
             kept.append(chunk[keep])
+            if chunk_labels is not None:
+                kept_labels.append(chunk_labels[keep])
     if first is None or last is None:
         raise ValueError(f"{path} holds no events: nothing to show")
     if start > last:
@@ -207,8 +246,29 @@ def _window(path: str | os.PathLike[str], options: MovieOptions,
     if options.duration_s is None:
         end = last + 1
     events = np.concatenate(kept) if kept else np.empty(0, EVENT_DTYPE)
-    events = events[np.argsort(events["t"], kind="stable")] if len(events) > 1 else events
-    return events, stream.meta, (start, end)
+    labels = (np.concatenate(kept_labels) if kept_labels else np.empty(0, np.uint8)) if by_label else None
+    if len(events) > 1:
+        order = np.argsort(events["t"], kind="stable")
+        events = events[order]
+        labels = labels[order] if labels is not None else None
+    return events, labels, stream.meta, (start, end)
+
+
+def _window_array_class() -> Any:
+    faery = require("faery", "movies")
+
+    class WindowArray(faery.events_stream.Array):  # type: ignore[misc, name-defined]
+        """faery's array of events with the movie's window as its time range, so that every layer
+        has a frame for every period of the window, before the first event and after the last."""
+
+        def __init__(self, events: np.ndarray, dimensions: tuple[int, int], window_us: tuple[int, int]) -> None:
+            super().__init__(events, dimensions)
+            self.window_us = window_us
+
+        def time_range(self) -> tuple[Any, Any]:
+            return (faery.Time(microseconds=self.window_us[0]), faery.Time(microseconds=self.window_us[1]))
+
+    return WindowArray
 
 
 def _truth_tracks(meta: Mapping[str, Any]) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -228,13 +288,16 @@ def _finish_class() -> Any:
     faery = require("faery", "movies")
 
     class Finish(faery.frame_stream.FiniteRegularFrameFilter):  # type: ignore[misc, name-defined]
-        """Square outlines at each target's true place at the frame's time; frames padded
-        with the background to ``video`` (width, height)."""
+        """The layers of the other labels over the parent's frames (each pixel from the layer
+        farthest from the background), square outlines at each target's true place at the
+        frame's time; frames padded with the background to ``video`` (width, height)."""
 
-        def __init__(self, parent: Any, tracks: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+        def __init__(self, parent: Any, layers: list[Any],
+                     tracks: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
                      legend: Mapping[str, str], scale: int, sensor: tuple[int, int], video: tuple[int, int],
                      background: tuple[int, int, int]) -> None:
             self.init(parent=parent)
+            self.layers = layers
             self.tracks = tracks
             self.colors = {name: parse_color(legend[name], "legend") for name in tracks}
             self.scale = scale
@@ -246,11 +309,12 @@ def _finish_class() -> Any:
             return self.video
 
         def __iter__(self) -> Iterator[Any]:
-            for frame in self.parent:
+            for frame, *others in zip(self.parent, *self.layers, strict=True):
                 pixels = np.empty((self.video[1], self.video[0], 4), np.uint8)
                 pixels[...] = self.background
                 rows, cols = frame.pixels.shape[:2]
-                pixels[:rows, :cols] = frame.pixels
+                pixels[:rows, :cols] = over_background([frame.pixels, *(o.pixels for o in others)],
+                                                       self.background)
                 t_us = float(frame.t.to_microseconds())
                 for name, (t, x, y) in self.tracks.items():
                     if not t[0] <= t_us <= t[-1]:
@@ -262,9 +326,20 @@ def _finish_class() -> Any:
     return Finish
 
 
-def _Finish(parent: Any, tracks: Any, legend: Any, scale: int, sensor: tuple[int, int],  # noqa: N802
-            video: tuple[int, int], background: tuple[int, int, int]) -> Any:
-    return _finish_class()(parent, tracks, legend, scale, sensor, video, background)
+def _Finish(parent: Any, layers: list[Any], tracks: Any, legend: Any, scale: int,  # noqa: N802
+            sensor: tuple[int, int], video: tuple[int, int], background: tuple[int, int, int]) -> Any:
+    return _finish_class()(parent, layers, tracks, legend, scale, sensor, video, background)
+
+
+def over_background(layers: list[np.ndarray], background: np.ndarray) -> np.ndarray:
+    """Per pixel, the RGBA value of the layer farthest from ``background`` (summed |RGB|
+    difference; the first layer where they tie): the composite of layers drawn on one background."""
+    if len(layers) == 1:
+        return layers[0]
+    stack = np.stack(layers)
+    distance = np.abs(stack[..., :3].astype(np.int16) - background[:3].astype(np.int16)).sum(axis=-1)
+    choice = np.argmax(distance, axis=0)
+    return np.take_along_axis(stack, choice[None, ..., None], axis=0)[0]
 
 
 MARKER_HALF_PX = 3
@@ -293,4 +368,5 @@ def draw_square(pixels: np.ndarray, x_px: float, y_px: float, rgb: tuple[int, in
                 pixels[max(y0, 0):min(y1 + 1, rows), xx] = color
 
 
-__all__ = ["DECAYS", "MovieOptions", "Movie", "draw_square", "parse_color", "render_movie"]
+__all__ = ["COLOR_BY", "DECAYS", "LABEL_COLORS", "MovieOptions", "Movie", "draw_square", "over_background",
+           "parse_color", "render_movie"]

@@ -9,17 +9,18 @@ import pytest
 
 from evstwin.cli import main
 from evstwin.io import write_events
-from evstwin.movie import MovieOptions, render_movie
-from evstwin.sensor import EVENT_DTYPE
+from evstwin.movie import LABEL_COLORS, MovieOptions, over_background, parse_color, render_movie
+from evstwin.sensor import EVENT_DTYPE, EVENT_LABELS
 
 Image = pytest.importorskip("PIL.Image", reason="Pillow comes with matplotlib")
 
 ON, OFF, GOLD = (0, 255, 0), (255, 0, 0), (255, 215, 0)
 
 
-def recording(path: Path, truth: bool = False) -> Path:
+def recording(path: Path, truth: bool = False, labels: bool = False) -> Path:
     """A 32 x 24 recording spanning 200 ms: an ON event at (5, 7) and an OFF event at (20, 10)
-    10 ms in, and two events at (0, 0) that open and close the span."""
+    10 ms in, and two events at (0, 0) that open and close the span. With ``labels``: the ON
+    event is the signal's, the OFF event shot noise, the two at (0, 0) a hot pixel's."""
     events = np.zeros(4, EVENT_DTYPE)
     events["t"] = [0, 10_000, 10_000, 199_999]
     events["x"] = [0, 5, 20, 0]
@@ -29,7 +30,7 @@ def recording(path: Path, truth: bool = False) -> Path:
     if truth:  # a target standing at (10, 12) for the whole span
         meta["truth"] = {"sat": {"t_s": np.array([0.0, 0.2]), "x_px": np.array([10.0, 10.0]),
                                  "y_px": np.array([12.0, 12.0]), "flux_ph_s": np.array([1e6, 1e6])}}
-    write_events(path, events, meta)
+    write_events(path, events, meta, labels=np.array([4, 0, 1, 4], np.uint8) if labels else None)
     return path
 
 
@@ -79,6 +80,39 @@ def test_the_ground_truth_is_drawn_where_the_file_has_it(tmp_path: Path) -> None
     assert close(frames(tmp_path / "n.gif")[0][9, 10], (0, 0, 0))
 
 
+def test_labels_as_colours_show_why_each_event_fired(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    rec = recording(tmp_path / "l.h5", labels=True)
+    out = tmp_path / "l.gif"
+    assert main(["movie", str(rec), "--out", str(out), "--frame-rate", "25", "--decay", "window", "--color-by",
+                 "label", "--on-color", "#00FF00", "--off-color", "#FF0000", "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    first = frames(out)[0]
+    assert close(first[7, 5], ON)                                   # the signal's ON event: the ON colour
+    assert close(first[10, 20], parse_color(LABEL_COLORS[1], ""))   # an OFF event of shot noise: its label's
+    assert close(first[0, 0], parse_color(LABEL_COLORS[4], ""))     # the hot pixel's
+    assert close(first[3, 15], (0, 0, 0))
+    assert f"{EVENT_LABELS[1]}: {LABEL_COLORS[1]}" in printed and f"{EVENT_LABELS[2]}:" not in printed  # no leak
+    # by polarity the same file shows the shot-noise event in the OFF colour
+    render_movie(rec, tmp_path / "p.gif", MovieOptions(frame_rate_hz=25.0, decay="window", off_color="#FF0000"))
+    assert close(frames(tmp_path / "p.gif")[0][10, 20], OFF)
+
+
+def test_layers_meet_where_they_stand_out_most() -> None:
+    background = np.array([0, 0, 0, 255], np.uint8)
+    dim, bright, other = ([[[v, v, v, 255]]] for v in (40, 200, 90))
+    # per pixel the layer farthest from the background, the first where they tie
+    assert over_background([np.array(dim, np.uint8), np.array(bright, np.uint8)], background)[0, 0, 0] == 200
+    assert over_background([np.array(other, np.uint8), np.array(other, np.uint8) // 3 * 3], background)[0, 0, 0] == 90
+
+
+def test_a_window_past_the_last_event_has_all_its_frames(tmp_path: Path) -> None:
+    rec = recording(tmp_path / "r.h5")  # events up to 200 ms; 400 ms asked at 25 frames/s: 10 frames
+    movie = render_movie(rec, tmp_path / "r.gif", MovieOptions(frame_rate_hz=25.0, duration_s=0.4, decay="window"))
+    got = frames(tmp_path / "r.gif")
+    assert movie.frames == len(got) == 10 and close(got[9][0, 0], (0, 0, 0))
+
+
 def test_an_mp4_is_written_whole(tmp_path: Path) -> None:
     rec = recording(tmp_path / "r.h5")
     movie = render_movie(rec, tmp_path / "r.mp4", MovieOptions(frame_rate_hz=50.0, scale=2))
@@ -116,6 +150,7 @@ def test_an_interrupted_movie_leaves_nothing(tmp_path: Path) -> None:
     (["--out", "m.gif", "--on-color", "green"], "--on-color takes a colour as #RRGGBB (e.g. #F4C20D); got 'green'"),
     (["--out", "m.gif", "--speed", "1e-9"], "6000000000 frames (0.2 s at 3.33333e-11 s a frame) is more than 100000"),
     (["--out", "r.h5"], "--out r.h5 exists; pass --force to overwrite it"),
+    (["--out", "m.gif", "--color-by", "label"], "--color-by label: r.h5 has no label column"),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                   monkeypatch: pytest.MonkeyPatch, args: list[str],

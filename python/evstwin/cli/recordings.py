@@ -60,6 +60,9 @@ def register(sub: Any) -> None:
     p.add_argument("--background", default="#000000", help="colour of pixels without events, #RRGGBB (default black)")
     p.add_argument("--scale", type=int, default=1, help="video pixels per sensor pixel, each way (default 1)")
     p.add_argument("--no-truth", action="store_true", help="do not draw the ground truth of a simulated file")
+    p.add_argument("--color-by", choices=("polarity", "label"), default="polarity",
+                   help="'label': why each event fired, from a file's label column (simulate --labels): the "
+                        "signal in the ON/OFF colours, each kind of noise in its own (default: polarity)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_size(p)
     add_force(p)
@@ -144,7 +147,7 @@ def cmd_movie(args: argparse.Namespace) -> int:
     options = MovieOptions(
         t0_s=args.t0, duration_s=args.duration, frame_rate_hz=args.frame_rate, speed=args.speed, decay=args.decay,
         tau_s=args.tau, on_color=args.on_color, off_color=args.off_color, background=args.background,
-        scale=args.scale, truth=not args.no_truth,
+        scale=args.scale, truth=not args.no_truth, color_by=args.color_by,
     )
     options.check()
     out = check_output_file(args.out, args.force, "--out")
@@ -169,8 +172,8 @@ def cmd_movie(args: argparse.Namespace) -> int:
     print(f"wrote {movie.path}: {movie.frames} frames of {movie.size_px[0]} x {movie.size_px[1]} px at "
           f"{options.frame_rate_hz:g} frames/s, {movie.events} events from {t0} to {t1} us "
           f"({options.frame_span_s:.6g} s of recording a frame)")
-    for name, color in movie.legend.items():
-        print(f"  truth {name}: {color} square")
+    for name, colors in movie.legend.items():
+        print(f"  {name}: {colors}")
     return 0
 
 
