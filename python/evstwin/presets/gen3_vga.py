@@ -7,6 +7,7 @@ from ..optics import DAVIS346_MEAN_WAVELENGTH_M
 from ..readout import ReadoutParams
 from .davis346 import _DAVIS346_BASE
 from .imx636 import IMX636_THETA
+from .prophesee_biases import GEN3_BIASES
 from .sensor_preset import READOUT_FIFO_ASSUMPTION, SensorPreset, _fsi_pixel, _fsi_qe
 
 GEN3_VGA_DARK_RATE_E_PER_S = 18000.0 * (15.0**2 * 0.25) / (18.5**2 * 0.22)
@@ -79,5 +80,6 @@ PROPHESEE_GEN3_VGA = SensorPreset(
         assumptions=(READOUT_FIFO_ASSUMPTION,),
     ),
     qe=_fsi_qe(0.25, "Prophesee Gen3 VGA"),
+    vendor_biases=GEN3_BIASES,
 )
 """Prophesee Gen3 VGA: geometry and readout as published (640 x 480, 15 um, 50 Mev/s); pixel figures assumed."""

@@ -9,6 +9,7 @@ from ..optics import DAVIS346_MEAN_WAVELENGTH_M
 from ..readout import ReadoutParams
 from ..spectra import silicon_qe_curve
 from .davis346 import _DAVIS346_BASE
+from .prophesee_biases import IMX636_BIASES
 from .sensor_preset import READOUT_FIFO_ASSUMPTION, SensorPreset
 
 IMX636_READOUT = ReadoutParams(
@@ -144,6 +145,7 @@ IMX636 = SensorPreset(
         0.68, IMX636_COLLECTION_DEPTH_M,
         "IMX636: eq. 2 with silicon's absorption spectrum (Green 2008), transmission 0.68 x (1 - exp(-alpha(lambda) x "
         "5 um)), fill factor 1 (BSI with microlenses); an assumption, no measured curve was found"),
+    vendor_biases=IMX636_BIASES,
 )
 """Sony IMX636 / Prophesee EVK4: geometry sourced; refractory period, background (rates per
 polarity, their spread, hot pixels), thresholds' ON/OFF split and the source follower from a
