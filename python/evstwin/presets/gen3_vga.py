@@ -21,7 +21,8 @@ at 1000 lux, as Prophesee states its latencies): ``evstwin characterize prophese
 gives a median of 202 us at 1000 lux with 150 Hz (130 Hz: 233 us, 300 Hz: 93 us)."""
 GEN3_VGA_THETA = IMX636_THETA  # the same assumed 25 % contrast step (no Gen3 figure at hand)
 """The Gen3 VGA preset's ON and OFF thresholds [ln units]: a 25 % contrast step, as assumed for
-the IMX636 (Prophesee's biases are DAC settings, not currents)."""
+the IMX636 (Prophesee's biases are DAC settings, not currents; ``vendor_biases`` scales these
+values with the vendor's bias_diff_on and bias_diff_off)."""
 
 PROPHESEE_GEN3_VGA = SensorPreset(
     name="prophesee_gen3_vga",

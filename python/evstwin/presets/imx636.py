@@ -122,7 +122,8 @@ IMX636 = SensorPreset(
             "thresholds ln(1.25) = 0.223 both ways (a 25 % contrast step), far enough above the filtered "
             "shot noise that the dark background comes from eq. 12 as measured; Prophesee biases are DAC "
             "settings, not the currents of eq. 8-9, so measure theta with S-curves (McReynolds et al. 2024, "
-            "arXiv:2404.07656) for a given camera"
+            "arXiv:2404.07656) for a given camera; vendor_biases maps the biases onto these values by trends "
+            "(its own assumptions)"
         ),
         (
             "QE: collection depth 5 um and transmission 0.68 (IMX636_COLLECTION_DEPTH_M); a simulator's 0.6 "
