@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from evstwin.presets import GEN3_BIASES, IMX636_BIASES, get_preset
-from evstwin.scenario import ScenarioError, build, load, parse_assignment, set_value
+from evstwin.scenario import ScenarioError, build, load, parse_assignment, set_value, to_toml
 from evstwin.simulate import simulate
 
 FIELDS = ("theta_on", "theta_off", "cutoff_hz", "refractory_s")
@@ -48,6 +48,28 @@ def test_vendor_defaults_give_the_presets_parameters_exactly(preset: str) -> Non
     plain_cold = small(preset)
     plain_cold["sensor"]["temperature_c"] = 0.0
     assert build(cold).params == build(plain_cold).params
+
+
+def test_the_vendors_figures_as_the_sources_give_them() -> None:
+    # OpenEB 3.0 gen3_ll_biases.cpp (defaults and ranges, mV) and imx636_bias_settings*.h (offsets).
+    gen3 = {b.name: (b.default, b.allowed) for b in GEN3_BIASES.biases}
+    assert gen3 == {"bias_diff_on": (375, (0, 1800)), "bias_diff_off": (225, (0, 1800)), "bias_diff": (300, (0, 1800)),
+                    "bias_fo": (1725, (1650, 1800)), "bias_pr": (1500, (1200, 1800)),
+                    "bias_hpf": (1500, (0, 1800)), "bias_refr": (1500, (1300, 1800))}
+    imx = {b.name: (b.default, b.allowed, b.recommended) for b in IMX636_BIASES.biases}
+    assert imx == {"bias_diff_on": (0, (-150, 200), (-85, 140)), "bias_diff_off": (0, (-150, 200), (-35, 190)),
+                   "bias_diff": (0, (-150, 200), (-25, 23)), "bias_fo": (0, (-150, 200), (-35, 55)),
+                   "bias_hpf": (0, (0, 255), (0, 120)), "bias_refr": (0, (-50, 255), (-20, 235))}
+    # Every law and constant has its sources and assumptions in the preset (the presets reference).
+    for model in (GEN3_BIASES, IMX636_BIASES):
+        assert len(model.sources) >= 3 and len(model.assumptions) >= 4
+
+
+def test_a_scenario_with_vendor_biases_round_trips_through_toml(tmp_path) -> None:
+    s = load(small("prophesee_gen3_vga", bias_diff_on=414, bias_fo=1700))
+    path = tmp_path / "resolved.toml"
+    path.write_text(to_toml(s))
+    assert build(str(path)).params == build(s).params
 
 
 # -- hand computations ----------------------------------------------------------------------------

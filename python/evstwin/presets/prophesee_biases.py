@@ -273,33 +273,38 @@ DVS_CIRCUIT = (
 # Gen3 VGA (PPS3MVCD): absolute mV.
 
 _FOLLOW = "a subthreshold bias current, exp(kappa dV / U_T) of the bias voltage's change"
+_G3 = {"bias_diff_on": 375, "bias_diff_off": 225, "bias_diff": 300, "bias_fo": 1725, "bias_pr": 1500, "bias_hpf": 1500,
+       "bias_refr": 1500}  # the vendor's Gen3 defaults [mV] (OPENEB_GEN3)
+_G3_ON = _G3["bias_diff_on"] - _G3["bias_diff"]
+_G3_OFF = _G3["bias_diff"] - _G3["bias_diff_off"]
 GEN3_BIASES = PropheseeBiases(
     sensor="Prophesee Gen3 VGA (PPS3MVCD)",
     dac="voltage",
     unit="mV",
     biases=(
-        VendorBias("bias_diff_on", 375, (0, 1800), None, "theta_on",
+        VendorBias("bias_diff_on", _G3["bias_diff_on"], (0, 1800), None, "theta_on",
                    "sets the ON contrast threshold with bias_diff: their difference",
-                   "theta_on = theta_on0 (bias_diff_on - bias_diff) / 75 mV"),
-        VendorBias("bias_diff_off", 225, (0, 1800), None, "theta_off",
+                   f"theta_on = theta_on0 (bias_diff_on - bias_diff) / {_G3_ON} mV"),
+        VendorBias("bias_diff_off", _G3["bias_diff_off"], (0, 1800), None, "theta_off",
                    "sets the OFF contrast threshold with bias_diff: their difference",
-                   "theta_off = theta_off0 (bias_diff - bias_diff_off) / 75 mV"),
-        VendorBias("bias_diff", 300, (0, 1800), None, "",
+                   f"theta_off = theta_off0 (bias_diff - bias_diff_off) / {_G3_OFF} mV"),
+        VendorBias("bias_diff", _G3["bias_diff"], (0, 1800), None, "",
                    "the threshold reference voltage; 'should not be modified'",
                    "the vendor's Gen3 driver does not let bias_diff be changed (OpenEB gen3: not modifiable)"),
-        VendorBias("bias_fo", 1725, (1650, 1800), None, "cutoff_hz",
+        VendorBias("bias_fo", _G3["bias_fo"], (1650, 1800), None, "cutoff_hz",
                    "the source-follower buffer's bandwidth: lower is faster, and noisier",
-                   f"cutoff_hz proportional to {_FOLLOW}: cutoff0 exp(-kappa (bias_fo - 1725 mV) / U_T)"),
-        VendorBias("bias_pr", 1500, (1200, 1800), None, "",
+                   f"cutoff_hz proportional to {_FOLLOW}: cutoff0 exp(-kappa (bias_fo - {_G3['bias_fo']} mV) / U_T)"),
+        VendorBias("bias_pr", _G3["bias_pr"], (1200, 1800), None, "",
                    "the photoreceptor amplifier's bias current: higher is a smaller current and less bandwidth",
                    "the twin's photoreceptor pole follows the photocurrent alone (PixelParams.pr_pole); it has no "
                    "amplifier-limited pole for bias_pr to move"),
-        VendorBias("bias_hpf", 1500, (0, 1800), None, "",
+        VendorBias("bias_hpf", _G3["bias_hpf"], (0, 1800), None, "",
                    "the pixel's high-pass cut-off",
                    "the twin's pixel has no high-pass filter for bias_hpf to set"),
-        VendorBias("bias_refr", 1500, (1300, 1800), None, "refractory_s",
+        VendorBias("bias_refr", _G3["bias_refr"], (1300, 1800), None, "refractory_s",
                    "the refractory period, the dead time after each event",
-                   f"1 / refractory_s proportional to {_FOLLOW}: refractory0 exp(-kappa (bias_refr - 1500 mV) / U_T)"),
+                   f"1 / refractory_s proportional to {_FOLLOW}: refractory0 exp(-kappa (bias_refr - {_G3['bias_refr']} mV) "
+                   "/ U_T)"),
     ),
     threshold_margin=1,
     sources=(OPENEB_GEN3, PSEE_GEN3_DOC, OPENEB_GEN31, DVS_CIRCUIT),
@@ -337,6 +342,7 @@ IMX636_FACTORY_CODES = (("bias_diff_on", 115), ("bias_diff_off", 52), ("bias_dif
 """The IMX636's factory register codes N0 the offsets add to (assumed, per chip in reality):
 Gen4.1's standard file for all but bias_refr, whose 20 is the one code that keeps the vendor's
 recommended offsets (-20..+235) inside the 8-bit register."""
+_N0 = dict(IMX636_FACTORY_CODES)
 
 IMX636_BIASES = PropheseeBiases(
     sensor="Sony IMX636 (Prophesee EVK4)",
@@ -345,23 +351,25 @@ IMX636_BIASES = PropheseeBiases(
     biases=(
         VendorBias("bias_diff_on", 0, (-150, 200), (-85, 140), "theta_on",
                    "controls the light sensitivity for ON events (the ON contrast threshold)",
-                   "theta_on = theta_on0 + k ln((115 + offset) / 115), k = 0.0659"),
+                   f"theta_on = theta_on0 + k ln(({_N0['bias_diff_on']} + offset) / {_N0['bias_diff_on']}), "
+                   f"k = {K_THRESHOLD_DAVIS346:g}"),
         VendorBias("bias_diff_off", 0, (-150, 200), (-35, 190), "theta_off",
                    "controls the light sensitivity for OFF events (the OFF contrast threshold)",
-                   "theta_off = theta_off0 + k ln((52 + offset) / 52), k = 0.0659"),
+                   f"theta_off = theta_off0 + k ln(({_N0['bias_diff_off']} + offset) / {_N0['bias_diff_off']}), "
+                   f"k = {K_THRESHOLD_DAVIS346:g}"),
         VendorBias("bias_diff", 0, (-150, 200), (-25, 23), "",
                    "reference value for comparison with bias_diff_on and bias_diff_off",
                    "how bias_diff moves the IMX636's OFF threshold is not public (its OFF code runs the other way "
                    "to Gen4.1's), and the vendor recommends leaving it"),
         VendorBias("bias_fo", 0, (-150, 200), (-35, 55), "cutoff_hz",
                    "controls the pixel low-pass cut-off frequency",
-                   "cutoff_hz = cutoff0 (74 + offset) / 74"),
+                   f"cutoff_hz = cutoff0 ({_N0['bias_fo']} + offset) / {_N0['bias_fo']}"),
         VendorBias("bias_hpf", 0, (0, 255), (0, 120), "",
                    "controls the pixel high-pass cut-off frequency",
                    "the twin's pixel has no high-pass filter for bias_hpf to set"),
         VendorBias("bias_refr", 0, (-50, 255), (-20, 235), "refractory_s",
                    "controls the refractory period during which the change detector is switched off after an event",
-                   "refractory_s = refractory0 x 20 / (20 + offset)"),
+                   f"refractory_s = refractory0 x {_N0['bias_refr']} / ({_N0['bias_refr']} + offset)"),
     ),
     factory_codes=IMX636_FACTORY_CODES,
     threshold_k=K_THRESHOLD_DAVIS346,
