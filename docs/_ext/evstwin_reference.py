@@ -455,7 +455,8 @@ def _preset_value_md(name: str, value: Any, depth: int) -> list[str]:
         nested = []
         for f in dataclasses.fields(value):
             v = getattr(value, f.name)
-            if isinstance(v, (tuple, list)) or dataclasses.is_dataclass(v):
+            inline = isinstance(v, (tuple, list)) and all(isinstance(x, (int, float)) for x in v)
+            if (isinstance(v, (tuple, list)) and not inline) or dataclasses.is_dataclass(v):
                 nested.append((f.name, v))
             else:
                 scalars.append(f"| `{f.name}` | {code(fmt_value(v))} | {unit_of(f.name)} |")

@@ -15,6 +15,10 @@ The photoreceptor bias I_pr is kept for the record but not mapped: the engine's 
 bandwidth follows the photocurrent (``PixelParams.pr_pole``), which limits it in the dark.
 
 Every derived value can be overridden (``BiasSet.pixel_params(**overrides)``).
+
+The Prophesee presets carry their biases in the vendor's own names and units instead
+(``SensorPreset.vendor_biases``, ``evstwin.presets.prophesee_biases``): ``bias_diff_on`` ...
+in mV on the Gen3 VGA, in DAC codes from the factory default on the IMX636.
 """
 
 from __future__ import annotations
@@ -67,6 +71,15 @@ from .imx636 import (
     IMX636_THETA_OFF,
     IMX636_THETA_ON,
 )
+from .prophesee_biases import (
+    GEN3_BIASES,
+    IMX636_BIASES,
+    IMX636_FACTORY_CODES,
+    PROPHESEE_BIAS_NAMES,
+    PropheseeBiases,
+    VendorBias,
+    thermal_voltage_at_v,
+)
 from .sensor_preset import (
     DARK_DOUBLING_C,
     FSI_COLLECTION_DEPTH_M,
@@ -102,11 +115,14 @@ __all__ = [
     "FAST_PR_SLOW_SF_BALANCED_TH",
     "FSI_COLLECTION_DEPTH_M",
     "FSI_TRANSMISSION",
+    "GEN3_BIASES",
     "GEN3_VGA_CUTOFF_HZ",
     "GEN3_VGA_DARK_RATE_E_PER_S",
     "GEN3_VGA_THETA",
     "IMX636",
     "IMX636_ABSORPTION_PER_M",
+    "IMX636_BIASES",
+    "IMX636_FACTORY_CODES",
     "IMX636_COLLECTION_DEPTH_M",
     "IMX636_READOUT",
     "IMX636_RECORDING",
@@ -118,6 +134,7 @@ __all__ = [
     "PAPER_RUN_1",
     "PAPER_RUN_3",
     "PRESETS",
+    "PROPHESEE_BIAS_NAMES",
     "PROPHESEE_GEN3_VGA",
     "QE_REFERENCE_WAVELENGTH_M",
     "READOUT_FIFO_ASSUMPTION",
@@ -138,7 +155,10 @@ __all__ = [
     "get_preset",
     "paper_run_params",
     "refractory_from_bias",
+    "thermal_voltage_at_v",
     "thresholds_from_biases",
     "BiasSet",
+    "PropheseeBiases",
     "SensorPreset",
+    "VendorBias",
 ]

@@ -7,6 +7,7 @@ from ..optics import DAVIS346_MEAN_WAVELENGTH_M
 from ..readout import ReadoutParams
 from .davis346 import _DAVIS346_BASE
 from .imx636 import IMX636_THETA
+from .prophesee_biases import GEN3_BIASES
 from .sensor_preset import READOUT_FIFO_ASSUMPTION, SensorPreset, _fsi_pixel, _fsi_qe
 
 GEN3_VGA_DARK_RATE_E_PER_S = 18000.0 * (15.0**2 * 0.25) / (18.5**2 * 0.22)
@@ -20,7 +21,8 @@ at 1000 lux, as Prophesee states its latencies): ``evstwin characterize prophese
 gives a median of 202 us at 1000 lux with 150 Hz (130 Hz: 233 us, 300 Hz: 93 us)."""
 GEN3_VGA_THETA = IMX636_THETA  # the same assumed 25 % contrast step (no Gen3 figure at hand)
 """The Gen3 VGA preset's ON and OFF thresholds [ln units]: a 25 % contrast step, as assumed for
-the IMX636 (Prophesee's biases are DAC settings, not currents)."""
+the IMX636 (Prophesee's biases are DAC settings, not currents; ``vendor_biases`` scales these
+values with the vendor's bias_diff_on and bias_diff_off)."""
 
 PROPHESEE_GEN3_VGA = SensorPreset(
     name="prophesee_gen3_vga",
@@ -79,5 +81,6 @@ PROPHESEE_GEN3_VGA = SensorPreset(
         assumptions=(READOUT_FIFO_ASSUMPTION,),
     ),
     qe=_fsi_qe(0.25, "Prophesee Gen3 VGA"),
+    vendor_biases=GEN3_BIASES,
 )
 """Prophesee Gen3 VGA: geometry and readout as published (640 x 480, 15 um, 50 Mev/s); pixel figures assumed."""

@@ -9,6 +9,7 @@ from ..optics import DAVIS346_MEAN_WAVELENGTH_M
 from ..readout import ReadoutParams
 from ..spectra import silicon_qe_curve
 from .davis346 import _DAVIS346_BASE
+from .prophesee_biases import IMX636_BIASES
 from .sensor_preset import READOUT_FIFO_ASSUMPTION, SensorPreset
 
 IMX636_READOUT = ReadoutParams(
@@ -121,7 +122,8 @@ IMX636 = SensorPreset(
             "thresholds ln(1.25) = 0.223 both ways (a 25 % contrast step), far enough above the filtered "
             "shot noise that the dark background comes from eq. 12 as measured; Prophesee biases are DAC "
             "settings, not the currents of eq. 8-9, so measure theta with S-curves (McReynolds et al. 2024, "
-            "arXiv:2404.07656) for a given camera"
+            "arXiv:2404.07656) for a given camera; vendor_biases maps the biases onto these values by trends "
+            "(its own assumptions)"
         ),
         (
             "QE: collection depth 5 um and transmission 0.68 (IMX636_COLLECTION_DEPTH_M); a simulator's 0.6 "
@@ -144,6 +146,7 @@ IMX636 = SensorPreset(
         0.68, IMX636_COLLECTION_DEPTH_M,
         "IMX636: eq. 2 with silicon's absorption spectrum (Green 2008), transmission 0.68 x (1 - exp(-alpha(lambda) x "
         "5 um)), fill factor 1 (BSI with microlenses); an assumption, no measured curve was found"),
+    vendor_biases=IMX636_BIASES,
 )
 """Sony IMX636 / Prophesee EVK4: geometry sourced; refractory period, background (rates per
 polarity, their spread, hot pixels), thresholds' ON/OFF split and the source follower from a

@@ -14,6 +14,7 @@ from ..readout import ReadoutParams
 from ..sensor import Sensor
 from ..spectra import QECurve, silicon_absorption_per_m, silicon_qe_curve
 from .biases import BiasSet
+from .prophesee_biases import PropheseeBiases
 
 DARK_DOUBLING_C = 6.5
 """Temperature rise [degC] that doubles a pixel's dark current: the middle of the 5-8 degC
@@ -73,6 +74,10 @@ class SensorPreset:
     rates hold (``at_temperature``)."""
     dark_doubling_c: float = DARK_DOUBLING_C
     """Temperature rise [degC] that doubles the dark current and the rates it drives."""
+    vendor_biases: PropheseeBiases | None = None
+    """The sensor's biases in the vendor's own names and units (``[biases] bias_diff_on`` ...)
+    and the laws that map them onto ``pixel`` (``evstwin.presets.prophesee_biases``); None: the
+    sensor has none (the DAVIS346's biases are currents, ``BiasSet``)."""
 
     def __post_init__(self) -> None:
         size(self.width, self.height)

@@ -15,6 +15,19 @@ The tables mirror the Python objects:
                   current, leak, background and hot-pixel rates scale from the preset's
                   25 degC by ``SensorPreset.at_temperature``, doubling every 6.5 degC).
 ``[biases]``      bias currents in amperes (``i_on_a`` ... ``i_refr_a``), overriding the set.
+                  On a Prophesee preset, the vendor's biases in its own names and units instead
+                  (mV on ``prophesee_gen3_vga``, offsets in DAC codes from the factory default
+                  on ``imx636``; ``evstwin.presets.prophesee_biases`` gives each law, range and
+                  source, the presets reference lists them): ``bias_diff_on`` sets the ON
+                  threshold (raising it raises theta_on); ``bias_diff_off`` sets the OFF
+                  threshold (on Gen3 its distance below bias_diff; on the IMX636 raising it
+                  raises theta_off); ``bias_diff`` is the comparators' reference, accepted only
+                  at its default; ``bias_fo`` sets the source follower's cutoff_hz (Gen3: lower
+                  is faster); ``bias_refr`` sets the refractory period; ``bias_pr`` (Gen3's
+                  photoreceptor amplifier, which the twin does not model) accepts only its
+                  default; ``bias_hpf`` (a high-pass filter the twin lacks) accepts only its
+                  default. They cannot be mixed with the currents or ``bias_set``; the DAVIS346
+                  presets have none.
 ``[pixel]``       any ``PixelParams`` field by name; overrides what biases and preset derive.
                   ``pr_pole`` defaults to true here (as in every built-in), unlike
                   ``PixelParams``, whose default is the paper's single pole.

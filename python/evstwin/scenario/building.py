@@ -16,7 +16,7 @@ from .. import psf
 from ..constants import ARCSEC_PER_DEG
 from ..optics import PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M, Optics
 from ..pixel import HotPixelChain, PixelParams
-from ..presets import BiasSet, SensorPreset, get_bias_set, get_preset
+from ..presets import PRESETS, PROPHESEE_BIAS_NAMES, BiasSet, SensorPreset, get_bias_set, get_preset
 from ..readout import ReadoutParams
 from ..sky import scene as sky_scene
 from ..sky import stars as sky_stars
@@ -123,12 +123,16 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         if not 1 <= value <= full:
             raise ScenarioError(f"sensor.{name} must be in [1, {full}] for preset {preset.name!r}; got {value}")
 
-    # Pixel: preset defaults <- biases (a set, then single currents) <- [pixel] overrides.
+    # Pixel: preset defaults <- biases (a set, then single currents; or the vendor's biases)
+    # <- [pixel] overrides.
     params = preset.pixel
-    bias_table = s.get("biases", {})
+    bias_table = dict(s.get("biases", {}))
+    vendor = {name: bias_table.pop(name) for name in PROPHESEE_BIAS_NAMES if name in bias_table}
     set_name = s["sensor"].get("bias_set")
     k = s["sensor"].get("k")
-    if set_name or bias_table:
+    if vendor:
+        params = _vendor_biases(s, preset, vendor, bias_table)
+    elif set_name or bias_table:
         base_set = _wrap("sensor.bias_set", get_bias_set, set_name) if set_name else None
         fields = {} if base_set is None else {f: getattr(base_set, f) for f in _BIAS_KEYS}
         fields.update(bias_table)
@@ -347,6 +351,29 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
         static_step_s=float(sp["static_step_s"]),
         readout=readout, atmosphere=atmosphere,
     )
+
+
+def _vendor_biases(s: dict[str, Any], preset: SensorPreset, vendor: dict[str, Any],
+                   currents: dict[str, Any]) -> PixelParams:
+    """The preset's pixel with the vendor's biases of [biases] (``bias_diff_on`` ...) mapped
+    onto it (``SensorPreset.vendor_biases``), at sensor.temperature_c (U_T of the exponential
+    laws; default the preset's reference temperature)."""
+    first = next(iter(vendor))
+    if preset.vendor_biases is None:
+        raise ScenarioError(
+            f"biases.{first}: preset {preset.name!r} has no Prophesee biases (its biases are the DAVIS bias "
+            f"currents, biases.{', biases.'.join(_BIAS_KEYS)}, or sensor.bias_set); Prophesee biases: "
+            f"{', '.join(p for p, q in PRESETS.items() if q.vendor_biases is not None)}")
+    mixed = [f"biases.{k}" for k in currents] + (["sensor.bias_set"] if s["sensor"].get("bias_set") else []) + (
+        ["sensor.k"] if "k" in s["sensor"] else [])
+    if mixed:
+        raise ScenarioError(f"biases.{first} (a Prophesee bias) cannot be combined with {', '.join(mixed)} (the "
+                            "DAVIS bias currents): give one or the other")
+    temperature_c = s["sensor"].get("temperature_c", preset.dark_reference_temperature_c)
+    try:
+        return preset.vendor_biases.pixel_params(vendor, preset.pixel, temperature_c)
+    except (ValueError, TypeError) as exc:  # each message names its key and value
+        raise ScenarioError(str(exc)) from None
 
 
 def _response(s: dict[str, Any], preset: SensorPreset) -> SensorResponse | None:

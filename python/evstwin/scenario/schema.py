@@ -18,7 +18,7 @@ import numpy as np
 
 from ..optics import Optics
 from ..pixel import PixelParams
-from ..presets import PRESETS
+from ..presets import PRESETS, PROPHESEE_BIAS_NAMES
 from ..readout import MAX_RATE_HZ, MAX_TICK_S, MIN_TICK_S
 from ..sensor import MAX_MAX_EVENTS
 from ..sky import scene as sky_scene
@@ -75,7 +75,7 @@ SCHEMA: dict[str, Any] = {
     "seed": int,
     "sensor": {"preset": str, "width": int, "height": int, "roi": list, "bias_set": str, "k": float,
                "temperature_c": float},
-    "biases": {k: float for k in _BIAS_KEYS},
+    "biases": {k: float for k in _BIAS_KEYS + PROPHESEE_BIAS_NAMES},
     "pixel": {name: Any for name in PixelParams.field_names()},
     "optics": {k: Any for k in _OPTICS_KEYS},
     "sampling": {"rate_hz": float, "max_shift_px": float, "sparse": bool, "chunk_samples": int, "max_events": int,
