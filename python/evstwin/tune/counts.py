@@ -233,15 +233,6 @@ class CountsObjective(MatchObjective):
         stats = self.statistics(result.events)
         return {"distance": chi2_distance(self.real_stats, [stats]), "stats": stats}
 
-    def brightest_totals(self, stats: np.ndarray) -> tuple[float, float]:
-        """The ON and OFF event totals of the brightest pixel group (the track's core, where a
-        source's light swamps the dark current) in a statistics vector of this objective
-        (counts' layout: per polarity, per group, the histogram then the total)."""
-        per_group = self.edges.size + 1
-        top = self.n_groups - 1
-        return (float(stats[top * per_group + self.edges.size]),
-                float(stats[(self.n_groups + top) * per_group + self.edges.size]))
-
     def residuals(self, sims: Sequence[np.ndarray]) -> np.ndarray:
         """:func:`chi2_residuals` of the real recording against these seeds' vectors."""
         return chi2_residuals(self.real_stats, sims)

@@ -198,7 +198,6 @@ def fit(
             if sampler == "cmaes":
                 stop = _cma_es(run_trials, scaler, x0, budget - len(history), opts.seed)
             elif sampler == "ls" and counts is not None:
-                x0 = _threshold_moments(run_trials, seed_stats, counts, scaler, x0, budget - len(history))
                 stop = _least_squares(run_trials, residuals, counts.real_stats.size, scaler, x0,
                                       budget - len(history), float(opts.ls_step))
             else:
@@ -261,55 +260,6 @@ def fit(
         identifiability=report,
         interval_kind="calibrated" if opts.intervals else ("report" if found else ""),
     )
-
-
-THRESHOLD_KEYS = {"pixel.theta_on": 0, "pixel.theta_off": 1}
-"""The fitted thresholds :func:`_threshold_moments` moves, and the polarity (0 ON, 1 OFF) each sets."""
-MOMENT_STEPS = 2
-"""Most threshold corrections by moments before the least squares (one trial each)."""
-MOMENT_TOLERANCE = 0.05
-"""The moments stop when every corrected threshold moves by less than this share."""
-
-
-def _threshold_moments(run_trials: Any, seed_stats: Mapping[int, np.ndarray], counts: CountsObjective,
-                       scaler: _Scaler, x0: np.ndarray, budget: int) -> np.ndarray:
-    """The least squares' start with its thresholds corrected by the method of moments.
-
-    A pixel the source's light crosses fires about (its log-intensity swing) / theta events
-    of each polarity, whatever the dark current (in the brightest group the source swamps
-    it): so the simulated total over the real one of the brightest pixel group, per polarity,
-    scales that polarity's threshold (theta <- theta x N_sim / N_real). A start several times
-    off (the scenario's 0.09 against a hidden 0.4) then costs the least squares one or two
-    trials, not most of its budget. Up to :data:`MOMENT_STEPS` trials (phase 'moments'),
-    leaving the least squares at least one step; nothing when no threshold is fitted or a
-    total is zero. Returns the corrected start in [0, 1] coordinates."""
-    fitted = {key: i for i, key in enumerate(scaler.keys) if key in THRESHOLD_KEYS}
-    if not fitted:
-        return x0
-    x = np.clip(x0, 0.0, 1.0)
-    for _ in range(MOMENT_STEPS):
-        if budget < 2 * (len(scaler.keys) + 1) + 1:
-            break
-        budget -= 1
-        record = run_trials([scaler.from_unit(x)], "moments")[0]
-        if record.trial not in seed_stats or not math.isfinite(record.distance):
-            break
-        sim = counts.brightest_totals(np.mean(seed_stats[record.trial], axis=0))
-        real = counts.brightest_totals(counts.real_stats)
-        values = scaler.from_unit(x)
-        moved = 0.0
-        for key, i in fitted.items():
-            polarity = THRESHOLD_KEYS[key]
-            if sim[polarity] <= 0 or real[polarity] <= 0:
-                continue
-            ratio = sim[polarity] / real[polarity]
-            values[key] = values[key] * ratio
-            moved = max(moved, abs(ratio - 1.0))
-        corrected = np.clip(scaler.to_unit(values), 0.0, 1.0)
-        if moved < MOMENT_TOLERANCE:
-            break
-        x = corrected
-    return x
 
 
 def _report(stop: Stop, scaler: _Scaler, best: TrialRecord, n_stats: int) -> Identifiability | None:
