@@ -19,6 +19,10 @@ knowledge base) at illuminances from 0.01 to 10,000 lux:
   whole threshold away), so a small step would fire the pixels the leak brought close, which
   is not what a contrast threshold measures.
 
+``biases`` (``evstwin characterize PRESET --bias bias_diff_on=+40``) runs the bench on a Prophesee
+preset's pixel at other settings of the vendor's biases (``SensorPreset.vendor_biases``); the
+published figures beside it are the vendor's for its default biases.
+
 Lux become the engine's photons through the source's spectrum and the preset's QE curve
 (``evstwin.spectra.photons_per_lumen``); a preset without a curve (``davis346_paper``) counts
 the photons between 300 and 1100 nm.
@@ -27,15 +31,15 @@ the photons between 300 and 1100 nm.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from . import spectra
 from ._checks import integer
-from .presets import SensorPreset, get_preset
+from .presets import PRESETS, SensorPreset, get_preset
 from .sensor import Sensor
 
 BENCH_SPECTRUM = "blackbody:3000"
@@ -116,6 +120,8 @@ class CharacterizationResult:
     size_px: int
     seed: int
     published: list[dict[str, Any]] = field(default_factory=list)
+    biases: dict[str, float] = field(default_factory=dict)
+    """The vendor's biases set away from the preset's (empty: its defaults)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -134,7 +140,8 @@ class CharacterizationResult:
 
     def to_text(self) -> str:
         lines = [f"characterisation of {self.preset} ({self.size_px} x {self.size_px} pixels, seed {self.seed}; "
-                 f"light: {BENCH_SPECTRUM}, at the focal plane)",
+                 f"light: {BENCH_SPECTRUM}, at the focal plane)"
+                 + ("" if not self.biases else "; biases " + ", ".join(f"{k}={v:g}" for k, v in self.biases.items())),
                  f"{'lux':>9}  {'photons/px/s':>12}  {'background [Hz/px]':>18}  {'latency median':>14}  "
                  f"{'latency p90':>11}  {'respond':>7}",
                  "-" * 82]
@@ -147,7 +154,8 @@ class CharacterizationResult:
         lines.append(f"contrast threshold at {self.contrast_lux:g} lux (half the pixels fire ON): "
                      f"{_fmt_pct(self.contrast_threshold, self.contrasts[0])}")
         if self.published:
-            lines.append("published figures beside the twin's:")
+            lines.append("published figures beside the twin's"
+                         + (" (the vendor's, at its default biases):" if self.biases else ":"))
             for p in self.published:
                 lines.append(f"  {p['quantity']:<22} published {p['value']:<9.3g} ({p['condition'] or 'no condition'}) "
                              f"twin {p['twin']:.3g}  ratio {p['ratio']:.2f}  ({p['role']}) [{p['kind']}] {p['source']}")
@@ -249,9 +257,17 @@ def _half_point(x: Sequence[float], y: Sequence[float], log_x: bool) -> float:
 def characterize(preset: str | SensorPreset, lux: Sequence[float] = DEFAULT_LUX, size_px: int = 32, seed: int = 0,
                  num_threads: int | None = None, contrast_lux: float = CONTRAST_LUX,
                  contrasts: Sequence[float] = CONTRAST_STEPS,
-                 progress: Callable[[int, int], None] | None = None) -> CharacterizationResult:
-    """Run the bench (module doc) on a preset's pixel; ``progress(done, total)`` after each run."""
+                 progress: Callable[[int, int], None] | None = None,
+                 biases: Mapping[str, float] | None = None) -> CharacterizationResult:
+    """Run the bench (module doc) on a preset's pixel; ``progress(done, total)`` after each run.
+    ``biases``: the vendor's biases by name (a Prophesee preset's ``vendor_biases``: mV on the
+    Gen3 VGA, code offsets on the IMX636), mapped onto the pixel at the preset's temperature."""
     p = get_preset(preset) if isinstance(preset, str) else preset
+    if biases:
+        if p.vendor_biases is None:
+            raise ValueError(f"--bias: preset {p.name!r} has no Prophesee biases (only "
+                             f"{', '.join(n for n, q in PRESETS.items() if q.vendor_biases is not None)} have)")
+        p = replace(p, pixel=p.vendor_biases.pixel_params(dict(biases), p.pixel, p.dark_reference_temperature_c))
     integer("size_px", size_px, 4, MAX_SIZE_PX)
     grid = sorted(float(v) for v in lux)
     if not grid or not all(math.isfinite(v) and 1e-6 <= v <= 1e6 for v in grid):
@@ -287,7 +303,8 @@ def characterize(preset: str | SensorPreset, lux: Sequence[float] = DEFAULT_LUX,
         preset=p.name, lux=grid, photons_per_px_s=rates, background_hz=background, latency_median_s=median,
         latency_p90_s=p90, response_fraction=response, low_light_cutoff_lux=_half_point(grid, response, True),
         contrast_lux=float(contrast_lux), contrasts=steps, contrast_response=s_curve,
-        contrast_threshold=_half_point(steps, s_curve, False), size_px=size_px, seed=seed)
+        contrast_threshold=_half_point(steps, s_curve, False), size_px=size_px, seed=seed,
+        biases={k: float(v) for k, v in (biases or {}).items()})
     for fig in PUBLISHED.get(p.name, ()):
         twin = result.twin_value(fig.quantity)
         role = "calibration" if fig.quantity in CALIBRATED.get(p.name, ()) else "validation"

@@ -68,3 +68,21 @@ def test_characterize_command_writes_all_or_nothing(tmp_path: Path, capsys: pyte
     assert main(["characterize", "imx636", "--out", str(tmp_path / "y"), "--size-px", "2", "--no-progress"]) == 2
     assert "size_px must be an integer in [4, 128]" in capsys.readouterr().err and not (tmp_path / "y").exists()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary folder left
+
+
+def test_vendor_biases_move_the_bench_as_their_laws_say(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # IMX636 bias_diff_on +140 codes from the assumed factory 115: theta_on = 0.235 + 0.0659 ln(255 / 115)
+    # = 0.2875, an ON step of exp(0.2875) - 1 = 33 % against exp(0.235) - 1 = 26.5 % at the default.
+    steps = [0.2, 0.24, 0.28, 0.32, 0.36, 0.4, 0.6]
+    base = characterize.characterize("imx636", lux=[1000.0], contrasts=steps, size_px=8, num_threads=1)
+    raised = characterize.characterize("imx636", lux=[1000.0], contrasts=steps, size_px=8, num_threads=1,
+                                       biases={"bias_diff_on": 140})
+    assert 0.22 < base.contrast_threshold < 0.30 < raised.contrast_threshold < 0.37
+    assert raised.biases == {"bias_diff_on": 140.0} and "biases bias_diff_on=140" in raised.to_text()
+    assert "at its default biases" in raised.to_text() and base.biases == {}
+    for argv, words in ((["davis346", "--bias", "bias_diff_on=10"], "preset 'davis346' has no Prophesee biases"),
+                        (["imx636", "--bias", "bias_diff_on"], "--bias takes NAME=VALUE"),
+                        (["imx636", "--bias", "bias_fo=+999"], "biases.bias_fo")):
+        assert main(["characterize", *argv, "--out", str(tmp_path / "z"), "--no-progress", "--no-figure"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and words in err and not (tmp_path / "z").exists()

@@ -19,6 +19,9 @@ def register(sub: Any) -> None:
     p.add_argument("--lux", help="illuminances at the focal plane [lux], v1,v2,... (default 0.01 to 10000)")
     p.add_argument("--size-px", type=int, default=32, help="pixels a side of the simulated array (default 32)")
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--bias", dest="biases", action="append", default=[], metavar="NAME=VALUE",
+                   help="a Prophesee preset's bias in the vendor's name and unit, e.g. bias_diff_on=+40 (IMX636: "
+                        "code offset from the factory default; Gen3 VGA: mV); repeatable")
     p.add_argument("--threads", type=int, help="engine threads (default: the engine's choice)")
     p.add_argument("--no-figure", action="store_true", help="skip characterize.png (no matplotlib needed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -32,6 +35,15 @@ def run(args: argparse.Namespace) -> int:
     from ..tune.limits import parse_float_list
 
     preset = get_preset(args.preset)
+    biases: dict[str, float] = {}
+    for item in args.biases:
+        name, sep, value = item.partition("=")
+        try:
+            biases[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise ValueError(f"--bias takes NAME=VALUE with a number (e.g. bias_diff_on=+40); got {item!r}")
     lux = DEFAULT_LUX if args.lux is None else tuple(parse_float_list(args.lux, "--lux"))
     if args.threads is not None and args.threads < 1:
         raise ValueError(f"--threads must be >= 1; got {args.threads}")
@@ -54,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         result = characterize(preset, lux=lux, size_px=args.size_px, seed=args.seed, num_threads=args.threads,
-                              progress=progress)
+                              progress=progress, biases=biases)
     finally:
         if bar is not None:
             bar.close()
