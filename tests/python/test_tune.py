@@ -1166,15 +1166,9 @@ RECOVERY_PARAMS = ("pixel.theta_on", "pixel.theta_off", "pixel.dark_rate_e_per_s
                    "pixel.shot_noise_on_rate_hz", "pixel.shot_noise_off_rate_hz")
 
 
-@pytest.mark.parametrize(
-    "hidden",
-    [
-        (0.20, 0.30, 5000.0, 0.30, 0.10),
-        (0.35, 0.18, 12000.0, 0.10, 0.40),
-        (0.25, 0.22, 2500.0, 0.15, 0.05),
-    ],
-    ids=["low-on", "low-off", "dark"],
-)
+# One hidden setting here (the suite's time); bench/bench_recovery.py recovers ten drawn
+# settings of the same five parameters at full size.
+@pytest.mark.parametrize("hidden", [(0.35, 0.18, 12000.0, 0.10, 0.40)], ids=["low-off"])
 def test_least_squares_recovers_thresholds_dark_and_background_rates_on_a_davis346_window(
     hidden: tuple[float, ...]
 ) -> None:
