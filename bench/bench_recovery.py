@@ -17,7 +17,7 @@ Prints a row per (setting, optimiser) and a summary; no asserts. A sampler may n
 distance: ``nm:chi2``, ``cmaes:chi2`` (default: each sampler's own, see ``tune.fit``).
 
 ``--default-command`` measures issue 34's goal instead: the command a user runs, ``evstwin fit
-REAL --scenario mcreynolds --budget 60`` (the seven default parameters, FitOptions' defaults:
+REAL --scenario mcreynolds --budget 60`` (the default parameters ``tune.DEFAULT_FIT_PARAMS``, FitOptions' defaults:
 one run per trial, the start at the scenario's values) on a 1 s recording (--duration 1 unless
 given) of each setting's hidden thresholds and dark rate (drawn as above; the other parameters
 keep the scenario's values, as ``--set`` would leave them). Success: both thresholds within 10 %
@@ -154,7 +154,7 @@ def default_command(args: argparse.Namespace) -> None:
     base = scene(duration_s)
     statistics = [s.strip() for s in args.statistics.split(",") if s.strip()]
     budget = args.budget
-    print(f"default command: mcreynolds {duration_s:g} s, budget {budget}, 7 default parameters, "
+    print(f"default command: mcreynolds {duration_s:g} s, budget {budget}, {len(tune.DEFAULT_FIT_PARAMS)} default parameters, "
           f"FitOptions' runs per trial ({tune.FitOptions().runs_per_trial}), start at the scenario's values; "
           f"{os.cpu_count()} cores", flush=True)
     rows: list[dict[str, Any]] = []
@@ -214,7 +214,7 @@ def main() -> None:
                     help="also print each setting's hidden values' distance with the fits' seeds (one trial)")
     ap.add_argument("--profile", action="store_true", help="measure the distances' noise and sensitivity instead")
     ap.add_argument("--default-command", action="store_true",
-                    help="issue 34's goal: the default fit command (7 parameters, 1 run per trial, the scenario's "
+                    help="issue 34's goal: the default fit command (the default parameters, 1 run per trial, the scenario's "
                          "start) on hidden thresholds and dark rate, 1 s (see the module docstring)")
     ap.add_argument("--statistics", default="timing,counts",
                     help="the chi-square's statistics compared with --default-command (default timing,counts; "

@@ -57,7 +57,7 @@ the per-pixel counts of :mod:`evstwin.tune.counts` and the timing statistics of
 :mod:`evstwin.tune.timing` beside them; ``counts``, the counts alone (the distance before
 issue 34). The default because it recovers what the counts cannot: on issue 34's default
 command (``mcreynolds``, 1 s, hidden theta_on 0.2, theta_off 0.25, dark rate 8000 e-/s, the
-seven default parameters, budget 60) the counts alone end at theta_on -14 % and the dark rate
+then seven default parameters, budget 60) the counts alone end at theta_on -14 % and the dark rate
 x1.36 with r(theta_on, dark rate) = -0.98; with the timing statistics at -1.2 % and x1.02,
 r = -0.85 (the fit guide's "Statistics that carry timing")."""
 
