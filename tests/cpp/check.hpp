@@ -17,9 +17,12 @@ inline std::vector<std::pair<std::string, std::function<void()>>>& registry() {
 struct Register {
     Register(const char* name, std::function<void()> f) { registry().emplace_back(name, std::move(f)); }
 };
-inline int run_all() {
-    int tests = 0;
+// Runs the tests whose registration index is part modulo parts (all of them by default), so
+// that a slow build (the sanitized one) can run as several processes side by side.
+inline int run_all(int part = 0, int parts = 1) {
+    int tests = 0, index = -1;
     for (auto& [name, f] : registry()) {
+        if (++index % parts != part) continue;
         const int before = failures();
         f();
         ++tests;
@@ -27,6 +30,19 @@ inline int run_all() {
     }
     std::printf("%d tests, %d failed checks\n", tests, failures());
     return failures() == 0 ? 0 : 1;
+}
+// main's arguments: none (every test) or --part=K/N (0 <= K < N: every N-th test from the K-th).
+inline int run_main(int argc, char** argv) {
+    int part = 0, parts = 1;
+    for (int i = 1; i < argc; ++i) {
+        char rest = 0;
+        if (std::sscanf(argv[i], "--part=%d/%d%c", &part, &parts, &rest) != 2 || parts < 1 || part < 0 ||
+            part >= parts) {
+            std::fprintf(stderr, "usage: %s [--part=K/N] with 0 <= K < N; got %s\n", argv[0], argv[i]);
+            return 2;
+        }
+    }
+    return run_all(part, parts);
 }
 }  // namespace check
 
@@ -42,4 +58,4 @@ inline int run_all() {
 #define CHECK_THROWS(stmt) \
     do { bool _t = false; try { stmt; } catch (const std::exception&) { _t = true; } \
          if (!_t) { ++check::failures(); std::printf("  %s:%d: %s did not throw\n", __FILE__, __LINE__, #stmt); } } while (0)
-#define TEST_MAIN() int main() { return check::run_all(); }
+#define TEST_MAIN() int main(int argc, char** argv) { return check::run_main(argc, argv); }
