@@ -314,6 +314,16 @@ void load(StudyBlock<L, Clock, Time, Due>& f, const EnginePass& e, StudyPass<L, 
     q.bridge_stage = e.q.bridge_stage;
 }
 
+/// One study variant: its arrays (b) and its pass over them (q), loaded from the engine's pass.
+template <class L, class Clock, class Time, bool Due = false>
+struct StudyCase {
+    StudyBlock<L, Clock, Time, Due> b;
+    StudyPass<L, Clock, Time, Due> q{};
+    explicit StudyCase(const EnginePass& e) { load(b, e, q); }
+    StudyCase(const StudyCase&) = delete;  // q points into b
+    StudyCase& operator=(const StudyCase&) = delete;
+};
+
 /// Study variant of detail::quiet_pass_body<SfOnly, Noise = true, Background = true>: the same
 /// operations in the same order on levels in L (Clock, Time and Due as StudyBlock says). In
 /// float its level tests are not made conservative (a float "quiet" need not be a double one
@@ -589,27 +599,13 @@ void speed() {
     EngineBlock kernel_block(3000);
     const double kernel_ns = min_seconds_per_call([&] { kernel_block.step(); }, 200, 60) / BLOCK * 1e9;
     // The study's passes: StudyPass<levels, clocks, times, due> (float levels re-based).
-    study::StudyBlock<double, double, double> b_dd;
-    study::StudyPass<double, double, double> q_dd{};
-    study::load(b_dd, e, q_dd);
-    study::StudyBlock<double, double, double, true> b_ddue;
-    study::StudyPass<double, double, double, true> q_ddue{};
-    study::load(b_ddue, e, q_ddue);
-    study::StudyBlock<float, float, float> b_fff;
-    study::StudyPass<float, float, float> q_fff{};
-    study::load(b_fff, e, q_fff);
-    study::StudyBlock<float, float, double> b_ffd;
-    study::StudyPass<float, float, double> q_ffd{};
-    study::load(b_ffd, e, q_ffd);
-    study::StudyBlock<float, double, float> b_fdf;
-    study::StudyPass<float, double, float> q_fdf{};
-    study::load(b_fdf, e, q_fdf);
-    study::StudyBlock<float, double, double> b_fdd;
-    study::StudyPass<float, double, double> q_fdd{};
-    study::load(b_fdd, e, q_fdd);
-    study::StudyBlock<float, float, float, true> b_fdue;
-    study::StudyPass<float, float, float, true> q_fdue{};
-    study::load(b_fdue, e, q_fdue);
+    study::StudyCase<double, double, double> c_dd(e);
+    study::StudyCase<double, double, double, true> c_ddue(e);
+    study::StudyCase<float, float, float> c_fff(e);
+    study::StudyCase<float, float, double> c_ffd(e);
+    study::StudyCase<float, double, float> c_fdf(e);
+    study::StudyCase<float, double, double> c_fdd(e);
+    study::StudyCase<float, float, float, true> c_fdue(e);
     struct Variant {
         const char* name;
         void (*run)(const void*, const float*);
@@ -626,13 +622,13 @@ void speed() {
              evstwin::detail::quiet_pass<QuietChain::SfOnly>(*static_cast<const evstwin::QuietPass*>(p), r, true, true);
          },
          &e.q},
-        as_variant("study, double (the engine's, as a check)", q_dd),
-        as_variant("study, double, clocks as due times", q_ddue),
-        as_variant("float levels, float clocks, float times", q_fff),
-        as_variant("float levels, float clocks, double times", q_ffd),
-        as_variant("float levels, double clocks, float times", q_fdf),
-        as_variant("float levels, double clocks, double times", q_fdd),
-        as_variant("float levels, clocks as due times (float)", q_fdue),
+        as_variant("study, double (the engine's, as a check)", c_dd.q),
+        as_variant("study, double, clocks as due times", c_ddue.q),
+        as_variant("float levels, float clocks, float times", c_fff.q),
+        as_variant("float levels, float clocks, double times", c_ffd.q),
+        as_variant("float levels, double clocks, float times", c_fdf.q),
+        as_variant("float levels, double clocks, double times", c_fdd.q),
+        as_variant("float levels, clocks as due times (float)", c_fdue.q),
     };
     constexpr std::size_t N_VARIANTS = sizeof(variants) / sizeof(variants[0]);
     const SimdLevel levels[] = {SimdLevel::AVX512, SimdLevel::AVX2, SimdLevel::Baseline};
@@ -681,12 +677,12 @@ void speed() {
     const BlockSoA::Levels& eng = *e.q.next;
     for (std::size_t j = 0; j < BLOCK; ++j) {
         n_quiet += e.q.busy[j] == 0;
-        differ_f += e.q.busy[j] != q_fff.busy[j];
-        differ_due += e.q.busy[j] != q_fdue.busy[j];
-        differ_ddue += e.q.busy[j] != q_ddue.busy[j];
-        same_levels &= e.q.busy[j] == q_dd.busy[j] && eng.z[j] == b_dd.buf[1].z[j] && eng.y[j] == b_dd.buf[1].y[j] &&
-                  eng.ny[j] == b_dd.buf[1].ny[j] && eng.ref[j] == b_dd.buf[1].ref[j] &&
-                  eng.clock_on[j] == b_dd.buf[1].on[j] && eng.clock_off[j] == b_dd.buf[1].off[j];
+        differ_f += e.q.busy[j] != c_fff.q.busy[j];
+        differ_due += e.q.busy[j] != c_fdue.q.busy[j];
+        differ_ddue += e.q.busy[j] != c_ddue.q.busy[j];
+        same_levels &= e.q.busy[j] == c_dd.q.busy[j] && eng.z[j] == c_dd.b.buf[1].z[j] && eng.y[j] == c_dd.b.buf[1].y[j] &&
+                  eng.ny[j] == c_dd.b.buf[1].ny[j] && eng.ref[j] == c_dd.b.buf[1].ref[j] &&
+                  eng.clock_on[j] == c_dd.b.buf[1].on[j] && eng.clock_off[j] == c_dd.b.buf[1].off[j];
     }
     std::printf("snapshot: %zu of %zu pixels quiet (engine); the study's double pass gives the engine's levels and verdicts "
                 "bit for bit: %s; verdicts that differ from the engine's: %zu (float, all float), %zu (float, due times), "
@@ -701,15 +697,15 @@ void speed() {
         for (SimdLevel l : levels) {
             if (!evstwin::simd_level_supported(l)) continue;
             evstwin::set_simd_level(l);
-            study::quiet_pass(q_fff, block.rate.data());
+            study::quiet_pass(c_fff.q, block.rate.data());
             if (first_y.empty()) {
-                first_y = b_fff.buf[1].y;
-                first_ref = b_fff.buf[1].ref;
-                first_busy = b_fff.busy;
+                first_y = c_fff.b.buf[1].y;
+                first_ref = c_fff.b.buf[1].ref;
+                first_busy = c_fff.b.busy;
             } else {
-                same_at_levels &= std::memcmp(first_y.data(), b_fff.buf[1].y.data(), BLOCK * sizeof(float)) == 0 &&
-                                  std::memcmp(first_ref.data(), b_fff.buf[1].ref.data(), BLOCK * sizeof(float)) == 0 &&
-                                  first_busy == b_fff.busy;
+                same_at_levels &= std::memcmp(first_y.data(), c_fff.b.buf[1].y.data(), BLOCK * sizeof(float)) == 0 &&
+                                  std::memcmp(first_ref.data(), c_fff.b.buf[1].ref.data(), BLOCK * sizeof(float)) == 0 &&
+                                  first_busy == c_fff.b.busy;
             }
         }
         evstwin::set_simd_level(evstwin::best_simd_level());
@@ -897,6 +893,19 @@ T quiet_step(Track<T, C>& s, T x, T g, T th_on, T th_off, T leak_g, C bon, C bof
     return d1;
 }
 
+/// quiet_step() for pixel s in T and C from the double numbers of the sample (c, cache) and
+/// of the pixel (leak_g, bon, boff): each rounded once to the track's precision. x: the
+/// common level, already re-based where the track is.
+template <class T, class C>
+T quiet_step_from(Track<T, C>& tr, double x, double g, const PixelState& s, double leak_g, double bon, double boff,
+                  const SampleConstants& c, const NoiseCache& cache, bool& quiet, bool& ran_out, T& db_out) {
+    return quiet_step<T, C>(tr, static_cast<T>(x), static_cast<T>(g), static_cast<T>(s.theta_on),
+                            static_cast<T>(s.theta_off), static_cast<T>(leak_g), static_cast<C>(bon), static_cast<C>(boff),
+                            static_cast<T>(c.sf_decay), static_cast<T>(c.sf_ramp), static_cast<T>(cache.k.phi_yy),
+                            static_cast<T>(cache.k.l_yy), static_cast<T>(cache.bridge_bound), static_cast<T>(c.dt),
+                            static_cast<T>(c.inv_dt), static_cast<C>(c.dt), quiet, ran_out, db_out);
+}
+
 struct StudyEvent {
     std::uint32_t pixel;
     std::uint32_t sample;
@@ -1043,23 +1052,9 @@ void fidelity(std::size_t n_samples) {
                 bool q, r;
                 double db_d;
                 float db_f;
-                quiet_step<double, double>(d, cache.x, g, s.theta_on, s.theta_off, leak_g[j], bon[j], boff[j],
-                                           c.sf_decay, c.sf_ramp, cache.k.phi_yy, cache.k.l_yy, cache.bridge_bound, c.dt,
-                                           c.inv_dt, c.dt, q, r, db_d);
-                quiet_step<float, float>(fa, static_cast<float>(cache.x), static_cast<float>(g), static_cast<float>(s.theta_on),
-                                  static_cast<float>(s.theta_off), static_cast<float>(leak_g[j]),
-                                  static_cast<float>(bon[j]), static_cast<float>(boff[j]), static_cast<float>(c.sf_decay),
-                                  static_cast<float>(c.sf_ramp), static_cast<float>(cache.k.phi_yy),
-                                  static_cast<float>(cache.k.l_yy), static_cast<float>(cache.bridge_bound),
-                                  static_cast<float>(c.dt), static_cast<float>(c.inv_dt), static_cast<float>(c.dt), q,
-                                  r, db_f);
-                quiet_step<float, float>(fr, static_cast<float>(cache.x - base), static_cast<float>(g),
-                                  static_cast<float>(s.theta_on), static_cast<float>(s.theta_off),
-                                  static_cast<float>(leak_g[j]), static_cast<float>(bon[j]), static_cast<float>(boff[j]),
-                                  static_cast<float>(c.sf_decay), static_cast<float>(c.sf_ramp),
-                                  static_cast<float>(cache.k.phi_yy), static_cast<float>(cache.k.l_yy),
-                                  static_cast<float>(cache.bridge_bound), static_cast<float>(c.dt),
-                                  static_cast<float>(c.inv_dt), static_cast<float>(c.dt), q, r, db_f);
+                quiet_step_from(d, cache.x, g, s, leak_g[j], bon[j], boff[j], c, cache, q, r, db_d);
+                quiet_step_from(fa, cache.x, g, s, leak_g[j], bon[j], boff[j], c, cache, q, r, db_f);
+                quiet_step_from(fr, cache.x - base, g, s, leak_g[j], bon[j], boff[j], c, cache, q, r, db_f);
             }
             const double dd = d.y - d.ref;
             const double da = static_cast<double>(fa.y) - static_cast<double>(fa.ref);
@@ -1131,13 +1126,7 @@ void fidelity(std::size_t n_samples) {
                 using C = std::decay_t<decltype(tr.on)>;
                 bool ran_out;
                 T db;
-                const T d1 = quiet_step<T, C>(tr, static_cast<T>(x - b), static_cast<T>(g), static_cast<T>(s.theta_on),
-                                              static_cast<T>(s.theta_off), static_cast<T>(leak_g[j]),
-                                              static_cast<C>(bon[j]), static_cast<C>(boff[j]), static_cast<T>(c.sf_decay),
-                                              static_cast<T>(c.sf_ramp), static_cast<T>(cache.k.phi_yy),
-                                              static_cast<T>(cache.k.l_yy), static_cast<T>(cache.bridge_bound),
-                                              static_cast<T>(c.dt), static_cast<T>(c.inv_dt), static_cast<C>(c.dt), quiet,
-                                              ran_out, db);
+                const T d1 = quiet_step_from(tr, x - b, g, s, leak_g[j], bon[j], boff[j], c, cache, quiet, ran_out, db);
                 cross = d1 >= static_cast<T>(s.theta_on) ? 1 : d1 <= -static_cast<T>(s.theta_off) ? -1 : 0;
                 if (!out) return;
                 if (cross) {

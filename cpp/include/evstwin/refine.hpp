@@ -27,6 +27,22 @@ inline SampleConstants refined_piece(const SampleConstants& c, int i, int m, dou
     piece.inv_dt = 1.0 / piece.dt;
     return piece;
 }
+
+/// Piece i (1..m, length h) of a refined interval c: the comparator with the pieces' bridge
+/// (variance piece_bridge, its draws keyed by the piece) toward the noise-free level yd plus
+/// the noise ny, then that level as the pixel's. The background's events due by the piece's
+/// end are its own (compare takes them).
+template <class Emit>
+EVSTWIN_ALWAYS_INLINE void compare_refined_piece(const PixelModel& model, PixelState& s, double yd, double ny,
+                                                 const SampleConstants& c, int i, int m, double h, double leak_g,
+                                                 double piece_bridge, NoisePulses& pulses, Philox4x32Key key,
+                                                 std::uint32_t pixel, Emit& emit) {
+    const SampleConstants piece = refined_piece(c, i, m, h);
+    model.compare_bridged(s, yd + ny, ny, piece, leak_g, piece_bridge, pulses, key, pixel,
+                          PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
+    s.y = yd + ny;
+    s.ny = ny;
+}
 }  // namespace detail
 
 template <class Emit>
@@ -100,12 +116,7 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
             zi = detail::low_pass_exact(z_prev, x_prev, xi, pole_decay, pole_ramp);
             ydi = detail::low_pass_exact(yd_prev, z_prev, zi, sf_decay, sf_ramp);
         }
-        const SampleConstants piece = detail::refined_piece(c, i, m, h);
-        // The background's events due by the piece's end are its own (compare takes them).
-        compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, pulses, key, pixel,
-                        PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
-        s.y = ydi + nys[i];
-        s.ny = nys[i];
+        detail::compare_refined_piece(*this, s, ydi, nys[i], c, i, m, h, leak_g, piece_bridge, pulses, key, pixel, emit);
         x_prev = xi;
         z_prev = zi;
         yd_prev = ydi;
@@ -148,12 +159,7 @@ void PixelModel::refine_sf_and_compare(PixelState& s, double x1, double yd1, dou
             xi = s.z + (x1 - s.z) * (static_cast<double>(i) / m);
             ydi = detail::low_pass_exact(yd_prev, x_prev, xi, sf_decay, sf_ramp);
         }
-        const SampleConstants piece = detail::refined_piece(c, i, m, h);
-        // The background's events due by the piece's end are its own (compare takes them).
-        compare_bridged(s, ydi + nys[i], nys[i], piece, leak_g, piece_bridge, pulses, key, pixel,
-                        PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
-        s.y = ydi + nys[i];
-        s.ny = nys[i];
+        detail::compare_refined_piece(*this, s, ydi, nys[i], c, i, m, h, leak_g, piece_bridge, pulses, key, pixel, emit);
         x_prev = xi;
         yd_prev = ydi;
     }
