@@ -203,18 +203,24 @@ def _check_workers(args: argparse.Namespace) -> None:
         raise ValueError(f"--workers must be >= {1 if args.scheduler else 0}; got {args.workers}")
 
 
+def _check_at_least(args: argparse.Namespace, **lowest: int) -> None:
+    """ValueError naming the first integer option (``runs_per_trial`` is --runs-per-trial) below its lowest value."""
+    for name, low in lowest.items():
+        value = getattr(args, name)
+        if value < low:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= {low}; got {value}")
+
+
+def _check_duration(args: argparse.Namespace) -> None:
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration must be > 0; got {args.duration}")
+
+
 def _cmd_fit(args: argparse.Namespace) -> int:
     _check_workers(args)
     from ..io import read_events
 
-    if args.budget < 1:
-        raise ValueError(f"--budget must be >= 1; got {args.budget}")
-    if args.runs_per_trial < 1:
-        raise ValueError(f"--runs-per-trial must be >= 1; got {args.runs_per_trial}")
-    if args.seed < 0:
-        raise ValueError(f"--seed must be >= 0; got {args.seed}")
-    if args.batch_size < 1:
-        raise ValueError(f"--batch-size must be >= 1; got {args.batch_size}")
+    _check_at_least(args, budget=1, runs_per_trial=1, seed=0, batch_size=1)
     params = [p for p in args.params.split(",") if p.strip()]
     bounds = dict(parse_bound(b) for group in args.bounds for b in group)
     scenario = load(args.scenario)
@@ -257,16 +263,12 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     _check_workers(args)
-    if args.runs < 1:
-        raise ValueError(f"--runs must be >= 1; got {args.runs}")
-    if args.seed < 0:
-        raise ValueError(f"--seed must be >= 0; got {args.seed}")
+    _check_at_least(args, runs=1, seed=0)
     if args.objective not in OBJECTIVES:
         raise ValueError(f"--objective must be one of {', '.join(OBJECTIVES)}; got {args.objective!r}")
     if args.real is not None and args.objective != "match":
         raise ValueError(f"--real is for --objective match; got --objective {args.objective}")
-    if args.duration is not None and not args.duration > 0:
-        raise ValueError(f"--duration must be > 0; got {args.duration}")
+    _check_duration(args)
     roi, pixels, mask_hot = region_args(args)
     if args.objective != "match" and (roi is not None or pixels or mask_hot):
         raise ValueError(f"--roi and the --mask options are for --objective match; got --objective {args.objective}")
@@ -304,10 +306,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 def _cmd_limiting(args: argparse.Namespace) -> int:
     _check_workers(args)
-    if args.runs < 1:
-        raise ValueError(f"--runs must be >= 1; got {args.runs}")
-    if args.duration is not None and not args.duration > 0:
-        raise ValueError(f"--duration must be > 0; got {args.duration}")
+    _check_at_least(args, runs=1)
+    _check_duration(args)
     if ">=" not in args.criterion:
         raise ValueError(
             f"--criterion takes METRIC>=VALUE (e.g. excess_fraction>=0.5); got {args.criterion!r}"

@@ -102,6 +102,11 @@ def _error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
+def _failure(job: _Job, attempts: int, error: str) -> JobFailure:
+    """The record of ``job`` given up after ``attempts`` tries, with the last one's error."""
+    return JobFailure(job.key, job.overrides, job.seed, attempts, error)
+
+
 def _submit(pool: Any, job: _Job) -> Any:
     """``pool.submit`` of one job; a worker it starts never sees a terminal's Ctrl-C."""
     from .._signals import children_without_sigint
@@ -184,31 +189,13 @@ class LocalExecutor:
                         broken = True
                         attempts[i] += 1
                         if attempts[i] > JOB_RETRIES:
-                            yield (
-                                jobs[i],
-                                JobFailure(
-                                    jobs[i].key,
-                                    jobs[i].overrides,
-                                    jobs[i].seed,
-                                    attempts[i],
-                                    f"worker process died: {_error_text(exc)}",
-                                ),
-                            )
+                            yield jobs[i], _failure(jobs[i], attempts[i], f"worker process died: {_error_text(exc)}")
                         else:
                             retry.append(i)
                     except Exception as exc:  # noqa: BLE001 - any job error is retried, then reported
                         attempts[i] += 1
                         if attempts[i] > JOB_RETRIES or isinstance(exc, DETERMINISTIC_ERRORS):
-                            yield (
-                                jobs[i],
-                                JobFailure(
-                                    jobs[i].key,
-                                    jobs[i].overrides,
-                                    jobs[i].seed,
-                                    attempts[i],
-                                    _error_text(exc),
-                                ),
-                            )
+                            yield jobs[i], _failure(jobs[i], attempts[i], _error_text(exc))
                         else:
                             retry.append(i)
                     else:
@@ -247,10 +234,10 @@ class LocalExecutor:
             try:
                 return _run_context_job(ctx, job.overrides, job.seed)
             except DETERMINISTIC_ERRORS as exc:
-                return JobFailure(job.key, job.overrides, job.seed, attempt, _error_text(exc))
+                return _failure(job, attempt, _error_text(exc))
             except Exception as exc:  # noqa: BLE001
                 error = _error_text(exc)
-        return JobFailure(job.key, job.overrides, job.seed, JOB_RETRIES + 1, error)
+        return _failure(job, JOB_RETRIES + 1, error)
 
     def close(self, wait: bool = True) -> None:
         if self._pool is not None:
@@ -336,12 +323,7 @@ class DaskExecutor:
                 try:
                     values = fut.result()
                 except Exception as exc:  # noqa: BLE001 - failed after the scheduler's retries
-                    yield (
-                        jobs[i],
-                        JobFailure(
-                            jobs[i].key, jobs[i].overrides, jobs[i].seed, JOB_RETRIES + 1, _error_text(exc)
-                        ),
-                    )
+                    yield jobs[i], _failure(jobs[i], JOB_RETRIES + 1, _error_text(exc))
                 else:
                     yield jobs[i], values
             ok = True
