@@ -39,7 +39,7 @@ import numpy as np
 
 from . import spectra
 from ._checks import integer
-from .presets import PRESETS, SensorPreset, get_preset
+from .presets import VENDOR_BIAS_PRESETS, SensorPreset, get_preset
 from .sensor import Sensor
 
 BENCH_SPECTRUM = "blackbody:3000"
@@ -266,7 +266,7 @@ def characterize(preset: str | SensorPreset, lux: Sequence[float] = DEFAULT_LUX,
     if biases:
         if p.vendor_biases is None:
             raise ValueError(f"--bias: preset {p.name!r} has no Prophesee biases (only "
-                             f"{', '.join(n for n, q in PRESETS.items() if q.vendor_biases is not None)} have)")
+                             f"{', '.join(VENDOR_BIAS_PRESETS)} have)")
         p = replace(p, pixel=p.vendor_biases.pixel_params(dict(biases), p.pixel, p.dark_reference_temperature_c))
     integer("size_px", size_px, 4, MAX_SIZE_PX)
     grid = sorted(float(v) for v in lux)

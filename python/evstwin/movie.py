@@ -146,11 +146,12 @@ def render_movie(path_in: str | os.PathLike[str], out: str | os.PathLike[str], o
                                                   (options.background, "--background"),
                                                   (options.on_color, "--on-color")))
     frames_us = (window[0], window[0] + round(frames * period_us))
+    window_array = _window_array_class()
 
     def rendered(chosen: np.ndarray, low: tuple[int, int, int], high: tuple[int, int, int]) -> Any:
         """faery's frames of ``chosen`` events over the whole window (empty frames included)."""
         colormap = faery.Colormap.diverging_from_triplet("evstwin", _hex(low), _hex(bg), _hex(high))
-        stream = (_window_array_class()(to_faery(chosen), (width, height), frames_us)
+        stream = (window_array(to_faery(chosen), (width, height), frames_us)
                   .regularize(frequency_hz=1e6 / period_us, start=window[0] * faery.us)
                   .render(decay=options.decay, tau=tau_us * faery.us, colormap=colormap))
         return stream.scale(options.scale) if options.scale > 1 else stream

@@ -100,10 +100,13 @@ def test_labels_as_colours_show_why_each_event_fired(tmp_path: Path,
 
 def test_layers_meet_where_they_stand_out_most() -> None:
     background = np.array([0, 0, 0, 255], np.uint8)
-    dim, bright, other = ([[[v, v, v, 255]]] for v in (40, 200, 90))
-    # per pixel the layer farthest from the background, the first where they tie
-    assert over_background([np.array(dim, np.uint8), np.array(bright, np.uint8)], background)[0, 0, 0] == 200
-    assert over_background([np.array(other, np.uint8), np.array(other, np.uint8) // 3 * 3], background)[0, 0, 0] == 90
+    dim, bright = (np.array([[[v, v, v, 255]]], np.uint8) for v in (40, 200))
+    red, green = (np.array([[rgb + [255]]], np.uint8) for rgb in ([90, 0, 0], [0, 90, 0]))
+    # per pixel the layer farthest from the background (summed |RGB|: 120 against 600), the
+    # first where they tie (red and green both 90 away)
+    assert over_background([dim, bright], background)[0, 0, 0] == 200
+    assert over_background([red, green], background)[0, 0].tolist() == [90, 0, 0, 255]
+    assert over_background([green, red], background)[0, 0].tolist() == [0, 90, 0, 255]
 
 
 def test_a_window_past_the_last_event_has_all_its_frames(tmp_path: Path) -> None:

@@ -37,13 +37,13 @@ def run(args: argparse.Namespace) -> int:
     preset = get_preset(args.preset)
     biases: dict[str, float] = {}
     for item in args.biases:
-        name, sep, value = item.partition("=")
-        try:
+        name, _, value = item.partition("=")
+        try:  # a missing '=' leaves value empty: float('') fails too
+            if not name.strip():
+                raise ValueError
             biases[name.strip()] = float(value)
         except ValueError:
-            sep = ""
-        if not sep or not name.strip():
-            raise ValueError(f"--bias takes NAME=VALUE with a number (e.g. bias_diff_on=+40); got {item!r}")
+            raise ValueError(f"--bias takes NAME=VALUE with a number (e.g. bias_diff_on=+40); got {item!r}") from None
     lux = DEFAULT_LUX if args.lux is None else tuple(parse_float_list(args.lux, "--lux"))
     if args.threads is not None and args.threads < 1:
         raise ValueError(f"--threads must be >= 1; got {args.threads}")

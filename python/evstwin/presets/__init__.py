@@ -92,6 +92,8 @@ from .sensor_preset import (
 )
 
 PRESETS: dict[str, SensorPreset] = {p.name: p for p in (DAVIS346, IMX636, PROPHESEE_GEN3_VGA, DAVIS346_PAPER)}
+VENDOR_BIAS_PRESETS: tuple[str, ...] = tuple(name for name, p in PRESETS.items() if p.vendor_biases is not None)
+"""The presets whose biases are the vendor's own names and units (``SensorPreset.vendor_biases``)."""
 """Built-in sensor presets by name."""
 
 
@@ -134,6 +136,7 @@ __all__ = [
     "PAPER_RUN_1",
     "PAPER_RUN_3",
     "PRESETS",
+    "VENDOR_BIAS_PRESETS",
     "PROPHESEE_BIAS_NAMES",
     "PROPHESEE_GEN3_VGA",
     "QE_REFERENCE_WAVELENGTH_M",

@@ -16,7 +16,14 @@ from .. import psf
 from ..constants import ARCSEC_PER_DEG
 from ..optics import PAPER_F_NUMBER, PAPER_FOCAL_LENGTH_M, Optics
 from ..pixel import HotPixelChain, PixelParams
-from ..presets import PRESETS, PROPHESEE_BIAS_NAMES, BiasSet, SensorPreset, get_bias_set, get_preset
+from ..presets import (
+    PROPHESEE_BIAS_NAMES,
+    VENDOR_BIAS_PRESETS,
+    BiasSet,
+    SensorPreset,
+    get_bias_set,
+    get_preset,
+)
 from ..readout import ReadoutParams
 from ..sky import scene as sky_scene
 from ..sky import stars as sky_stars
@@ -363,7 +370,7 @@ def _vendor_biases(s: dict[str, Any], preset: SensorPreset, vendor: dict[str, An
         raise ScenarioError(
             f"biases.{first}: preset {preset.name!r} has no Prophesee biases (its biases are the DAVIS bias "
             f"currents, biases.{', biases.'.join(_BIAS_KEYS)}, or sensor.bias_set); Prophesee biases: "
-            f"{', '.join(p for p, q in PRESETS.items() if q.vendor_biases is not None)}")
+            f"{', '.join(VENDOR_BIAS_PRESETS)}")
     mixed = [f"biases.{k}" for k in currents] + (["sensor.bias_set"] if s["sensor"].get("bias_set") else []) + (
         ["sensor.k"] if "k" in s["sensor"] else [])
     if mixed:
