@@ -172,6 +172,54 @@ py::array_t<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::arra
     return out.array(n_events);
 }
 
+py::array_t<evstwin::Event> run_sparse_any(Sensor& s, py::array static_rate, py::array t_s, std::size_t base_every,
+                                           std::size_t group_base_samples, py::array light_sample,
+                                           py::array light_pixel, py::array light_rate) {
+    using F64 = py::array_t<double, READ_FLAGS>;
+    using U32 = py::array_t<std::uint32_t, READ_FLAGS>;
+    auto rate = F64::ensure(static_rate);
+    if (!rate || rate.ndim() != 2 || rate.shape(0) != s.height() || rate.shape(1) != s.width())
+        throw py::value_error("static_rate must have shape (height, width) = (" + std::to_string(s.height()) + ", " +
+                              std::to_string(s.width()) + "); got shape " + shape_str(static_rate));
+    auto t = F64::ensure(t_s);
+    if (!t || t.ndim() != 1) throw py::value_error("t_s must be 1-D; got shape " + shape_str(t_s));
+    const auto integer = [](const py::array& a, const char* name) {
+        if (a.size() > 0 && a.dtype().kind() != 'i' && a.dtype().kind() != 'u')
+            throw py::type_error(std::string(name) + " must be an integer array; got dtype " + std::string(py::str(a.dtype())));
+        const auto wide = py::array_t<std::int64_t, READ_FLAGS>::ensure(a);
+        if (!wide || wide.ndim() != 1) throw py::value_error(std::string(name) + " must be 1-D; got shape " + shape_str(a));
+        for (py::ssize_t i = 0; i < wide.shape(0); ++i)
+            if (wide.data()[i] < 0 || wide.data()[i] > 0xFFFFFFFFll)
+                throw py::value_error(std::string(name) + "[" + std::to_string(i) + "]=" + std::to_string(wide.data()[i]) +
+                                      " is negative or too large");
+        return U32::ensure(wide);
+    };
+    auto sample = integer(light_sample, "light_sample");
+    auto pixel = integer(light_pixel, "light_pixel");
+    auto light = F64::ensure(light_rate);
+    if (!light || light.ndim() != 1 || light.shape(0) != sample.shape(0) || pixel.shape(0) != sample.shape(0))
+        throw py::value_error("light_sample, light_pixel and light_rate must be 1-D of one length; got shapes " +
+                              shape_str(light_sample) + ", " + shape_str(light_pixel) + " and " + shape_str(light_rate));
+    evstwin::SparseStep step;
+    step.static_rate = rate.data();
+    step.t_s = t.data();
+    step.n_samples = static_cast<std::size_t>(t.shape(0));
+    step.base_every = base_every;
+    step.group_base_samples = group_base_samples;
+    step.light_sample = sample.data();
+    step.light_pixel = pixel.data();
+    step.light_rate = light.data();
+    step.n_light = static_cast<std::size_t>(light.shape(0));
+    EventsOut out;
+    const evstwin::EventStorage storage = out.storage();
+    std::size_t n_events = 0;
+    {
+        py::gil_scoped_release release;
+        n_events = s.run_sparse_into(storage, step);
+    }
+    return out.array(n_events);
+}
+
 int threads_arg(const std::optional<int>& n) {
     if (n && *n < 1)
         throw py::value_error("num_threads must be >= 1 or None; got num_threads=" + std::to_string(*n));
@@ -207,6 +255,10 @@ void register_sensor(py::module_& m) {
                  return run_pixels_any(s, pixels, rate, t_s);
              },
              py::arg("pixels"), py::arg("photon_rate"), py::arg("t_s"))
+        .def("run_sparse", &run_sparse_any, py::arg("static_rate"), py::arg("t_s"), py::arg("base_every"),
+             py::arg("group_base_samples"), py::arg("light_sample"), py::arg("light_pixel"), py::arg("light_rate"))
+        .def_property_readonly("last_pixel_updates", &Sensor::last_pixel_updates)
+        .def("settle_time_s", &Sensor::settle_time_s, py::arg("photon_rate"))
         .def("reset", &Sensor::reset)
         .def("last_labels",
              [](const Sensor& s) { return to_numpy(std::vector<std::uint8_t>(s.last_labels())); },

@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 
 from . import psf
-from ._core import ELEMENTARY_CHARGE_C
 from .readout import Readout
 from .scenario import Scene, pre_roll_samples
 from .sensor import Sensor
@@ -173,8 +172,6 @@ class _Runner:
         # Long steps for the pixels whose light is constant (sampling.static_step_s): base
         # intervals per step, 1 where the run keeps every pixel at the base rate.
         self.static_every = self._static_every()
-        self.settle_until = np.full(scene.width * scene.height, -np.inf)
-        self.settle_px_s = self._settle_times() if self.static_every > 1 else np.zeros(0)  # per pixel [s]
 
     # -- the loop --------------------------------------------------------------------------------
 
@@ -277,33 +274,17 @@ class _Runner:
             return 1
         return max(1, math.floor(sc.static_step_s / self.dt + 1e-9))
 
-    def _settle_times(self) -> np.ndarray:
-        """Per pixel, how long after a moving source leaves it the pixel keeps the base rate
-        [s]: five time constants of the slower of its source follower and, when on, its
-        photoreceptor pole at the static light's mean current (the pole's cutoff scales with
-        it). Until then its levels still relax, and the comparator's line between two samples
-        far apart would misplace the crossings they make (the OFF events after a passage)."""
-        p = self.scene.params
-        settle = np.full(self.static_map.size, self.settle_s)
-        if p.pr_pole:
-            dark_e_s = 0.0 if p.dark_model == "none" else p.dark_rate_e_per_s
-            current_a = ELEMENTARY_CHARGE_C * (p.electrons_per_photon * self.static_map.reshape(-1) + dark_e_s)
-            with np.errstate(divide="ignore"):
-                pole_s = 5.0 * p.pr_ref_current_a / (2.0 * math.pi * p.pr_cutoff_ref_hz * current_a)
-            np.maximum(settle, pole_s, out=settle)
-        return settle
-
     def _stepped_chunks(self, bar: Any = None) -> Iterator[_Chunk]:
         """``_engine_chunks`` with time steps per pixel: units of ``static_every`` base intervals
-        aligned from t = 0. In each, the pixels inside a moving source's window take the fine
-        samples (``_n_sub`` per base interval), those a source has left and that still settle
-        take the base samples, and every other pixel one step to the unit's end, its light
+        aligned from t = 0, each one ``Sensor.run_sparse`` step. Within a unit the engine
+        chooses per group of ``self.unit`` base intervals: the pixels inside a moving source's
+        window take the fine samples (``_n_sub`` per base interval), those a source has left
+        and that still settle the base samples, every other pixel one long step, its light
         the static map's. Every pixel reaches the unit's end, so a unit's events all lie in it
         and come out in time order; which pixel takes which grid depends on the unit alone,
         not on the chunking."""
         sc = self.scene
         npix = sc.width * sc.height
-        static = self.static_map.reshape(-1)
         unit_s = self.static_every * self.dt
         # Sources that move less than max_shift_px in a unit (a drifting star field: 0.07-0.3
         # px/s, thousands of stars) need no sample between the unit's ends: they are rendered
@@ -317,46 +298,43 @@ class _Runner:
         fast_groups = [(shape, cols[~slow[cols]]) for shape, cols in self._fine_groups if (~slow[cols]).any()]
         slow_groups = [(shape, cols[slow[cols]]) for shape, cols in self._fine_groups if slow[cols].any()]
         frame = self._buffer("unit_frame", (1, sc.height, sc.width)) if slow_groups else None
+        npix_bits = (npix - 1).bit_length()
+        empty_i, empty_f = np.zeros(0, np.int64), np.zeros(0)
         a = 0
         while a < self.n_base:
             b = min(a - a % self.static_every + self.static_every, self.n_base)
             s0 = time.perf_counter()
-            calls: list[tuple[np.ndarray | None, np.ndarray, np.ndarray]] = []  # (pixels, rates, t_s)
+            # The unit to the engine as a sparse scene: the static map (with the slow sources
+            # at the unit's end) and the fast sources' windows at the fine times; the engine
+            # chooses each pixel's steps (Sensor.run_sparse).
+            n_sub, t = 1, np.array([b * self.dt])
+            light_sample, light_pixel, light_rate = empty_i, empty_i, empty_f
             if fast_groups:
                 n_sub = self._n_sub(a * self.dt, b * self.dt)
                 self.sub_sampled_chunks += n_sub > 1
-                t_base, t_fine = self._fine_times(a, b, n_sub)
-                x, y, f = self._sources(t_fine)
-                lit = self._lit(x, y, f, fast_groups)
-                settling = (self.settle_until > a * self.dt) & ~lit
-                self.settle_until[lit] = b * self.dt + self.settle_px_s[lit]
-                lit_px, settling_px = np.flatnonzero(lit), np.flatnonzero(settling)
-                if lit_px.size:
-                    calls.append((lit_px, self._window_rates(lit_px, x, y, f, fast_groups), t_fine))
-                if settling_px.size:
-                    calls.append((settling_px, np.repeat(static[settling_px][None, :], t_base.size, axis=0), t_base))
-                self.pixel_updates += lit_px.size * t_fine.size + settling_px.size * t_base.size
-            t_end = np.array([b * self.dt])
+                _, t = self._fine_times(a, b, n_sub)
+                x, y, f = self._sources(t)
+                parts = list(self._contribution_parts(x, y, f, fast_groups, stride=1 << npix_bits))
+                if parts:
+                    flat = np.concatenate([c[0] for c in parts])
+                    light_sample, light_pixel = flat >> npix_bits, flat & ((1 << npix_bits) - 1)
+                    light_rate = np.concatenate([c[1] for c in parts])
+            static_rate = self.static_map
             if frame is not None:
-                x, y, f = self._sources(t_end, truth=not fast_groups)
+                x, y, f = self._sources(np.array([b * self.dt]), truth=not fast_groups)
                 frame[0] = self.static_map
                 for shape, cols in slow_groups:
                     psf.render_points(sc.width, sc.height, x[0, cols], y[0, cols], f[0, cols], shape, out=frame[0])
-            calls.append((None, np.broadcast_to(self.static_map, (1, sc.height, sc.width)) if frame is None else frame,
-                          t_end))
-            self.pixel_updates += npix - sum(c[0].size for c in calls if c[0] is not None)
+                static_rate = frame[0]
             s1 = time.perf_counter()
-            parts, codes = [], []
-            for pixels, rates, t in calls:
-                parts.append(self.sensor.run(rates, t) if pixels is None else self.sensor.run_pixels(pixels, rates, t))
-                if self.labels:
-                    codes.append(self.sensor.last_labels())
+            events = self.sensor.run_sparse(static_rate, t, base_every=n_sub, group_base_samples=self.unit,
+                                            light_sample=light_sample, light_pixel=light_pixel, light_rate=light_rate)
+            labels = self.sensor.last_labels() if self.labels else None
             s2 = time.perf_counter()
+            self.pixel_updates += self.sensor.last_pixel_updates
             self.scene_s += s1 - s0
             self.engine_s += s2 - s1
-            events = parts[0] if len(parts) == 1 else np.concatenate(parts)
-            order = np.lexsort((events["y"].astype(np.int64) * sc.width + events["x"], events["t"]))
-            yield events[order], (np.concatenate(codes)[order] if self.labels else None)
+            yield events, labels
             if bar is not None:
                 bar.n = min(round(b * self.dt, 6), bar.total)
                 bar.update(0)

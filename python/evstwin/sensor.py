@@ -244,6 +244,45 @@ class Sensor:
         with self._cap(max_events):
             return self._core.run_pixels(_as_array(pixels, "pixels"), _as_array(photon_rate), _as_array(t_s, "t_s"))
 
+    def run_sparse(
+        self, static_rate: npt.ArrayLike, t_s: npt.ArrayLike, *, base_every: int = 1, group_base_samples: int = 1,
+        light_sample: npt.ArrayLike = (), light_pixel: npt.ArrayLike = (), light_rate: npt.ArrayLike = (),
+        max_events: int | None = None,
+    ) -> np.ndarray:
+        """Advance every pixel through one step of a sparse scene, with time steps per pixel.
+
+        static_rate: (height, width) photons/s, the light that stays constant over the step.
+        t_s: the step's fine sample times [s], after the previous call's last; the last ends
+            the step, where every pixel stands afterwards.
+        base_every: fine samples per base sample (``t_s[k]`` is a base time where
+            ``(k + 1) % base_every == 0``; ``len(t_s)`` must be a multiple).
+        group_base_samples: base samples per group, the granularity of the per-pixel choice.
+        light_sample, light_pixel, light_rate: the moving sources' light as entries: at sample
+            ``light_sample[i]`` pixel ``light_pixel[i]`` (row-major) receives ``light_rate[i]``
+            more photons/s (the pixels of a PSF stamp; entries of one sample and pixel add).
+
+        In each group, a pixel some entry lights takes the fine samples; one whose levels still
+        relax after a source left it (``settle_time_s``) the base samples; every other pixel
+        one long exact step. Needs the continuous noise model and the exact low-pass. Returns
+        the step's events sorted by (t, pixel); ``last_pixel_updates`` counts the steps taken.
+        """
+        with self._cap(max_events):
+            return self._core.run_sparse(
+                _as_array(static_rate, "static_rate"), _as_array(t_s, "t_s"), base_every, group_base_samples,
+                np.asarray(light_sample, np.int64), np.asarray(light_pixel, np.int64),
+                np.asarray(light_rate, np.float64))
+
+    @property
+    def last_pixel_updates(self) -> int:
+        """Pixel-updates of the last ``run_sparse`` call (long steps, fine and base samples)."""
+        return int(self._core.last_pixel_updates)
+
+    def settle_time_s(self, photon_rate: float) -> float:
+        """How long a pixel's levels keep relaxing after its light stops changing [s], at a
+        constant photon rate: five time constants of the slower of the source follower and
+        the photoreceptor pole (at that light's current)."""
+        return float(self._core.settle_time_s(float(photon_rate)))
+
     @contextlib.contextmanager
     def _cap(self, max_events: int | None) -> Iterator[None]:
         """The sensor's max_events, or for one call the given one."""

@@ -118,6 +118,35 @@ inline const char* kernel_name(Kernel k) {
     }
 }
 
+/// One step of a sparse scene for Sensor::run_sparse(): a constant light map over the step
+/// plus the moving sources' light at its fine sample times, given where it falls (a PSF
+/// stamp's pixels), never as full frames. Pointers stay the caller's; nothing is copied
+/// before the call. Units: photons/s arriving on a pixel, seconds.
+struct SparseStep {
+    /// width * height photon rates, row-major: the light that does not change over the step
+    /// (the sky's background, the sources that stay put).
+    const double* static_rate = nullptr;
+    /// The step's fine sample times, strictly increasing, after the sensor's last sample;
+    /// t_s[n_samples - 1] ends the step: every pixel stands there after the call.
+    const double* t_s = nullptr;
+    std::size_t n_samples = 0;
+    /// Fine samples per base sample: t_s[k] is a base time where (k + 1) % base_every == 0
+    /// (n_samples must be a multiple). A pixel whose light has stopped changing but whose
+    /// levels still relax (settle_time_s()) takes the base times only.
+    std::size_t base_every = 1;
+    /// Base samples per group: the granularity of the per-pixel choice of step. A pixel that
+    /// a source touches in a group takes all the group's fine samples; one that still relaxes
+    /// its base samples; every other pixel one long step across the group.
+    std::size_t group_base_samples = 1;
+    /// The moving sources' light: entry i adds light_rate[i] photons/s to pixel light_pixel[i]
+    /// (row-major) at sample light_sample[i]. A pixel listed at a sample is lit at it (a rate
+    /// of 0 included: the edge of a stamp); entries of one (sample, pixel) add up.
+    const std::uint32_t* light_sample = nullptr;
+    const std::uint32_t* light_pixel = nullptr;
+    const double* light_rate = nullptr;
+    std::size_t n_light = 0;
+};
+
 class Sensor {
 public:
     /// Pixels per block: the unit of parallel work and of event bookkeeping.
@@ -220,6 +249,8 @@ public:
                               hot_chain_map_.empty() ? std::uint16_t{0} : hot_chain_map_[i]);
         }
         block_synced_.assign((state_.size() + BLOCK - 1) / BLOCK, 0);
+        settle_until_.assign(state_.size(), -std::numeric_limits<double>::infinity());
+        settling_.clear();
         samples_ = 0;
         last_t_ = -std::numeric_limits<double>::infinity();
     }
@@ -342,6 +373,41 @@ public:
     std::size_t run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
                                 const Real* photon_rate, const double* t_s, std::size_t n_samples);
 
+    /// Advance every pixel through one step of a sparse scene (SparseStep) with time steps
+    /// per pixel: in each group of the step's samples, the pixels a source's light touches
+    /// take the fine samples, those whose levels still relax after a source left them
+    /// (settle_time_s(), carried from step to step) take the base samples, and every other
+    /// pixel one long exact step; then all reach the step's end. The noise, background
+    /// clocks, leak, hot pixels and refractory keep their laws over any step (the continuous
+    /// model; the documentation's noise model page), so the statistics are those of a dense
+    /// run at the fine rate. Needs noise_model = continuous and lowpass = exact. Returns the
+    /// step's events sorted by (t, pixel); last_labels() holds theirs. Throws
+    /// std::invalid_argument, before any pixel moves, on a bad input.
+    std::vector<Event> run_sparse(const SparseStep& step) {
+        std::vector<Event> events;
+        run_sparse_into(detail::vector_storage(events), step);
+        return events;
+    }
+
+    /// run_sparse() with the events written into `storage` (as run_into); returns their number.
+    std::size_t run_sparse_into(const EventStorage& storage, const SparseStep& step);
+
+    /// Pixel-updates of the last run_sparse() call: long steps, fine and base samples, summed
+    /// over the pixels (a dense call's is pixels x samples).
+    std::uint64_t last_pixel_updates() const { return last_pixel_updates_; }
+
+    /// How long a pixel's levels keep relaxing after its light stops changing [s], at a
+    /// constant photon rate: five time constants of the slower of the source follower and,
+    /// when on, the photoreceptor pole at the pixel's mean current (its cutoff scales with
+    /// the current, eq. 9: a dim pixel's pole is slow). Until then, the comparator's line
+    /// between two samples far apart would misplace the crossings the relaxation makes.
+    double settle_time_s(double photon_rate) const {
+        const double sf = model_.sf_rate();
+        const double pole = model_.pole_rate(ELEMENTARY_CHARGE_C * model_.mean_electron_rate(photon_rate));
+        const double slowest = p_min_positive(sf, pole);
+        return slowest > 0.0 ? SETTLE_TIME_CONSTANTS / slowest : 0.0;
+    }
+
 private:
     /// run()'s vector kernel (Kernel::Auto) takes a block where at least this many quarters of its pixels
     /// advance at a sample (the others stand past it, sampled finely by run_pixels): it runs
@@ -360,6 +426,21 @@ private:
     /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
     /// Speed only.
     static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
+    /// Time constants a pixel's levels take to settle (settle_time_s): e^-5 = 0.7 % of a step is left.
+    static constexpr double SETTLE_TIME_CONSTANTS = 5.0;
+    /// The smaller of two rates, ignoring a zero (a stage that is off).
+    static double p_min_positive(double a, double b) {
+        if (a <= 0.0) return b;
+        if (b <= 0.0) return a;
+        return std::min(a, b);
+    }
+    /// run_sparse()'s part for one group of a step: the runs it makes (see run_sparse_into).
+    struct SparseRun {
+        std::vector<std::uint32_t> pixels;
+        std::vector<double> rate;   ///< (times.size(), pixels.size()), C-ordered
+        std::vector<double> times;
+    };
+
     /// The state after a call that stopped part-way (max_events, out of memory) is neither
     /// the old one nor the new one: refuse to build on it.
     void check_usable() const {
@@ -846,6 +927,11 @@ private:
     std::vector<std::uint16_t> hot_chain_map_;  ///< per pixel, its hot_chains index (empty: all 0)
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;
     Kernel kernel_ = Kernel::Auto;
+    /// run_sparse(): per pixel, the time until which its levels relax after a source's light
+    /// left it (settle_time_s), and the pixels with such a time still ahead.
+    std::vector<double> settle_until_;
+    std::vector<std::uint32_t> settling_;
+    std::uint64_t last_pixel_updates_ = 0;
     std::atomic<std::size_t> events_in_call_{0};
     bool stopped_ = false;
 };
@@ -856,3 +942,4 @@ EVSTWIN_FP_STRICT_END
 // The definitions of Sensor's calls, block scheduler and event collection.
 #include "detail/sensor_collect.hpp"
 #include "detail/sensor_run.hpp"
+#include "detail/sensor_sparse.hpp"

@@ -1,0 +1,228 @@
+// Sensor::run_sparse_into(): one step of a sparse scene with time steps per pixel. Included
+// by sensor.hpp.
+//
+// The step's samples are cut into groups of group_base_samples base samples. In group g:
+//   - the pixels some source's light touches (the lit list) take the group's fine samples,
+//     after one long step at the static light to the group's start if they stood earlier;
+//   - those whose levels still relax after a source left them (settle_until_) take its base
+//     samples, after the same long step;
+//   - the others wait.
+// Then one run() of the static map at the step's end moves every pixel that stands earlier
+// there in one long exact step (run() skips the pixels already there). Which pixel takes
+// which grid depends on the step alone, so the events do not depend on the threads or on how
+// a simulation is cut into steps of the same groups. Every call it makes is an ordinary
+// run_pixels / run call; the step's events are their events, merged by (t, pixel).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "../config.hpp"
+#include "../sensor.hpp"
+
+EVSTWIN_FP_STRICT_BEGIN
+
+namespace evstwin {
+
+inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const SparseStep& step) {
+    check_usable();
+    const std::size_t npix = state_.size(), n = step.n_samples;
+    // --- checks: nothing moves before every one has passed ---
+    if (!model_.continuous || model_.euler)
+        throw std::invalid_argument("run_sparse needs noise_model='continuous' and lowpass='exact' (the long steps "
+                                    "advance the noise exactly over any interval only then)");
+    if (n == 0) throw std::invalid_argument("run_sparse needs at least one sample; got n_samples=0");
+    if (!step.static_rate || !step.t_s) throw std::invalid_argument("run_sparse needs static_rate and t_s");
+    if (step.base_every < 1 || n % step.base_every != 0)
+        throw std::invalid_argument("base_every must be >= 1 and divide n_samples (the step ends on a base time); got "
+                                    "base_every=" + std::to_string(step.base_every) + " and n_samples=" +
+                                    std::to_string(n));
+    if (step.group_base_samples < 1)
+        throw std::invalid_argument("group_base_samples must be >= 1; got 0");
+    if (step.n_light > 0 && (!step.light_sample || !step.light_pixel || !step.light_rate))
+        throw std::invalid_argument("run_sparse: n_light=" + std::to_string(step.n_light) +
+                                    " needs light_sample, light_pixel and light_rate");
+    check_times(step.t_s, n);
+    const std::size_t bad_static = first_bad_rate(step.static_rate, npix);
+    if (bad_static < npix)
+        throw_bad_rate("static_rate[" + std::to_string(bad_static / width_) + ", " + std::to_string(bad_static % width_) +
+                           "]",
+                       step.static_rate[bad_static]);
+    for (std::size_t i = 0; i < step.n_light; ++i) {
+        if (step.light_sample[i] >= n)
+            throw std::invalid_argument("light_sample[" + std::to_string(i) + "]=" + std::to_string(step.light_sample[i]) +
+                                        " is not a sample of the step (n_samples=" + std::to_string(n) + ")");
+        if (step.light_pixel[i] >= npix)
+            throw std::invalid_argument("light_pixel[" + std::to_string(i) + "]=" + std::to_string(step.light_pixel[i]) +
+                                        " is outside the " + std::to_string(npix) + "-pixel sensor");
+        const double v = step.light_rate[i];
+        if (!(v >= 0.0 && v <= MAX_RATE))
+            throw std::invalid_argument("light_rate must be finite, >= 0 and <= 1e20 photons/s; got light_rate[" +
+                                        std::to_string(i) + "]=" + detail::fmt(v));
+    }
+
+    // --- the groups' lit pixels and their rates (static light plus the sources'), in the
+    // entries' order within a group ---
+    const std::size_t group = std::min(n, step.group_base_samples * step.base_every);
+    const std::size_t n_groups = (n + group - 1) / group;
+    std::vector<std::size_t> first(n_groups + 1, 0);
+    for (std::size_t i = 0; i < step.n_light; ++i) ++first[step.light_sample[i] / group + 1];
+    for (std::size_t g = 0; g < n_groups; ++g) first[g + 1] += first[g];
+    std::vector<std::size_t> order(step.n_light);
+    {
+        std::vector<std::size_t> next(first.begin(), first.end() - 1);
+        for (std::size_t i = 0; i < step.n_light; ++i) order[next[step.light_sample[i] / group]++] = i;
+    }
+    std::vector<SparseRun> lit(n_groups);
+    std::vector<std::int32_t> column(npix, -1);
+    for (std::size_t g = 0; g < n_groups; ++g) {
+        SparseRun& r = lit[g];
+        const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
+        for (std::size_t e = first[g]; e < first[g + 1]; ++e) {
+            const std::uint32_t px = step.light_pixel[order[e]];
+            if (column[px] < 0) {
+                column[px] = 0;
+                r.pixels.push_back(px);
+            }
+        }
+        std::sort(r.pixels.begin(), r.pixels.end());
+        const std::size_t m = r.pixels.size();
+        for (std::size_t j = 0; j < m; ++j) column[r.pixels[j]] = static_cast<std::int32_t>(j);
+        r.times.assign(step.t_s + k0, step.t_s + k1);
+        r.rate.resize((k1 - k0) * m);
+        for (std::size_t k = 0; k < k1 - k0; ++k)
+            for (std::size_t j = 0; j < m; ++j) r.rate[k * m + j] = step.static_rate[r.pixels[j]];
+        for (std::size_t e = first[g]; e < first[g + 1]; ++e) {
+            const std::size_t i = order[e];
+            double& v = r.rate[(step.light_sample[i] - k0) * m + static_cast<std::size_t>(column[step.light_pixel[i]])];
+            v = v + step.light_rate[i];
+        }
+        for (const std::uint32_t px : r.pixels) column[px] = -1;
+        const std::size_t bad = first_bad_rate(r.rate.data(), r.rate.size());
+        if (bad < r.rate.size()) {
+            const std::uint32_t px = r.pixels[bad % m];
+            throw_bad_rate("static_rate plus the sources' light at sample " + std::to_string(k0 + bad / m) +
+                               ", pixel (x, y) = (" + std::to_string(px % width_) + ", " + std::to_string(px / width_) +
+                               ")",
+                           r.rate[bad]);
+        }
+        for (const std::uint32_t px : r.pixels)
+            if (!(state_[px].t < step.t_s[0]))
+                throw std::invalid_argument("run_sparse: pixel (x, y) = (" + std::to_string(px % width_) + ", " +
+                                            std::to_string(px / width_) + ") stands at " + detail::fmt(state_[px].t) +
+                                            " s, not before the step's first sample t_s[0]=" + detail::fmt(step.t_s[0]));
+    }
+    for (const std::uint32_t px : settling_)
+        if (!(state_[px].t < step.t_s[0]))
+            throw std::invalid_argument("run_sparse: pixel (x, y) = (" + std::to_string(px % width_) + ", " +
+                                        std::to_string(px / width_) + ") stands at " + detail::fmt(state_[px].t) +
+                                        " s, not before the step's first sample t_s[0]=" + detail::fmt(step.t_s[0]));
+
+    // --- the runs, group by group, then the long step of everyone else to the step's end ---
+    std::vector<Event> events;
+    std::vector<std::uint8_t> labels;
+    std::uint64_t updates = 0;
+    const auto take = [&](const std::vector<Event>& part) {
+        events.insert(events.end(), part.begin(), part.end());
+        labels.insert(labels.end(), labels_.begin(), labels_.end());
+    };
+    const auto static_rates = [&](const std::vector<std::uint32_t>& pixels, std::size_t n_times) {
+        std::vector<double> out(n_times * pixels.size());
+        for (std::size_t k = 0; k < n_times; ++k)
+            for (std::size_t j = 0; j < pixels.size(); ++j) out[k * pixels.size() + j] = step.static_rate[pixels[j]];
+        return out;
+    };
+    std::vector<std::uint8_t> in_group(npix, 0);  // 1: lit in this group, 2: settling in it
+    std::size_t at_end = 0;                        // pixels the last group took to the step's end
+    try {
+        for (std::size_t g = 0; g < n_groups; ++g) {
+            const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
+            const double t_start = k0 == 0 ? last_t_ : step.t_s[k0 - 1], t_end = step.t_s[k1 - 1];
+            const SparseRun& r = lit[g];
+            for (const std::uint32_t px : r.pixels) in_group[px] = 1;
+            std::vector<std::uint32_t> settle;
+            for (const std::uint32_t px : settling_)
+                if (in_group[px] == 0 && settle_until_[px] > t_start) {
+                    in_group[px] = 2;
+                    settle.push_back(px);
+                }
+            std::sort(settle.begin(), settle.end());
+            if (k0 > 0) {
+                // Those that stood still so far in the step: one long step to the group's start.
+                std::vector<std::uint32_t> entering;
+                for (const std::vector<std::uint32_t>* list : {&r.pixels, static_cast<const std::vector<std::uint32_t>*>(&settle)})
+                    for (const std::uint32_t px : *list)
+                        if (state_[px].t < t_start) entering.push_back(px);
+                std::sort(entering.begin(), entering.end());
+                if (!entering.empty()) {
+                    const std::vector<double> rate = static_rates(entering, 1);
+                    take(run_pixels(entering.data(), entering.size(), rate.data(), &t_start, 1));
+                    updates += entering.size();
+                }
+            }
+            if (!r.pixels.empty()) {
+                take(run_pixels(r.pixels.data(), r.pixels.size(), r.rate.data(), r.times.data(), r.times.size()));
+                updates += r.pixels.size() * r.times.size();
+            }
+            if (!settle.empty()) {
+                std::vector<double> base;
+                for (std::size_t k = k0; k < k1; ++k)
+                    if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
+                const std::vector<double> rate = static_rates(settle, base.size());
+                take(run_pixels(settle.data(), settle.size(), rate.data(), base.data(), base.size()));
+                updates += settle.size() * base.size();
+            }
+            // A lit pixel relaxes from the group's end on; the settling list keeps those with
+            // time still ahead, each once.
+            for (const std::uint32_t px : r.pixels) {
+                const bool listed = settle_until_[px] > t_start;
+                settle_until_[px] = t_end + settle_time_s(step.static_rate[px]);
+                if (!listed) settling_.push_back(px);
+            }
+            settling_.erase(std::remove_if(settling_.begin(), settling_.end(),
+                                           [&](std::uint32_t px) { return !(settle_until_[px] > t_end); }),
+                            settling_.end());
+            for (const std::uint32_t px : r.pixels) in_group[px] = 0;
+            for (const std::uint32_t px : settle) in_group[px] = 0;
+            at_end = r.pixels.size() + settle.size();
+        }
+        // The last group's pixels stand at the step's end already (its last sample is a base
+        // time); run() skips them.
+        const double t_last = step.t_s[n - 1];
+        take(run(step.static_rate, &t_last, 1, nullptr, nullptr, true));
+        updates += npix - at_end;
+    } catch (...) {
+        stopped_ = true;  // earlier groups' pixels have moved
+        throw;
+    }
+
+    // --- the step's events by (t, pixel); a pixel's ties in the order its calls made them ---
+    std::vector<std::uint32_t> idx(events.size());
+    std::iota(idx.begin(), idx.end(), 0u);
+    std::stable_sort(idx.begin(), idx.end(), [&](std::uint32_t a, std::uint32_t b) {
+        const Event &ea = events[a], &eb = events[b];
+        if (ea.t != eb.t) return ea.t < eb.t;
+        return static_cast<std::uint32_t>(ea.y) * static_cast<std::uint32_t>(width_) + ea.x <
+               static_cast<std::uint32_t>(eb.y) * static_cast<std::uint32_t>(width_) + eb.x;
+    });
+    labels_.resize(idx.size());
+    last_pixel_updates_ = updates;
+    if (idx.empty()) return 0;
+    Event* out = storage(idx.size());
+    for (std::size_t i = 0; i < idx.size(); ++i) {
+        out[i] = events[idx[i]];
+        labels_[i] = labels[idx[i]];
+    }
+    return idx.size();
+}
+
+}  // namespace evstwin
+
+EVSTWIN_FP_STRICT_END
