@@ -117,3 +117,73 @@ def test_background_clocks_keep_every_event_at_long_steps(rate_hz: float) -> Non
         assert abs(n - 40_960) < 4 * math.sqrt(40_960), (on, off)
     # Each in time order within its pixel, inside the run.
     assert runs[0]["t"].min() >= 0 and runs[0]["t"].max() <= 2_000_000
+
+
+def spot_counts(seed: int, sparse: bool) -> tuple[int, int, np.ndarray, int]:
+    """ON, OFF, per-pixel counts and pixel-updates of a Gaussian spot crossing 64 x 24 px of
+    the IMX636 preset's pixel (continuous noise, photoreceptor pole) at 70 px/s for 1 s, sampled
+    at 2 kHz: densely (a frame at every sample) or as four 0.25 s sparse steps (the spot's
+    windows as light entries, 500 Hz base samples, groups of 25)."""
+    from evstwin import psf
+
+    w, h, fine_hz = 64, 24, 2000.0
+    sensor = Sensor(w, h, get_preset("imx636").pixel_params(), seed=seed, num_threads=2)
+    background = np.full((h, w), 2e3)
+    sensor.run(background[None], np.array([0.0]))
+    t = np.arange(1, round(fine_hz) + 1) / fine_hz
+    x, y, f = -4.0 + 70.0 * t[:, None], np.full((t.size, 1), 11.7), np.full((t.size, 1), 4e7)
+    if not sparse:
+        ev = sensor.run(psf.render_frames(w, h, x, y, f, 1.2, background_ph_s=2e3), t)
+        updates = w * h * t.size
+    else:
+        parts, updates = [], 0
+        for k0 in range(0, t.size, 500):
+            k = slice(k0, k0 + 500)
+            sample = np.arange(x[k].shape[0])  # one source: its window at every sample of the step
+            flat, rate = zip(*psf.contributions(w, h, x[k, 0], y[k, 0], f[k, 0], 1.2, offset=sample * (w * h)))
+            idx = np.concatenate(flat)
+            parts.append(sensor.run_sparse(background, t[k], base_every=4, group_base_samples=25,
+                                           light_sample=idx // (w * h), light_pixel=idx % (w * h),
+                                           light_rate=np.concatenate(rate)))
+            updates += sensor.last_pixel_updates
+        ev = np.concatenate(parts)
+    on = int(np.count_nonzero(ev["p"]))
+    per_pixel = np.bincount(ev["y"].astype(np.int64) * w + ev["x"], minlength=w * h)
+    return on, len(ev) - on, per_pixel, updates
+
+
+def test_sparse_steps_give_the_statistics_of_the_dense_run() -> None:
+    # The convergence check of time steps per pixel: the same spot, the same fine rate, every
+    # pixel sampled at it (dense) or only where and while the spot's light changes (sparse).
+    dense = [spot_counts(s, sparse=False) for s in (1, 2, 3)]
+    sparse = [spot_counts(s, sparse=True) for s in (1, 2, 3)]
+    for i, name in ((0, "ON"), (1, "OFF")):
+        a, b = sum(r[i] for r in dense), sum(r[i] for r in sparse)
+        assert a > 300, (name, a)
+        tolerance = 4 * 2 * math.sqrt(a + b)
+        assert abs(a - b) < tolerance, f"{name}: {a} dense, {b} sparse (tolerance {tolerance:.0f})"
+    # Where the events are: the spot's row band, pixel by pixel, summed over the seeds.
+    band_dense = sum(r[2] for r in dense).reshape(24, 64)[8:16].sum(axis=0)
+    band_sparse = sum(r[2] for r in sparse).reshape(24, 64)[8:16].sum(axis=0)
+    assert np.abs(band_dense - band_sparse).max() < 4 * 2 * math.sqrt(band_dense.max() + 1)
+    # And the cost follows the spot: a pixel is updated finely only near it.
+    assert all(s[3] * 5 < d[3] for s, d in zip(sparse, dense))
+
+
+def test_run_sparse_names_a_bad_argument() -> None:
+    sensor = Sensor(8, 4, get_preset("imx636").pixel_params(), seed=1, num_threads=1)
+    sensor.run(np.full((1, 4, 8), 1e3), np.array([0.0]))
+    t = np.array([0.001, 0.002])
+    with pytest.raises(ValueError, match=r"static_rate must have shape \(height, width\) = \(4, 8\)"):
+        sensor.run_sparse(np.full((8, 4), 1e3), t)
+    with pytest.raises(ValueError, match=r"light_pixel\[0\]=32 is outside the 32-pixel sensor"):
+        sensor.run_sparse(np.full((4, 8), 1e3), t, light_sample=[0], light_pixel=[32], light_rate=[1.0])
+    with pytest.raises(ValueError, match=r"base_every must be >= 1 and divide n_samples.*base_every=3"):
+        sensor.run_sparse(np.full((4, 8), 1e3), t, base_every=3)
+    with pytest.raises(ValueError, match=r"static_rate\[2, 5\]=nan"):
+        bad = np.full((4, 8), 1e3)
+        bad[2, 5] = np.nan
+        sensor.run_sparse(bad, t)
+    # Nothing moved: the sensor still takes the step.
+    assert sensor.run_sparse(np.full((4, 8), 1e3), t).dtype.names is not None
+    assert sensor.last_pixel_updates == 32

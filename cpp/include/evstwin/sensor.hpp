@@ -198,6 +198,10 @@ public:
                                         std::to_string((n * STATE_BYTES_PER_PIXEL + 500'000'000) / 1'000'000'000) +
                                         " GB of pixel state");
         set_num_threads(num_threads);
+        // 224 bytes a pixel (206 MB for the IMX636 array): huge pages spare the construction
+        // most of its page faults (a hint: the memory is the same either way).
+        state_.reserve(static_cast<std::size_t>(n));
+        detail::advise_huge_pages(state_.data(), static_cast<std::size_t>(n) * sizeof(PixelState));
         state_.resize(static_cast<std::size_t>(n));
         reset();
     }
@@ -243,7 +247,15 @@ public:
     /// property of the pixels for this seed).
     void reset() {
         stopped_ = false;
-        for (std::size_t i = 0; i < state_.size(); ++i) {
+        // Each pixel's state is a function of its index and the seed alone, so the threads
+        // change nothing; in parallel, because the IMX636 array's 921,600 pixels took 0.3 s
+        // on one thread (its mismatch draws), as long as seconds of a sparse run.
+        const std::int64_t npix = static_cast<std::int64_t>(state_.size());
+#if EVSTWIN_HAS_OPENMP
+#pragma omp parallel for num_threads(num_threads_) schedule(static) if (npix >= std::int64_t{1} << 16)
+#endif
+        for (std::int64_t j = 0; j < npix; ++j) {
+            const std::size_t i = static_cast<std::size_t>(j);
             state_[i] = PixelState{};
             model_.init_pixel(state_[i], key_, static_cast<std::uint32_t>(i), hot_map_.empty() ? -1.0 : hot_map_[i],
                               hot_chain_map_.empty() ? std::uint16_t{0} : hot_chain_map_[i]);
