@@ -174,7 +174,8 @@ py::array_t<evstwin::Event> run_pixels_any(Sensor& s, py::array pixels, py::arra
 
 py::array_t<evstwin::Event> run_sparse_any(Sensor& s, py::array static_rate, py::array t_s, std::size_t base_every,
                                            std::size_t group_base_samples, py::array light_sample,
-                                           py::array light_pixel, py::array light_rate) {
+                                           py::array light_pixel, py::array light_rate,
+                                           std::optional<py::array> reach_pixel) {
     using F64 = py::array_t<double, READ_FLAGS>;
     using U32 = py::array_t<std::uint32_t, READ_FLAGS>;
     auto rate = F64::ensure(static_rate);
@@ -210,6 +211,13 @@ py::array_t<evstwin::Event> run_sparse_any(Sensor& s, py::array static_rate, py:
     step.light_pixel = pixel.data();
     step.light_rate = light.data();
     step.n_light = static_cast<std::size_t>(light.shape(0));
+    U32 reach;
+    if (reach_pixel) {
+        reach = integer(*reach_pixel, "reach_pixel");
+        step.reach_all = false;
+        step.reach_pixel = reach.data();
+        step.n_reach = static_cast<std::size_t>(reach.shape(0));
+    }
     EventsOut out;
     const evstwin::EventStorage storage = out.storage();
     std::size_t n_events = 0;
@@ -256,7 +264,8 @@ void register_sensor(py::module_& m) {
              },
              py::arg("pixels"), py::arg("photon_rate"), py::arg("t_s"))
         .def("run_sparse", &run_sparse_any, py::arg("static_rate"), py::arg("t_s"), py::arg("base_every"),
-             py::arg("group_base_samples"), py::arg("light_sample"), py::arg("light_pixel"), py::arg("light_rate"))
+             py::arg("group_base_samples"), py::arg("light_sample"), py::arg("light_pixel"), py::arg("light_rate"),
+             py::arg("reach_pixel") = py::none())
         .def_property_readonly("last_pixel_updates", &Sensor::last_pixel_updates)
         .def("settle_time_s", &Sensor::settle_time_s, py::arg("photon_rate"))
         .def("reset", &Sensor::reset)

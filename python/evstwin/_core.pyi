@@ -90,7 +90,8 @@ class Sensor:
     ) -> np.ndarray: ...
     def run_sparse(
         self, static_rate: np.ndarray, t_s: np.ndarray, base_every: int, group_base_samples: int,
-        light_sample: np.ndarray, light_pixel: np.ndarray, light_rate: np.ndarray
+        light_sample: np.ndarray, light_pixel: np.ndarray, light_rate: np.ndarray,
+        reach_pixel: np.ndarray | None = None
     ) -> np.ndarray: ...
     @property
     def last_pixel_updates(self) -> int: ...

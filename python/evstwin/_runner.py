@@ -84,6 +84,13 @@ pixel-updates; the events 133,326, 133,339, 133,556, 133,553 and 133,505 (quiet 
 machine, two runs each; ``python bench/bench_simulate.py --duration 4 --threads 2
 --unit-samples N``)."""
 
+SPARSE_SYNC_S = 4.0
+"""Sensor time between the moments every pixel stands at the same time in a run with time
+steps per pixel (``sampling.static_step_s``) [s]. In between, a pixel whose light stays
+constant waits and crosses the period in one long step; its events come out at the period's
+end, sorted with the others'. A longer period spares full-frame steps (each reads and writes
+every pixel's state: 0.4 GB for the IMX636 array) and holds more events back."""
+
 _Chunk = tuple[np.ndarray, "np.ndarray | None"]
 """A chunk of events (sorted by t) and their labels (None when the runner keeps none)."""
 
@@ -280,9 +287,11 @@ class _Runner:
         chooses per group of ``self.unit`` base intervals: the pixels inside a moving source's
         window take the fine samples (``_n_sub`` per base interval), those a source has left
         and that still settle the base samples, every other pixel one long step, its light
-        the static map's. Every pixel reaches the unit's end, so a unit's events all lie in it
-        and come out in time order; which pixel takes which grid depends on the unit alone,
-        not on the chunking."""
+        the static map's. A pixel whose static light stays the same at a unit's end waits
+        there (the drifting stars' pixels are the ones that move); every pixel reaches the
+        end of each sync period (``SPARSE_SYNC_S``), where the period's events come out in
+        time order. Which pixel takes which grid depends on the units alone, not on the
+        chunking."""
         sc = self.scene
         npix = sc.width * sc.height
         unit_s = self.static_every * self.dt
@@ -297,44 +306,70 @@ class _Runner:
                 slow[j] = True
         fast_groups = [(shape, cols[~slow[cols]]) for shape, cols in self._fine_groups if (~slow[cols]).any()]
         slow_groups = [(shape, cols[slow[cols]]) for shape, cols in self._fine_groups if slow[cols].any()]
-        frame = self._buffer("unit_frame", (1, sc.height, sc.width)) if slow_groups else None
         npix_bits = (npix - 1).bit_length()
         empty_i, empty_f = np.zeros(0, np.int64), np.zeros(0)
-        a = 0
+        sync_every = max(1, math.ceil(SPARSE_SYNC_S / unit_s - 1e-9))
+
+        def unit_light(b: int, slot: int) -> np.ndarray:
+            """The static light of the unit ending at base sample b: the static map, with the
+            slow sources where they are at its end (in buffer slot % 2: this unit's and the
+            next's)."""
+            if not slow_groups:
+                return self.static_map
+            out = self._buffer(f"unit_frame{slot % 2}", (sc.height, sc.width))
+            x, y, f = self._sources(np.array([b * self.dt]), truth=not fast_groups)
+            out[:] = self.static_map
+            for shape, cols in slow_groups:
+                psf.render_points(sc.width, sc.height, x[0, cols], y[0, cols], f[0, cols], shape, out=out)
+            return out
+
+        pending: list[_Chunk] = []
+        a, unit = 0, 0
+        static_rate = unit_light(min(self.static_every, self.n_base), 0)
         while a < self.n_base:
             b = min(a - a % self.static_every + self.static_every, self.n_base)
             s0 = time.perf_counter()
-            # The unit to the engine as a sparse scene: the static map (with the slow sources
-            # at the unit's end) and the fast sources' windows at the fine times; the engine
-            # chooses each pixel's steps (Sensor.run_sparse).
-            n_sub, t = 1, np.array([b * self.dt])
+            # The unit to the engine as a sparse scene: the static light and the fast sources'
+            # windows at the fine times; the engine chooses each pixel's steps.
+            # The base times at least: the engine samples at them the pixels that need it.
+            n_sub = self._n_sub(a * self.dt, b * self.dt) if fast_groups else 1
+            _, t = self._fine_times(a, b, n_sub)
             light_sample, light_pixel, light_rate = empty_i, empty_i, empty_f
             if fast_groups:
-                n_sub = self._n_sub(a * self.dt, b * self.dt)
                 self.sub_sampled_chunks += n_sub > 1
-                _, t = self._fine_times(a, b, n_sub)
                 x, y, f = self._sources(t)
                 parts = list(self._contribution_parts(x, y, f, fast_groups, stride=1 << npix_bits))
                 if parts:
                     flat = np.concatenate([c[0] for c in parts])
                     light_sample, light_pixel = flat >> npix_bits, flat & ((1 << npix_bits) - 1)
                     light_rate = np.concatenate([c[1] for c in parts])
-            static_rate = self.static_map
-            if frame is not None:
-                x, y, f = self._sources(np.array([b * self.dt]), truth=not fast_groups)
-                frame[0] = self.static_map
-                for shape, cols in slow_groups:
-                    psf.render_points(sc.width, sc.height, x[0, cols], y[0, cols], f[0, cols], shape, out=frame[0])
-                static_rate = frame[0]
+            unit += 1
+            sync = b == self.n_base or unit % sync_every == 0
+            reach: np.ndarray | None = None
+            next_rate = static_rate
+            if not sync:
+                # Only the pixels whose static light changes at the unit's end must be there.
+                next_rate = unit_light(min(b + self.static_every, self.n_base), unit)
+                reach = np.flatnonzero(next_rate != static_rate) if next_rate is not static_rate else empty_i
             s1 = time.perf_counter()
             events = self.sensor.run_sparse(static_rate, t, base_every=n_sub, group_base_samples=self.unit,
-                                            light_sample=light_sample, light_pixel=light_pixel, light_rate=light_rate)
-            labels = self.sensor.last_labels() if self.labels else None
+                                            light_sample=light_sample, light_pixel=light_pixel, light_rate=light_rate,
+                                            reach_pixel=reach)
+            pending.append((events, self.sensor.last_labels() if self.labels else None))
             s2 = time.perf_counter()
             self.pixel_updates += self.sensor.last_pixel_updates
             self.scene_s += s1 - s0
             self.engine_s += s2 - s1
-            yield events, labels
+            if sync and b < self.n_base:
+                next_rate = unit_light(min(b + self.static_every, self.n_base), unit)
+            static_rate = next_rate
+            if sync:
+                # Every pixel stands at b: the period's events, in order.
+                events = np.concatenate([c[0] for c in pending])
+                order = np.lexsort((events["y"].astype(np.int64) * sc.width + events["x"], events["t"]))
+                codes = np.concatenate([c[1] for c in pending])[order] if self.labels else None  # type: ignore[misc]
+                pending = []
+                yield events[order], codes
             if bar is not None:
                 bar.n = min(round(b * self.dt, 6), bar.total)
                 bar.update(0)

@@ -247,7 +247,7 @@ class Sensor:
     def run_sparse(
         self, static_rate: npt.ArrayLike, t_s: npt.ArrayLike, *, base_every: int = 1, group_base_samples: int = 1,
         light_sample: npt.ArrayLike = (), light_pixel: npt.ArrayLike = (), light_rate: npt.ArrayLike = (),
-        max_events: int | None = None,
+        reach_pixel: npt.ArrayLike | None = None, max_events: int | None = None,
     ) -> np.ndarray:
         """Advance every pixel through one step of a sparse scene, with time steps per pixel.
 
@@ -261,6 +261,13 @@ class Sensor:
             ``light_sample[i]`` pixel ``light_pixel[i]`` (row-major) receives ``light_rate[i]``
             more photons/s (the pixels of a PSF stamp; entries of one sample and pixel add).
 
+        reach_pixel: None (every pixel stands at the step's end afterwards), or the pixels
+            (row-major) that must, besides those the step's light moved: the others wait, their
+            light constant, for a later step to take them on in one long step at its static
+            light. List every pixel whose static light changes at this step's end. A later
+            step's events may then precede this one's in time; they are in order again after a
+            step with ``reach_pixel=None``.
+
         In each group, a pixel some entry lights takes the fine samples; one whose levels still
         relax after a source left it (``settle_time_s``) the base samples; every other pixel
         one long exact step. Needs the continuous noise model and the exact low-pass. Returns
@@ -270,7 +277,7 @@ class Sensor:
             return self._core.run_sparse(
                 _as_array(static_rate, "static_rate"), _as_array(t_s, "t_s"), base_every, group_base_samples,
                 np.asarray(light_sample, np.int64), np.asarray(light_pixel, np.int64),
-                np.asarray(light_rate, np.float64))
+                np.asarray(light_rate, np.float64), None if reach_pixel is None else np.asarray(reach_pixel, np.int64))
 
     @property
     def last_pixel_updates(self) -> int:

@@ -307,3 +307,33 @@ TEST(pixel_divider_is_the_exact_division_for_every_row_width) {
     CHECK_THROWS(detail::PixelDivider(0));
     CHECK_THROWS(detail::PixelDivider(65536));
 }
+
+TEST(run_pixels_with_static_rates_is_the_repeated_row) {
+    // One row of rates for every sample (static_rates) against the same row written out at
+    // each sample: the same events; a bad value in the one row is still refused.
+    PixelParams p;
+    p.threshold_sigma = 0.04;
+    p.shot_noise_rate_hz = 1.0;
+    p.cutoff_hz = 300.0;
+    const int w = 20, h = 10, n = 30;
+    const std::vector<std::uint32_t> pixels{3, 17, 40, 41, 42, 150, 199};
+    std::vector<double> row(pixels.size()), t(n), full;
+    for (std::size_t j = 0; j < row.size(); ++j) row[j] = 2e6 * (1.0 + static_cast<double>(j));
+    for (int k = 0; k < n; ++k) {
+        t[k] = 1e-3 * (k + 1);
+        full.insert(full.end(), row.begin(), row.end());
+    }
+    std::vector<double> start(w * h, 5e5), t0{0.0};
+    Sensor a(w, h, p, 2, 1), b(w, h, p, 2, 1);
+    a.run(start.data(), t0.data(), 1, nullptr, nullptr, true);
+    b.run(start.data(), t0.data(), 1, nullptr, nullptr, true);
+    const auto ea = a.run_pixels(pixels.data(), pixels.size(), row.data(), t.data(), n, true);
+    const auto eb = b.run_pixels(pixels.data(), pixels.size(), full.data(), t.data(), n);
+    CHECK(ea.size() > 10);
+    CHECK(ea.size() == eb.size() && std::memcmp(ea.data(), eb.data(), ea.size() * sizeof(Event)) == 0);
+    std::vector<double> bad(row);
+    bad[4] = -1.0;
+    std::vector<double> later(t);
+    for (double& v : later) v += 1.0;
+    CHECK_THROWS(a.run_pixels(pixels.data(), pixels.size(), bad.data(), later.data(), n, true));
+}

@@ -14,12 +14,17 @@ using namespace evstwin;
 
 namespace {
 
-PixelParams sparse_params() {
-    PixelParams p;  // continuous noise, exact low-pass, every noise source on
+/// Continuous noise, exact low-pass, every noise source on, the source follower alone at
+/// cutoff_hz: a long step is cut into 8 x 2 pi cutoff_hz pieces a second where its noise may
+/// cross (PixelModel::refine_pieces_per_s), so run_sparse gives long steps only where the
+/// base samples are more frequent than that (at 1 Hz: 50.3 pieces a second), and a pixel a
+/// source left relaxes for 5 / (2 pi cutoff_hz) (0.796 s at 1 Hz).
+PixelParams sparse_params(double cutoff_hz = 1.0) {
+    PixelParams p;
     p.threshold_sigma = 0.04;
     p.leak_rate_hz = 2.0;
     p.shot_noise_rate_hz = 1.0;
-    p.cutoff_hz = 100.0;  // settle_time_s: 5 / (2 pi 100 Hz) = 7.96 ms
+    p.cutoff_hz = cutoff_hz;
     return p;
 }
 
@@ -64,35 +69,41 @@ struct Spot {
 }  // namespace
 
 TEST(run_sparse_takes_the_steps_counted_by_hand) {
-    // 4 x 4 px, 8 samples 10 ms apart in groups of 2; pixel 5 lit at sample 2 only (group 1).
-    // Group 1: pixel 5 steps to t[1] (1), then its 2 fine samples; group 2: it still relaxes
-    // (7.96 ms after t[3]), so its 2 base samples; group 3: settled, nothing; then the 16
-    // pixels' long step to t[7] (pixel 5 from t[5]). 1 + 2 + 2 + 16 = 21.
+    // 4 x 4 px, steps of 8 samples 10 ms apart in groups of 2; pixel 5 lit at sample 2 only
+    // (group 1). The follower at 1 Hz: 50.3 pieces a second against 100 base samples, so no
+    // pixel is sampled throughout; pixel 5 relaxes for 0.796 s once lit.
+    // Step 1. Group 1: pixel 5's long step to t[1] (1), its 2 fine samples; groups 2 and 3:
+    // its 2 + 2 base samples; then the 15 others' long step to t[7]: 1 + 2 + 4 + 15 = 22.
+    // Step 2 (nothing lit): pixel 5 still relaxes, 8 base samples, and the 15 others: 23.
+    // A pixel sampled throughout instead (the follower at 100 Hz: 5,027 pieces a second):
+    // all 16 take the 8 base samples (pixel 5 its 2 fine ones in place of 2 of them): 128.
     const int w = 4, h = 4;
-    Sensor s(w, h, sparse_params(), 3, 1);
-    std::vector<double> background(w * h, 1e6), t0{0.0};
-    s.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
-    std::vector<double> t(8);
-    for (int k = 0; k < 8; ++k) t[k] = 0.01 * (k + 1);
-    const std::uint32_t sample = 2, pixel = 5;
-    const double rate = 0.0;  // the edge of a stamp: lit all the same
-    SparseStep step;
-    step.static_rate = background.data();
-    step.t_s = t.data();
-    step.n_samples = 8;
-    step.group_base_samples = 2;
-    step.light_sample = &sample;
-    step.light_pixel = &pixel;
-    step.light_rate = &rate;
-    step.n_light = 1;
-    s.run_sparse(step);
-    CHECK(s.last_pixel_updates() == 21u);
-    CHECK_NEAR(s.settle_time_s(1e6), 5.0 / (2.0 * 3.141592653589793 * 100.0), 1e-15);
-    // Nothing lit: one long step for each pixel, and no pixel is left relaxing.
-    step.n_light = 0;
-    for (double& v : t) v += 0.08;
-    s.run_sparse(step);
-    CHECK(s.last_pixel_updates() == 16u);
+    for (const double cutoff_hz : {1.0, 100.0}) {
+        Sensor s(w, h, sparse_params(cutoff_hz), 3, 1);
+        std::vector<double> background(w * h, 1e6), t0{0.0};
+        s.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
+        std::vector<double> t(8);
+        for (int k = 0; k < 8; ++k) t[k] = 0.01 * (k + 1);
+        const std::uint32_t sample = 2, pixel = 5;
+        const double rate = 0.0;  // the edge of a stamp: lit all the same
+        SparseStep step;
+        step.static_rate = background.data();
+        step.t_s = t.data();
+        step.n_samples = 8;
+        step.group_base_samples = 2;
+        step.light_sample = &sample;
+        step.light_pixel = &pixel;
+        step.light_rate = &rate;
+        step.n_light = 1;
+        s.run_sparse(step);
+        const bool sampled = cutoff_hz > 50.0;
+        CHECK(s.last_pixel_updates() == (sampled ? 128u : 22u));
+        CHECK_NEAR(s.settle_time_s(1e6), 5.0 / (2.0 * 3.141592653589793 * cutoff_hz), 1e-15);
+        step.n_light = 0;
+        for (double& v : t) v += 0.08;
+        s.run_sparse(step);
+        CHECK(s.last_pixel_updates() == (sampled ? 128u : 23u));
+    }
 }
 
 TEST(run_sparse_with_every_pixel_lit_is_the_dense_run) {
@@ -113,7 +124,7 @@ TEST(run_sparse_with_every_pixel_lit_is_the_dense_run) {
             rate.push_back(extra);
             frames[static_cast<std::size_t>(k) * w * h + i] = background[i] + extra;
         }
-    Sensor dense(w, h, sparse_params(), 9, 2), sparse(w, h, sparse_params(), 9, 2);
+    Sensor dense(w, h, sparse_params(100.0), 9, 2), sparse(w, h, sparse_params(100.0), 9, 2);
     dense.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
     sparse.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
     const auto expected = dense.run(frames.data(), t.data(), n);
@@ -146,7 +157,8 @@ TEST(run_sparse_is_the_same_whatever_the_threads) {
             for (int k = 0; k < 400; ++k) t[k] = 0.1 * unit + 2.5e-4 * (k + 1);
             const Spot spot(w, h, t);
             const auto ev = s.run_sparse(spot.step(background, t, 4, 5));
-            CHECK(s.last_pixel_updates() < 400u * w * h / 10);  // the spot's pixels only, finely
+            // The spot's pixels finely, its trail's at the base rate while they relax (0.8 s).
+            CHECK(s.last_pixel_updates() < 400u * w * h / 4);
             for (std::size_t i = 1; i < ev.size(); ++i)
                 CHECK(ev[i - 1].t < ev[i].t || (ev[i - 1].t == ev[i].t && ev[i - 1].y * w + ev[i - 1].x <= ev[i].y * w + ev[i].x));
             runs[threads - 1].insert(runs[threads - 1].end(), ev.begin(), ev.end());
@@ -188,4 +200,51 @@ TEST(run_sparse_refuses_bad_input_before_any_pixel_moves) {
     sampled.noise_model = NoiseModel::Sampled;
     Sensor other(w, h, sampled, 4, 1);
     CHECK_THROWS(other.run_sparse(spot.step(background, t, 1, 2)));
+}
+
+TEST(run_sparse_lets_unlisted_pixels_wait_for_one_long_step) {
+    // Three steps where nothing is lit and only pixels 3 and 7 must reach the first step's
+    // end, then a step that takes every pixel to its end: each other pixel crosses the whole
+    // 0.3 s in one exact step, which is what one run() sample at 0.3 s gives it, bit for bit
+    // (the same interval, light and sample counter).
+    const int w = 8, h = 6;
+    std::vector<double> background(w * h), t0{0.0};
+    for (int i = 0; i < w * h; ++i) background[i] = 2e5 * (1 + i % 3);
+    // One sample a step, 0.1 s apart: the follower at 0.1 Hz (5 pieces a second) steps long.
+    Sensor waits(w, h, sparse_params(0.1), 8, 1), once(w, h, sparse_params(0.1), 8, 1);
+    waits.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
+    once.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
+    const std::uint32_t reach[2] = {3, 7};
+    std::vector<Event> got;
+    for (int k = 1; k <= 3; ++k) {
+        const double t = 0.1 * k;
+        SparseStep step;
+        step.static_rate = background.data();
+        step.t_s = &t;
+        step.n_samples = 1;
+        step.reach_all = k == 3;
+        step.reach_pixel = reach;
+        step.n_reach = k == 1 ? 2 : 0;
+        const auto ev = waits.run_sparse(step);
+        got.insert(got.end(), ev.begin(), ev.end());
+        CHECK(waits.last_pixel_updates() == (k == 1 ? 2u : k == 2 ? 0u : static_cast<std::uint64_t>(w * h)));
+    }
+    const double t_end = 0.3;
+    auto expected = once.run(background.data(), &t_end, 1, nullptr, nullptr, true);
+    // Pixels 3 and 7 took two steps (0.1 s, then 0.2 s) in place of one: leave them out.
+    const auto other = [](const Event& e) { return !(e.y == 0 && (e.x == 3 || e.x == 7)); };
+    std::vector<Event> a, b;
+    for (const Event& e : got)
+        if (other(e)) a.push_back(e);
+    for (const Event& e : expected)
+        if (other(e)) b.push_back(e);
+    CHECK(b.size() > 5);
+    CHECK(same_events(a, b));
+    // A step must start after the last one's end, waiting pixels or not.
+    const double early = 0.25;
+    SparseStep step;
+    step.static_rate = background.data();
+    step.t_s = &early;
+    step.n_samples = 1;
+    CHECK_THROWS(waits.run_sparse(step));
 }

@@ -314,6 +314,19 @@ struct PixelModel {
     /// describes as rougher than it is (the dark DAVIS346 pixel with the pole, 128 x 128 px, 4 s,
     /// 3 seeds: 1,750 OFF events at 1 kHz, 2,063 at 5 Hz cut to a h <= 1, 1,715 cut to 1/8).
     double pole_refine_ah(double a) const { return a < sf_rate() ? SF_REFINE_BH : 1.0; }
+    /// Pieces per second of sensor time into which a long interval of a pixel at this photon
+    /// rate is cut where a crossing is plausible (refine_and_compare behind the pole,
+    /// refine_sf_and_compare with the follower alone); 0 where none is. A pixel whose long
+    /// steps would be cut finer than a dense run's samples is cheaper sampled densely
+    /// (Sensor::run_sparse).
+    double refine_pieces_per_s(double photon_rate) const {
+        if (!has_filter) return 0.0;
+        if (p.pr_pole) {
+            const double a = pole_rate(ELEMENTARY_CHARGE_C * mean_electron_rate(photon_rate));
+            return a / pole_refine_ah(a);
+        }
+        return euler ? 0.0 : sf_rate() / SF_REFINE_BH;
+    }
     /// Source-follower rate 2 pi f_sf [1/s] (0 without the filter).
     double sf_rate() const { return has_filter ? 2.0 * PI * *p.cutoff_hz : 0.0; }
 

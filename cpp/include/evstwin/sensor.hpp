@@ -145,6 +145,15 @@ struct SparseStep {
     const std::uint32_t* light_pixel = nullptr;
     const double* light_rate = nullptr;
     std::size_t n_light = 0;
+    /// Which pixels must stand at the step's end after the call: all of them (reach_all), or
+    /// only those listed in reach_pixel (row-major) and those the step's light moved. A pixel
+    /// left behind waits, its light constant, and a later step takes it on in one long step
+    /// at that step's static light: list every pixel whose static light changes at this
+    /// step's end. Events of a later step may then precede this step's last ones in time;
+    /// they are in order again after a step with reach_all (merge the steps' events there).
+    bool reach_all = true;
+    const std::uint32_t* reach_pixel = nullptr;
+    std::size_t n_reach = 0;
 };
 
 class Sensor {
@@ -263,6 +272,7 @@ public:
         block_synced_.assign((state_.size() + BLOCK - 1) / BLOCK, 0);
         settle_until_.assign(state_.size(), -std::numeric_limits<double>::infinity());
         settling_.clear();
+        sparse_end_ = -std::numeric_limits<double>::infinity();
         samples_ = 0;
         last_t_ = -std::numeric_limits<double>::infinity();
     }
@@ -372,24 +382,29 @@ public:
     /// have reached; so sub-sampling a pixel and then running the whole array gives that
     /// pixel the union of the two time grids, with its own sample counter keying its random
     /// numbers. Throws std::invalid_argument, before any state changes, on a bad input.
+    /// `static_rates = true`: photon_rate is one row of n_pixels rates, the same at every
+    /// sample (as run()'s static_frame).
     template <class Real>
     std::vector<Event> run_pixels(const std::uint32_t* pixels, std::size_t n_pixels, const Real* photon_rate,
-                                  const double* t_s, std::size_t n_samples) {
+                                  const double* t_s, std::size_t n_samples, bool static_rates = false) {
         std::vector<Event> events;
-        run_pixels_into(detail::vector_storage(events), pixels, n_pixels, photon_rate, t_s, n_samples);
+        run_pixels_into(detail::vector_storage(events), pixels, n_pixels, photon_rate, t_s, n_samples, static_rates);
         return events;
     }
 
     /// run_pixels() with the events written into `storage` (as run_into); returns their number.
     template <class Real>
     std::size_t run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
-                                const Real* photon_rate, const double* t_s, std::size_t n_samples);
+                                const Real* photon_rate, const double* t_s, std::size_t n_samples,
+                                bool static_rates = false);
 
     /// Advance every pixel through one step of a sparse scene (SparseStep) with time steps
     /// per pixel: in each group of the step's samples, the pixels a source's light touches
     /// take the fine samples, those whose levels still relax after a source left them
-    /// (settle_time_s(), carried from step to step) take the base samples, and every other
-    /// pixel one long exact step; then all reach the step's end. The noise, background
+    /// (settle_time_s(), carried from step to step) and those whose long steps would be cut
+    /// finer than the base samples where their noise may cross (PixelModel::
+    /// refine_pieces_per_s) take the base samples, and every other pixel one long exact step;
+    /// then all reach the step's end (or those the step names: SparseStep::reach_all). The noise, background
     /// clocks, leak, hot pixels and refractory keep their laws over any step (the continuous
     /// model; the documentation's noise model page), so the statistics are those of a dense
     /// run at the fine rate. Needs noise_model = continuous and lowpass = exact. Returns the
@@ -773,11 +788,12 @@ private:
                    std::size_t n_probe, TraceSample* trace);
 
     /// The sparse counterpart of run_block: entries [lo, hi) of a pixel list, each with its
-    /// own column of rates.
+    /// own column of rates; sample k's row at rate + k * sample_stride (0: one row for all).
     template <class Real>
     void run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
-                         const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
-                         PoissonSampler& poisson, BlockModel::BlockScratch& scratch);
+                         std::size_t sample_stride, const double* t_s, std::size_t n_samples,
+                         const std::vector<SampleConstants>& consts, PoissonSampler& poisson,
+                         BlockModel::BlockScratch& scratch);
 
     /// Count n more events of this call; throw once the call passes max_events_ (whichever
     /// thread gets there first; the exception is rethrown after the parallel region).
@@ -943,6 +959,9 @@ private:
     /// left it (settle_time_s), and the pixels with such a time still ahead.
     std::vector<double> settle_until_;
     std::vector<std::uint32_t> settling_;
+    /// The end of the last run_sparse() step (-inf before one): where its waiting pixels'
+    /// light began, so the next step's start.
+    double sparse_end_ = -std::numeric_limits<double>::infinity();
     std::uint64_t last_pixel_updates_ = 0;
     std::atomic<std::size_t> events_in_call_{0};
     bool stopped_ = false;

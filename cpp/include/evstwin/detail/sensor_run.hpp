@@ -89,7 +89,7 @@ inline std::size_t Sensor::run_into(const EventStorage& storage, const Real* pho
 
 template <class Real>
 inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
-                            const Real* photon_rate, const double* t_s, std::size_t n_samples) {
+                            const Real* photon_rate, const double* t_s, std::size_t n_samples, bool static_rates) {
     check_usable();
     if (n_pixels == 0 || n_samples == 0) {
         labels_.clear();
@@ -140,7 +140,8 @@ inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const st
     // from memory once more, 7 % of mcreynolds' run_pixels calls), and the blocks' new
     // states wait in pixel_states_ until every block has passed: a bad value anywhere leaves
     // every pixel as it was, and the error names the first one in the array.
-    const std::size_t total = n_samples * n_pixels;
+    const std::size_t rows = static_rates ? 1 : n_samples, sample_stride = static_rates ? 0 : n_pixels;
+    const std::size_t total = rows * n_pixels;
     std::vector<std::size_t> block_bad(nblocks, total);
     if (pixel_states_.size() < n_pixels) pixel_states_.resize(n_pixels);
     NoCheck no_check{total};
@@ -155,14 +156,14 @@ inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const st
             nblocks, total, no_check,
             [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
                 const std::size_t lo = b * BLOCK, m = std::min(n_pixels, lo + BLOCK) - lo;
-                for (std::size_t k = 0; k < n_samples; ++k) {
+                for (std::size_t k = 0; k < rows; ++k) {
                     const std::size_t i = first_bad_rate(photon_rate + k * n_pixels + lo, m);
                     if (i < m) {
                         block_bad[b] = k * n_pixels + lo + i;
                         return;
                     }
                 }
-                run_pixel_block(b, pixels, n_pixels, photon_rate, t_s, n_samples, consts, poisson, scratch);
+                run_pixel_block(b, pixels, n_pixels, photon_rate, sample_stride, t_s, n_samples, consts, poisson, scratch);
             },
             [&]() -> std::size_t {
                 bad = *std::min_element(block_bad.begin(), block_bad.end());
@@ -414,8 +415,9 @@ inline void Sensor::run_block(std::size_t b, const Real* rate, std::size_t sampl
 
 template <class Real>
 inline void Sensor::run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
-                     const double* t_s, std::size_t n_samples, const std::vector<SampleConstants>& consts,
-                     PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
+                                    std::size_t sample_stride, const double* t_s, std::size_t n_samples,
+                                    const std::vector<SampleConstants>& consts, PoissonSampler& poisson,
+                                    BlockModel::BlockScratch& scratch) {
     const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
     TakenEvents taken(block_events_[b], block_full_t_[b]);
     std::vector<RawEvent>& out = taken.out;
@@ -453,7 +455,7 @@ inline void Sensor::run_pixel_block(std::size_t b, const std::uint32_t* pixels, 
         scratch.soa.load(local, m);
         for (; k < n_samples; ++k) {
             emit.start_sample(k);
-            model_.step_block_soa(scratch.soa, local, pixels + lo, m, rate + k * n_pixels + lo, consts[k], key_,
+            model_.step_block_soa(scratch.soa, local, pixels + lo, m, rate + k * sample_stride + lo, consts[k], key_,
                                   scratch, emit, pixel);
             ends[k] = static_cast<std::uint32_t>(out.size());
         }
@@ -461,7 +463,7 @@ inline void Sensor::run_pixel_block(std::size_t b, const std::uint32_t* pixels, 
     }
     for (; k < n_samples; ++k) {
         emit.start_sample(k);
-        const Real* row = rate + k * n_pixels + lo;
+        const Real* row = rate + k * sample_stride + lo;
         if (kernel) {
             model_.step_block(BlockModel::BlockView{local, pixels + lo, nullptr, m}, row, consts[k], key_, poisson,
                               scratch, emit, pixel);

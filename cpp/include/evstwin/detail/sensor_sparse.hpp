@@ -4,11 +4,13 @@
 // The step's samples are cut into groups of group_base_samples base samples. In group g:
 //   - the pixels some source's light touches (the lit list) take the group's fine samples,
 //     after one long step at the static light to the group's start if they stood earlier;
-//   - those whose levels still relax after a source left them (settle_until_) take its base
-//     samples, after the same long step;
+//   - those whose levels still relax after a source left them (settle_until_), and those
+//     whose long steps would cost more than the base samples (refine_pieces_per_s), take its
+//     base samples, after the same long step;
 //   - the others wait.
 // Then one run() of the static map at the step's end moves every pixel that stands earlier
-// there in one long exact step (run() skips the pixels already there). Which pixel takes
+// there in one long exact step (run() skips the pixels already there); or, where the step
+// lets pixels wait (reach_all false), only the pixels it lists, whose light changes there. Which pixel takes
 // which grid depends on the step alone, so the events do not depend on the threads or on how
 // a simulation is cut into steps of the same groups. Every call it makes is an ordinary
 // run_pixels / run call; the step's events are their events, merged by (t, pixel).
@@ -50,6 +52,18 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         throw std::invalid_argument("run_sparse: n_light=" + std::to_string(step.n_light) +
                                     " needs light_sample, light_pixel and light_rate");
     check_times(step.t_s, n);
+    // Where the step starts: the last run() or run_sparse() step, whichever is later.
+    const double t_begin = std::max(last_t_, sparse_end_);
+    if (!(step.t_s[0] > t_begin))
+        throw std::invalid_argument("t_s must continue after the previous step's end (" + detail::fmt(t_begin) +
+                                    " s); got t_s[0]=" + detail::fmt(step.t_s[0]));
+    if (!step.reach_all && step.n_reach > 0 && !step.reach_pixel)
+        throw std::invalid_argument("run_sparse: n_reach=" + std::to_string(step.n_reach) + " needs reach_pixel");
+    if (!step.reach_all)
+        for (std::size_t i = 0; i < step.n_reach; ++i)
+            if (step.reach_pixel[i] >= npix)
+                throw std::invalid_argument("reach_pixel[" + std::to_string(i) + "]=" + std::to_string(step.reach_pixel[i]) +
+                                            " is outside the " + std::to_string(npix) + "-pixel sensor");
     const std::size_t bad_static = first_bad_rate(step.static_rate, npix);
     if (bad_static < npix)
         throw_bad_rate("static_rate[" + std::to_string(bad_static / width_) + ", " + std::to_string(bad_static % width_) +
@@ -125,6 +139,27 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                                         std::to_string(px / width_) + ") stands at " + detail::fmt(state_[px].t) +
                                         " s, not before the step's first sample t_s[0]=" + detail::fmt(step.t_s[0]));
 
+    // --- the pixels that take the base samples throughout: those whose long steps would be
+    // cut finer than the base samples wherever their noise can cross (a bright pixel behind
+    // a fast pole, the follower alone at a high cutoff); for them long steps cost more than
+    // they save (geo-stare's sky on the IMX636: 121 s for one 4 s step of the whole array,
+    // against 6 s for 4 s of base samples) ---
+    double base_dt = std::numeric_limits<double>::infinity();
+    {
+        double prev = t_begin;
+        for (std::size_t k = step.base_every - 1; k < n; k += step.base_every) {
+            base_dt = std::min(base_dt, step.t_s[k] - prev);
+            prev = step.t_s[k];
+        }
+    }
+    std::vector<std::uint32_t> busy;
+    if (std::isfinite(base_dt)) {
+        const double most_pieces_per_s = 1.0 / base_dt;
+        for (std::size_t i = 0; i < npix; ++i)
+            if (model_.refine_pieces_per_s(step.static_rate[i]) > most_pieces_per_s)
+                busy.push_back(static_cast<std::uint32_t>(i));
+    }
+
     // --- the runs, group by group, then the long step of everyone else to the step's end ---
     std::vector<Event> events;
     std::vector<std::uint8_t> labels;
@@ -133,10 +168,10 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         events.insert(events.end(), part.begin(), part.end());
         labels.insert(labels.end(), labels_.begin(), labels_.end());
     };
-    const auto static_rates = [&](const std::vector<std::uint32_t>& pixels, std::size_t n_times) {
-        std::vector<double> out(n_times * pixels.size());
-        for (std::size_t k = 0; k < n_times; ++k)
-            for (std::size_t j = 0; j < pixels.size(); ++j) out[k * pixels.size() + j] = step.static_rate[pixels[j]];
+    // The static light of some pixels: one row, the same at each of their samples.
+    const auto static_rates = [&](const std::vector<std::uint32_t>& pixels) {
+        std::vector<double> out(pixels.size());
+        for (std::size_t j = 0; j < pixels.size(); ++j) out[j] = step.static_rate[pixels[j]];
         return out;
     };
     std::vector<std::uint8_t> in_group(npix, 0);  // 1: lit in this group, 2: settling in it
@@ -144,7 +179,7 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     try {
         for (std::size_t g = 0; g < n_groups; ++g) {
             const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
-            const double t_start = k0 == 0 ? last_t_ : step.t_s[k0 - 1], t_end = step.t_s[k1 - 1];
+            const double t_start = k0 == 0 ? t_begin : step.t_s[k0 - 1], t_end = step.t_s[k1 - 1];
             const SparseRun& r = lit[g];
             for (const std::uint32_t px : r.pixels) in_group[px] = 1;
             std::vector<std::uint32_t> settle;
@@ -153,16 +188,22 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                     in_group[px] = 2;
                     settle.push_back(px);
                 }
+            for (const std::uint32_t px : busy)
+                if (in_group[px] == 0) {
+                    in_group[px] = 2;
+                    settle.push_back(px);
+                }
             std::sort(settle.begin(), settle.end());
-            if (k0 > 0) {
-                // Those that stood still so far in the step: one long step to the group's start.
+            {
+                // Those that stood still so far (in the step, or waiting from an earlier one):
+                // one long step at the static light to the group's start.
                 std::vector<std::uint32_t> entering;
                 for (const std::vector<std::uint32_t>* list : {&r.pixels, static_cast<const std::vector<std::uint32_t>*>(&settle)})
                     for (const std::uint32_t px : *list)
                         if (state_[px].t < t_start) entering.push_back(px);
                 std::sort(entering.begin(), entering.end());
                 if (!entering.empty()) {
-                    const std::vector<double> rate = static_rates(entering, 1);
+                    const std::vector<double> rate = static_rates(entering);
                     take(run_pixels(entering.data(), entering.size(), rate.data(), &t_start, 1));
                     updates += entering.size();
                 }
@@ -175,8 +216,8 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                 std::vector<double> base;
                 for (std::size_t k = k0; k < k1; ++k)
                     if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
-                const std::vector<double> rate = static_rates(settle, base.size());
-                take(run_pixels(settle.data(), settle.size(), rate.data(), base.data(), base.size()));
+                const std::vector<double> rate = static_rates(settle);
+                take(run_pixels(settle.data(), settle.size(), rate.data(), base.data(), base.size(), true));
                 updates += settle.size() * base.size();
             }
             // A lit pixel relaxes from the group's end on; the settling list keeps those with
@@ -196,8 +237,27 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         // The last group's pixels stand at the step's end already (its last sample is a base
         // time); run() skips them.
         const double t_last = step.t_s[n - 1];
-        take(run(step.static_rate, &t_last, 1, nullptr, nullptr, true));
-        updates += npix - at_end;
+        if (step.reach_all) {
+            take(run(step.static_rate, &t_last, 1, nullptr, nullptr, true));
+            updates += npix - at_end;
+        } else {
+            std::vector<std::uint32_t> reach;
+            for (std::size_t i = 0; i < step.n_reach; ++i) {
+                const std::uint32_t px = step.reach_pixel[i];
+                if (in_group[px] == 0 && state_[px].t < t_last) {
+                    in_group[px] = 1;  // once, if listed twice
+                    reach.push_back(px);
+                }
+            }
+            for (const std::uint32_t px : reach) in_group[px] = 0;
+            std::sort(reach.begin(), reach.end());
+            if (!reach.empty()) {
+                const std::vector<double> rate = static_rates(reach);
+                take(run_pixels(reach.data(), reach.size(), rate.data(), &t_last, 1));
+                updates += reach.size();
+            }
+        }
+        sparse_end_ = t_last;
     } catch (...) {
         stopped_ = true;  // earlier groups' pixels have moved
         throw;
