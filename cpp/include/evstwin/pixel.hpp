@@ -319,6 +319,16 @@ struct PixelModel {
     /// refine_sf_and_compare with the follower alone); 0 where none is. A pixel whose long
     /// steps would be cut finer than a dense run's samples is cheaper sampled densely
     /// (Sensor::run_sparse).
+    /// Stationary standard deviation of the noise on the level y at a constant photon rate [ln
+    /// units]: white noise of intensity D (noise_intensity) through the pole (rate a) and the
+    /// follower (rate b) has variance D a b / (2 (a + b)); through one of them, D r / 2.
+    double stationary_noise_sigma(double photon_rate) const {
+        const double mean_e = mean_electron_rate(photon_rate);
+        const double D = noise_intensity(photon_rate, mean_e);
+        const double a = pole_rate(ELEMENTARY_CHARGE_C * mean_e), b = sf_rate();
+        const double r = a > 0.0 && b > 0.0 ? a * b / (a + b) : (a > 0.0 ? a : b);
+        return r > 0.0 ? std::sqrt(0.5 * D * r) : 0.0;
+    }
     double refine_pieces_per_s(double photon_rate) const {
         if (!has_filter) return 0.0;
         if (p.pr_pole) {

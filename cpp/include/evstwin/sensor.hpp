@@ -273,6 +273,8 @@ public:
         settle_until_.assign(state_.size(), -std::numeric_limits<double>::infinity());
         settling_.clear();
         sparse_end_ = -std::numeric_limits<double>::infinity();
+        sparse_mark_.clear();  // an error part-way may have left marks
+        sparse_column_.clear();
         samples_ = 0;
         last_t_ = -std::numeric_limits<double>::infinity();
     }
@@ -453,6 +455,13 @@ private:
     /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
     /// Speed only.
     static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
+    /// run_sparse() samples a pixel at the base rate throughout where its long steps would be
+    /// refined (its noise's standard deviation over SPARSE_NOISY_SIGMAS of the smaller
+    /// threshold: crossing_plausible's reach is ~6.9 of them) into pieces that cost more than
+    /// the base samples (a refined piece, scalar, costs about SPARSE_PIECE_COST samples of
+    /// the vector kernel). Speed only: either way the statistics are the same.
+    static constexpr double SPARSE_NOISY_SIGMAS = 7.0;
+    static constexpr double SPARSE_PIECE_COST = 8.0;
     /// Time constants a pixel's levels take to settle (settle_time_s): e^-5 = 0.7 % of a step is left.
     static constexpr double SETTLE_TIME_CONSTANTS = 5.0;
     /// The smaller of two rates, ignoring a zero (a stage that is off).
@@ -601,6 +610,26 @@ private:
             full_t.push_back(event_time(end_us(j), out[e].t_lo));
         }
         full_t.push_back(t_us);
+    }
+
+    /// The records out[first..] (with their full times, where the block keeps them) stably
+    /// into pixel order: run_block's sample where some pixels took the kernel and others the
+    /// per-pixel path.
+    static void stable_sort_by_pixel(std::vector<RawEvent>& out, std::vector<std::int64_t>& full_t, std::size_t first) {
+        const auto by_pixel = [](const RawEvent& a, const RawEvent& b) { return a.pixel() < b.pixel(); };
+        if (full_t.empty()) {
+            std::stable_sort(out.begin() + static_cast<std::ptrdiff_t>(first), out.end(), by_pixel);
+            return;
+        }
+        std::vector<std::size_t> order(out.size() - first);
+        for (std::size_t i = 0; i < order.size(); ++i) order[i] = first + i;
+        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return by_pixel(out[a], out[b]); });
+        const std::vector<RawEvent> records(out.begin() + static_cast<std::ptrdiff_t>(first), out.end());
+        const std::vector<std::int64_t> times(full_t.begin() + static_cast<std::ptrdiff_t>(first), full_t.end());
+        for (std::size_t i = 0; i < order.size(); ++i) {
+            out[first + i] = records[order[i] - first];
+            full_t[first + i] = times[order[i] - first];
+        }
     }
 
     /// A block's event list, taken out of block_events_ while the block runs and put back
@@ -962,6 +991,15 @@ private:
     /// The end of the last run_sparse() step (-inf before one): where its waiting pixels'
     /// light began, so the next step's start.
     double sparse_end_ = -std::numeric_limits<double>::infinity();
+    /// run_sparse()'s per-pixel scratch, kept from call to call (its marks all 0 and its
+    /// columns all -1 between calls): the IMX636 array's 4.6 MB need not be zeroed each step.
+    std::vector<std::uint8_t> sparse_mark_;
+    std::vector<std::int32_t> sparse_column_;
+    /// run_sparse()'s judgement of which pixels take the base samples throughout, per pixel,
+    /// with the static light and base interval it was made for.
+    std::vector<std::uint8_t> sparse_busy_;
+    std::vector<double> sparse_static_;
+    double sparse_busy_dt_ = 0.0;
     std::uint64_t last_pixel_updates_ = 0;
     std::atomic<std::size_t> events_in_call_{0};
     bool stopped_ = false;

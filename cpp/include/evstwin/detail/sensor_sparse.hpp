@@ -21,6 +21,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -95,7 +96,8 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         for (std::size_t i = 0; i < step.n_light; ++i) order[next[step.light_sample[i] / group]++] = i;
     }
     std::vector<SparseRun> lit(n_groups);
-    std::vector<std::int32_t> column(npix, -1);
+    if (sparse_column_.size() != npix) sparse_column_.assign(npix, -1);
+    std::int32_t* column = sparse_column_.data();  // -1 but while a group's lit pixels are listed
     for (std::size_t g = 0; g < n_groups; ++g) {
         SparseRun& r = lit[g];
         const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
@@ -139,11 +141,13 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                                         std::to_string(px / width_) + ") stands at " + detail::fmt(state_[px].t) +
                                         " s, not before the step's first sample t_s[0]=" + detail::fmt(step.t_s[0]));
 
-    // --- the pixels that take the base samples throughout: those whose long steps would be
-    // cut finer than the base samples wherever their noise can cross (a bright pixel behind
-    // a fast pole, the follower alone at a high cutoff); for them long steps cost more than
-    // they save (geo-stare's sky on the IMX636: 121 s for one 4 s step of the whole array,
-    // against 6 s for 4 s of base samples) ---
+    // --- the pixels that take the base samples throughout: those whose noise comes within
+    // reach of a threshold in a long step (crossing_plausible then refines it: ~6.9 of its
+    // standard deviations) and whose refined pieces would cost more than the base samples (a
+    // bright pixel behind a fast pole, a noisy dim one behind a slow pole, the follower alone
+    // at a high cutoff). For them long steps cost more than they save: geo-stare's sky on the
+    // IMX636 took 121 s for one 4 s step of the whole array, against 6 s for 4 s of base
+    // samples. Speed only: either way the pixel's statistics are the same. ---
     double base_dt = std::numeric_limits<double>::infinity();
     {
         double prev = t_begin;
@@ -154,10 +158,25 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     }
     std::vector<std::uint32_t> busy;
     if (std::isfinite(base_dt)) {
-        const double most_pieces_per_s = 1.0 / base_dt;
-        for (std::size_t i = 0; i < npix; ++i)
-            if (model_.refine_pieces_per_s(step.static_rate[i]) > most_pieces_per_s)
-                busy.push_back(static_cast<std::uint32_t>(i));
+        // Judged again only where the light or the base interval changed since the last step
+        // (a drifting star field changes a few percent of the pixels a step).
+        const double most_pieces_per_s = 1.0 / (SPARSE_PIECE_COST * base_dt);
+        const double theta = std::min(model_.p.theta_on, model_.p.theta_off);
+        const bool all = sparse_busy_.size() != npix || base_dt != sparse_busy_dt_;
+        if (all) {
+            sparse_busy_.assign(npix, 0);
+            sparse_static_.assign(npix, std::numeric_limits<double>::quiet_NaN());
+            sparse_busy_dt_ = base_dt;
+        }
+        for (std::size_t i = 0; i < npix; ++i) {
+            const double rate = step.static_rate[i];
+            if (rate != sparse_static_[i]) {
+                sparse_static_[i] = rate;
+                sparse_busy_[i] = model_.refine_pieces_per_s(rate) > most_pieces_per_s &&
+                                  SPARSE_NOISY_SIGMAS * model_.stationary_noise_sigma(rate) > theta;
+            }
+            if (sparse_busy_[i]) busy.push_back(static_cast<std::uint32_t>(i));
+        }
     }
 
     // --- the runs, group by group, then the long step of everyone else to the step's end ---
@@ -174,8 +193,29 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         for (std::size_t j = 0; j < pixels.size(); ++j) out[j] = step.static_rate[pixels[j]];
         return out;
     };
-    std::vector<std::uint8_t> in_group(npix, 0);  // 1: lit in this group, 2: settling in it
-    std::size_t at_end = 0;                        // pixels the last group took to the step's end
+    // One long step of some pixels (increasing indices, each behind t) at the static light
+    // to t, in one run_pixels call per time they stand at, so that each call's blocks start
+    // together and take the block kernels.
+    const auto long_step = [&](const std::vector<std::uint32_t>& pixels, double t) {
+        std::map<double, std::vector<std::uint32_t>> by_start;
+        std::vector<std::uint32_t>* last = nullptr;
+        double last_t = 0.0;
+        for (const std::uint32_t px : pixels) {
+            const double t0 = state_[px].t;
+            if (!last || t0 != last_t) {
+                last = &by_start[t0];
+                last_t = t0;
+            }
+            last->push_back(px);
+        }
+        for (const auto& start : by_start) {
+            const std::vector<double> rate = static_rates(start.second);
+            take(run_pixels(start.second.data(), start.second.size(), rate.data(), &t, 1, true));
+            updates += start.second.size();
+        }
+    };
+    if (sparse_mark_.size() != npix) sparse_mark_.assign(npix, 0);
+    std::uint8_t* in_group = sparse_mark_.data();  // 1: lit in this group, 2: sampled in it; 0 after the call
     try {
         for (std::size_t g = 0; g < n_groups; ++g) {
             const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
@@ -202,11 +242,7 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                     for (const std::uint32_t px : *list)
                         if (state_[px].t < t_start) entering.push_back(px);
                 std::sort(entering.begin(), entering.end());
-                if (!entering.empty()) {
-                    const std::vector<double> rate = static_rates(entering);
-                    take(run_pixels(entering.data(), entering.size(), rate.data(), &t_start, 1));
-                    updates += entering.size();
-                }
+                long_step(entering, t_start);
             }
             if (!r.pixels.empty()) {
                 take(run_pixels(r.pixels.data(), r.pixels.size(), r.rate.data(), r.times.data(), r.times.size()));
@@ -232,14 +268,17 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                             settling_.end());
             for (const std::uint32_t px : r.pixels) in_group[px] = 0;
             for (const std::uint32_t px : settle) in_group[px] = 0;
-            at_end = r.pixels.size() + settle.size();
         }
         // The last group's pixels stand at the step's end already (its last sample is a base
-        // time); run() skips them.
+        // time).
         const double t_last = step.t_s[n - 1];
         if (step.reach_all) {
+            // run() skips the pixels already there; a block whose pixels stand apart takes the
+            // kernel for those that start together (run_block).
+            std::size_t behind = 0;
+            for (std::size_t i = 0; i < npix; ++i) behind += state_[i].t < t_last;
             take(run(step.static_rate, &t_last, 1, nullptr, nullptr, true));
-            updates += npix - at_end;
+            updates += behind;
         } else {
             std::vector<std::uint32_t> reach;
             for (std::size_t i = 0; i < step.n_reach; ++i) {
@@ -251,11 +290,7 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             }
             for (const std::uint32_t px : reach) in_group[px] = 0;
             std::sort(reach.begin(), reach.end());
-            if (!reach.empty()) {
-                const std::vector<double> rate = static_rates(reach);
-                take(run_pixels(reach.data(), reach.size(), rate.data(), &t_last, 1));
-                updates += reach.size();
-            }
+            long_step(reach, t_last);
         }
         sparse_end_ = t_last;
     } catch (...) {
