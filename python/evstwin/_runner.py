@@ -266,18 +266,13 @@ class _Runner:
         the continuous noise model, the exact low-pass: the engine advances a pixel's noise
         exactly over any interval and refines one where a crossing is plausible; the
         documentation's noise model page measures it), and no halo changes the light of every
-        pixel (a ``CompositePSF``'s smooth part is sampled at the base rate everywhere). Else 1."""
+        pixel (a ``CompositePSF``'s smooth part is sampled at the base rate everywhere). Else 1.
+        Which pixels then take long steps the engine decides (``Sensor.run_sparse``): a pixel
+        whose noise would have its long steps refined more finely than the base samples (the
+        DAVIS346 preset's dark pixel, a bright sky behind a fast pole) keeps the base rate."""
         sc, p = self.scene, self.scene.params
         if not (sc.sparse and sc.static_step_s > 0.0 and p.noise_model == "continuous" and p.lowpass == "exact"
                 and not self._halo_groups):
-            return 1
-        if not p.pr_pole and p.cutoff_hz is not None and 2.0 * math.pi * p.cutoff_hz * sc.static_step_s > 1.0:
-            # The follower alone: where its noise can cross (the DAVIS346 preset's dark pixel
-            # fires ~2 times a second, so almost everywhere), a long step is refined to
-            # pieces of an eighth of its time constant, which costs more than the base rate's
-            # vector kernel (a 1280 x 720 dark frame of the DAVIS346 preset's pixel: 13.1 us a
-            # pixel for one 0.2 s step against ~5.6 us for 200 samples at 1 kHz, one thread).
-            # Such a pixel's cost is its noise.
             return 1
         return max(1, math.floor(sc.static_step_s / self.dt + 1e-9))
 
