@@ -198,6 +198,12 @@ EVSTWIN_ALWAYS_INLINE void ziggurat_batch_body(const std::uint32_t* __restrict w
     }
 }
 
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+// GCC 12's AVX-512 and gather intrinsics leave an undefined vector that -Wmaybe-uninitialized
+// reports (GCC bug 105593, fixed in 13).
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #if EVSTWIN_MULTIVERSION
 /// The intrinsic batches' last counters, from `from` to n (fewer than a vector), one by one.
 inline void philox_batch_tail(std::size_t from, const std::uint32_t* c0, const std::uint32_t* c1,
@@ -208,28 +214,35 @@ inline void philox_batch_tail(std::size_t from, const std::uint32_t* c0, const s
         r0[i] = r[0]; r1[i] = r[1]; r2[i] = r[2]; r3[i] = r[3];
     }
 }
-// The AVX2 and AVX-512 batches are one algorithm over the vector (simd/philox_lanes.hpp,
-// Stim's way: the algorithm once, the intrinsics in a small class per instruction set). Each
-// 32-bit word rides in a 64-bit lane (its upper half ignored: the multiplication reads the low
-// 32 bits, the stores truncate), so each product is one 32 x 32 -> 64-bit multiplication
-// (vpmuludq) and the three words of an XOR one or two instructions, with no permutes. From the
-// plain loop GCC made 32-bit lanes and split even from odd ones with permutes for every product
-// (AVX-512), or emulated a 64-bit multiplication with shifts and adds (the loop over 64-bit
-// lanes, AVX2). Integer arithmetic: the same words as philox4x32 at every level. Each batch
-// takes several vectors of counters through the ten rounds side by side, so one vector's
-// multiplications fill another's latency: four at AVX2 (some of them spill: 16 registers,
-// which costs instructions but not time here), two at AVX-512 (more gained nothing), then the
-// rest one vector at a time; the last n % width counters are done by the scalar philox4x32.
-// Figures: bench/philox_batch.cpp (the documentation's performance page).
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-// GCC 12's AVX-512 intrinsics leave an undefined vector that -Wmaybe-uninitialized reports
-// (GCC bug 105593, fixed in 13).
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
-/// Philox's words in the 64-bit lanes of an AVX2 vector: four counters a vector, four vectors
-/// side by side.
-struct PhiloxLanesAvx2 {
+// The AVX2 and AVX-512 batches are written once (simd/lane_batches.hpp, Stim's way: the
+// algorithms once, the intrinsics in a small class per instruction set, LanesAvx2 and
+// LanesAvx512).
+//
+// Philox: each 32-bit word rides in a 64-bit lane (its upper half ignored: the multiplication
+// reads the low 32 bits, the stores truncate), so each product is one 32 x 32 -> 64-bit
+// multiplication (vpmuludq) and the three words of an XOR one or two instructions, with no
+// permutes. From the plain loop GCC made 32-bit lanes and split even from odd ones with
+// permutes for every product (AVX-512), or emulated a 64-bit multiplication with shifts and
+// adds (the loop over 64-bit lanes, AVX2). Integer arithmetic: the same words as philox4x32 at
+// every level. Each batch takes several vectors of counters through the ten rounds side by
+// side, so one vector's multiplications fill another's latency: four at AVX2 (some of them
+// spill: 16 registers, which costs instructions but not time here), two at AVX-512 (more
+// gained nothing), then the rest one vector at a time; the last n % width counters are done by
+// the scalar philox4x32. Figures: bench/philox_batch.cpp (the documentation's performance page).
+//
+// The ziggurat: gathers. From the plain loop GCC 12 looked the tables up lane by lane (an
+// extract and an insert a lane), most of the batch's time (found by bench/precision_study.cpp;
+// bench/draw_floor.cpp at AVX-512, before and after: 3.2-3.3 -> 2.2-2.3 ns a pixel-update, at
+// the change; git history). The same operations as ziggurat_batch_body: the 24-bit magnitude
+// converted exactly, one multiplication by the layer's width, the sign set by an XOR of the
+// sign bit (x * (1 - 2 s) only flips it, zeros included), the slow flag from j >= k (both below
+// 2^31, so a signed comparison is the unsigned one). So the same normals and flags, bit for
+// bit. (Processors whose microcode slows gathers, the Gather Data Sampling mitigation, may gain
+// less or lose; not measured here. The bits are the same either way.)
+/// The intrinsics of the AVX2 batches. Philox: its words in the 64-bit lanes of a vector (V),
+/// four counters a vector, four vectors side by side. The ziggurat: eight words a vector
+/// (Words), four of them (Half) for a vector of four doubles.
+struct LanesAvx2 {
     using V = __m256i;
     static constexpr std::size_t width = 4, unroll = 4;
     EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE V set1(std::uint32_t v) { return _mm256_set1_epi64x(v); }
@@ -245,12 +258,43 @@ struct PhiloxLanesAvx2 {
     EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE V high_xor(V p, V x, V k) {
         return _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p, 32), x), k);
     }
+
+    using Words = __m256i;
+    using Half = __m128i;
+    static constexpr std::size_t words = 8;
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words load_words(const std::uint32_t* p) {
+        return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+    }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words set1_words(int v) { return _mm256_set1_epi32(v); }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words and_words(Words a, Words b) { return _mm256_and_si256(a, b); }
+    template <int S>
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words shift_right(Words a) { return _mm256_srli_epi32(a, S); }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words gather_words(const int* t, Words i) {
+        return _mm256_i32gather_epi32(t, i, 4);
+    }
+    /// slow = j >= k as bytes: 1 - (k > j), eight 32-bit lanes packed to bytes.
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void store_slow(std::uint8_t* slow, Words j, Words k) {
+        const __m256i slow32 = _mm256_add_epi32(_mm256_cmpgt_epi32(k, j), _mm256_set1_epi32(1));
+        const __m128i slow16 = _mm_packus_epi32(_mm256_castsi256_si128(slow32), _mm256_extracti128_si256(slow32, 1));
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(slow), _mm_packus_epi16(slow16, slow16));
+    }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Half half(Words v, int h) {
+        return h ? _mm256_extracti128_si256(v, 1) : _mm256_castsi256_si128(v);
+    }
+    /// g = j * tw[layer], its sign bit flipped where s = 1.
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void store_normals(double* g, Half j, Half layer, Half s,
+                                                                        const double* tw) {
+        const __m256d x = _mm256_mul_pd(_mm256_cvtepi32_pd(j), _mm256_i32gather_pd(tw, layer, 8));
+        const __m256i bits = _mm256_slli_epi64(_mm256_cvtepu32_epi64(s), 63);
+        _mm256_storeu_pd(g, _mm256_castsi256_pd(_mm256_xor_si256(_mm256_castpd_si256(x), bits)));
+    }
 };
-/// The same for AVX-512: eight counters a vector, two vectors side by side. high_xor swaps the
-/// halves of each lane (vpshufd, a shuffle port) rather than shifting, which shares its port
-/// with the multiplications; the upper halves then hold the low halves, ignored as above. (At
-/// AVX2, with four vectors, the swap lost.) The three-way XOR is one vpternlogq.
-struct PhiloxLanesAvx512 {
+/// The same for AVX-512: eight counters a vector, two vectors side by side; sixteen words a
+/// vector. high_xor swaps the halves of each lane (vpshufd, a shuffle port) rather than
+/// shifting, which shares its port with the multiplications; the upper halves then hold the low
+/// halves, ignored as above. (At AVX2, with four vectors, the swap lost.) The three-way XOR is
+/// one vpternlogq; the slow flags a mask.
+struct LanesAvx512 {
     using V = __m512i;
     static constexpr std::size_t width = 8, unroll = 2;
     EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE V set1(std::uint32_t v) { return _mm512_set1_epi64(v); }
@@ -264,28 +308,54 @@ struct PhiloxLanesAvx512 {
     EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE V high_xor(V p, V x, V k) {
         return _mm512_ternarylogic_epi64(_mm512_shuffle_epi32(p, _MM_PERM_CDAB), x, k, 0x96);  // a ^ b ^ c
     }
+
+    using Words = __m512i;
+    using Half = __m256i;
+    static constexpr std::size_t words = 16;
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words load_words(const std::uint32_t* p) {
+        return _mm512_loadu_si512(p);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words set1_words(int v) { return _mm512_set1_epi32(v); }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words and_words(Words a, Words b) {
+        return _mm512_and_si512(a, b);
+    }
+    template <int S>
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words shift_right(Words a) { return _mm512_srli_epi32(a, S); }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words gather_words(const int* t, Words i) {
+        return _mm512_i32gather_epi32(i, t, 4);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void store_slow(std::uint8_t* slow, Words j, Words k) {
+        const __mmask16 s = _mm512_cmpge_epu32_mask(j, k);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(slow), _mm_maskz_mov_epi8(s, _mm_set1_epi8(1)));
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Half half(Words v, int h) {
+        return h ? _mm512_extracti64x4_epi64(v, 1) : _mm512_castsi512_si256(v);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void store_normals(double* g, Half j, Half layer, Half s,
+                                                                          const double* tw) {
+        const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(j), _mm512_i32gather_pd(layer, tw, 8));
+        const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(s), 63);
+        _mm512_storeu_pd(g, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
+    }
 };
-/// Philox4x32-10 over the vectors of Lanes: PhiloxRounds<Lanes>::batch, defined in
-/// simd/philox_lanes.hpp once for each lane class.
+/// The batches over the vectors of Lanes (philox, ziggurat), defined in simd/lane_batches.hpp
+/// once for each lane class.
 template <class Lanes>
-struct PhiloxRounds;
-#define EVSTWIN_PHILOX_LANES PhiloxLanesAvx2
-#define EVSTWIN_PHILOX_TARGET EVSTWIN_TARGET_AVX2
-#include "simd/philox_lanes.hpp"
-#undef EVSTWIN_PHILOX_LANES
-#undef EVSTWIN_PHILOX_TARGET
-#define EVSTWIN_PHILOX_LANES PhiloxLanesAvx512
-#define EVSTWIN_PHILOX_TARGET EVSTWIN_TARGET_AVX512
-#include "simd/philox_lanes.hpp"
-#undef EVSTWIN_PHILOX_LANES
-#undef EVSTWIN_PHILOX_TARGET
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
+struct LaneBatches;
+#define EVSTWIN_LANES LanesAvx2
+#define EVSTWIN_LANES_TARGET EVSTWIN_TARGET_AVX2
+#include "simd/lane_batches.hpp"
+#undef EVSTWIN_LANES
+#undef EVSTWIN_LANES_TARGET
+#define EVSTWIN_LANES LanesAvx512
+#define EVSTWIN_LANES_TARGET EVSTWIN_TARGET_AVX512
+#include "simd/lane_batches.hpp"
+#undef EVSTWIN_LANES
+#undef EVSTWIN_LANES_TARGET
 #endif
 
 /// Philox4x32-10 of a list of counters (philox4x32_batch): the plain loop at the baseline,
-/// PhiloxRounds over the lanes of AVX2 and AVX-512.
+/// LaneBatches' at AVX2 and AVX-512.
 struct PhiloxBatch {
     template <class Level>
     static EVSTWIN_ALWAYS_INLINE void run(Level, const std::uint32_t* c0, const std::uint32_t* c1,
@@ -298,35 +368,20 @@ struct PhiloxBatch {
                                                               const std::uint32_t* c2, std::uint32_t c3,
                                                               Philox4x32Key key, std::size_t n, std::uint32_t* r0,
                                                               std::uint32_t* r1, std::uint32_t* r2, std::uint32_t* r3) {
-        PhiloxRounds<PhiloxLanesAvx2>::batch(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+        LaneBatches<LanesAvx2>::philox(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
     }
     EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void run(SimdAvx512, const std::uint32_t* c0,
                                                                 const std::uint32_t* c1, const std::uint32_t* c2,
                                                                 std::uint32_t c3, Philox4x32Key key, std::size_t n,
                                                                 std::uint32_t* r0, std::uint32_t* r1, std::uint32_t* r2,
                                                                 std::uint32_t* r3) {
-        PhiloxRounds<PhiloxLanesAvx512>::batch(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+        LaneBatches<LanesAvx512>::philox(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
     }
 #endif
 };
 
 /// normal_ziggurat's common path for a list of words (ziggurat_batch): the plain loop at the
-/// baseline, gathers at AVX2 and AVX-512. From the plain loop GCC 12 looked the tables up lane
-/// by lane (an extract and an insert a lane), most of the batch's time (found by
-/// bench/precision_study.cpp; bench/draw_floor.cpp at AVX-512, before and after: 3.2-3.3 ->
-/// 2.2-2.3 ns a pixel-update, at the change; git history). The same operations as
-/// ziggurat_batch_body: the 24-bit magnitude converted exactly, one multiplication by the
-/// layer's width, the sign set by an XOR of the sign bit (x * (1 - 2 s) only flips it, zeros
-/// included), the slow flag from j >= k (both below 2^31, so a signed comparison is the
-/// unsigned one). So the same normals and flags, bit for bit. (Processors whose microcode slows
-/// gathers, the Gather Data Sampling mitigation, may gain less or lose; not measured here. The
-/// bits are the same either way.)
-// GCC 12's gather intrinsics leave an undefined vector that -Wmaybe-uninitialized reports
-// (GCC bug 105593, fixed in 13): silenced for these functions only.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
+/// baseline, LaneBatches' (gathers) at AVX2 and AVX-512.
 struct ZigguratBatch {
     template <class Level>
     static EVSTWIN_ALWAYS_INLINE void run(Level, const std::uint32_t* w, std::size_t n, double* g, std::uint8_t* slow) {
@@ -335,51 +390,11 @@ struct ZigguratBatch {
 #if EVSTWIN_MULTIVERSION
     EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void run(SimdAvx2, const std::uint32_t* w, std::size_t n, double* g,
                                                               std::uint8_t* slow) {
-        const double* tw = ZIGGURAT.w;
-        const int* tk = reinterpret_cast<const int*>(ZIGGURAT.k);
-        const __m256i m127 = _mm256_set1_epi32(127), one = _mm256_set1_epi32(1);
-        std::size_t i = 0;
-        for (; i + 8 <= n; i += 8) {
-            const __m256i wi = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(w + i));
-            const __m256i layer = _mm256_and_si256(wi, m127), j = _mm256_srli_epi32(wi, 8);
-            const __m256i sign = _mm256_and_si256(_mm256_srli_epi32(wi, 7), one);
-            // slow = 1 - (k > j), eight 32-bit lanes packed to bytes.
-            const __m256i slow32 = _mm256_add_epi32(_mm256_cmpgt_epi32(_mm256_i32gather_epi32(tk, layer, 4), j), one);
-            const __m128i slow16 = _mm_packus_epi32(_mm256_castsi256_si128(slow32), _mm256_extracti128_si256(slow32, 1));
-            _mm_storel_epi64(reinterpret_cast<__m128i*>(slow + i), _mm_packus_epi16(slow16, slow16));
-            for (int h = 0; h < 2; ++h) {
-                const __m128i lh = h ? _mm256_extracti128_si256(layer, 1) : _mm256_castsi256_si128(layer);
-                const __m128i jh = h ? _mm256_extracti128_si256(j, 1) : _mm256_castsi256_si128(j);
-                const __m128i sh = h ? _mm256_extracti128_si256(sign, 1) : _mm256_castsi256_si128(sign);
-                const __m256d x = _mm256_mul_pd(_mm256_cvtepi32_pd(jh), _mm256_i32gather_pd(tw, lh, 8));
-                const __m256i bits = _mm256_slli_epi64(_mm256_cvtepu32_epi64(sh), 63);
-                _mm256_storeu_pd(g + i + 4 * h, _mm256_castsi256_pd(_mm256_xor_si256(_mm256_castpd_si256(x), bits)));
-            }
-        }
-        ziggurat_batch_body(w + i, n - i, g + i, slow + i);
+        LaneBatches<LanesAvx2>::ziggurat(w, n, g, slow);
     }
     EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void run(SimdAvx512, const std::uint32_t* w, std::size_t n,
                                                                 double* g, std::uint8_t* slow) {
-        const double* tw = ZIGGURAT.w;
-        const int* tk = reinterpret_cast<const int*>(ZIGGURAT.k);
-        const __m512i m127 = _mm512_set1_epi32(127), one = _mm512_set1_epi32(1);
-        std::size_t i = 0;
-        for (; i + 16 <= n; i += 16) {
-            const __m512i wi = _mm512_loadu_si512(w + i);
-            const __m512i layer = _mm512_and_si512(wi, m127), j = _mm512_srli_epi32(wi, 8);
-            const __m512i sign = _mm512_and_si512(_mm512_srli_epi32(wi, 7), one);
-            const __mmask16 s = _mm512_cmpge_epu32_mask(j, _mm512_i32gather_epi32(layer, tk, 4));
-            _mm_storeu_si128(reinterpret_cast<__m128i*>(slow + i), _mm_maskz_mov_epi8(s, _mm_set1_epi8(1)));
-            for (int h = 0; h < 2; ++h) {
-                const __m256i lh = h ? _mm512_extracti64x4_epi64(layer, 1) : _mm512_castsi512_si256(layer);
-                const __m256i jh = h ? _mm512_extracti64x4_epi64(j, 1) : _mm512_castsi512_si256(j);
-                const __m256i sh = h ? _mm512_extracti64x4_epi64(sign, 1) : _mm512_castsi512_si256(sign);
-                const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(jh), _mm512_i32gather_pd(lh, tw, 8));
-                const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(sh), 63);
-                _mm512_storeu_pd(g + i + 8 * h, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
-            }
-        }
-        ziggurat_batch_body(w + i, n - i, g + i, slow + i);
+        LaneBatches<LanesAvx512>::ziggurat(w, n, g, slow);
     }
 #endif
 };
