@@ -293,7 +293,8 @@ struct LanesAvx2 {
 /// vector. high_xor swaps the halves of each lane (vpshufd, a shuffle port) rather than
 /// shifting, which shares its port with the multiplications; the upper halves then hold the low
 /// halves, ignored as above. (At AVX2, with four vectors, the swap lost.) The three-way XOR is
-/// one vpternlogq; the slow flags a mask.
+/// one vpternlogq; the slow flags a mask. With list_flagged's, every AVX-512 intrinsic of the
+/// engine is here.
 struct LanesAvx512 {
     using V = __m512i;
     static constexpr std::size_t width = 8, unroll = 2;
@@ -336,6 +337,30 @@ struct LanesAvx512 {
         const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(j), _mm512_i32gather_pd(layer, tw, 8));
         const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(s), 63);
         _mm512_storeu_pd(g, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
+    }
+
+    // list_flagged's (simd/block_passes.hpp, ListFlagged).
+    /// Which of the 16 flags from f are nonzero, as the bits of a mask (two vptestmq).
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::uint64_t nonzero(const std::uint64_t* f) {
+        const __m512i a = _mm512_loadu_si512(f), b = _mm512_loadu_si512(f + 8);
+        return static_cast<unsigned>(_mm512_test_epi64_mask(a, a)) |
+               (static_cast<unsigned>(_mm512_test_epi64_mask(b, b)) << 8);
+    }
+    /// The same for the 64 flags from f (one vptestmb).
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::uint64_t nonzero(const std::uint8_t* f) {
+        const __m512i a = _mm512_loadu_si512(f);
+        return _mm512_test_epi8_mask(a, a);
+    }
+    /// The indices base + b of the set bits b of the 16-bit mask k, compressed into out in order
+    /// (their count returned): vpcompressd and a store under a mask of the count's length.
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE unsigned list_sixteen(unsigned k, std::size_t base,
+                                                                             std::uint32_t* out) {
+        const __m512i idx = _mm512_add_epi32(_mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+                                             _mm512_set1_epi32(static_cast<int>(base)));
+        const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
+        _mm512_mask_storeu_epi32(out, static_cast<__mmask16>((1u << count) - 1u),
+                                 _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
+        return count;
     }
 };
 /// The batches over the vectors of Lanes (philox, ziggurat), defined in simd/lane_batches.hpp

@@ -98,46 +98,23 @@ inline bool bracket_fires(double u, double q, double e_on, double e_off) {
 /// vector (vpcompressd) and stored under a mask of the count's length, so no branch depends on
 /// the flags (list_flagged_body's loop over a word's bits ends at a branch mispredicted about
 /// once a word: perf had the two listings at ~9 % of continuous 260). The last n % 16 (n % 64
-/// for bytes) flags as in the plain list. Same list.
+/// for bytes) flags as in the plain list. Same list. (The intrinsics: LanesAvx512, simd.hpp.)
 struct ListFlagged {
     template <class Level, class Flag>
     static EVSTWIN_ALWAYS_INLINE std::size_t run(Level, const Flag* flag, std::size_t n, std::uint32_t* list) {
         return list_flagged_body(flag, n, list);
     }
 #if EVSTWIN_MULTIVERSION
-    /// The indices base + b of the set bits b of the 16-bit mask k, compressed into out in order
-    /// (their count returned): vpcompressd and a store under a mask of the count's length.
-    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE unsigned list_sixteen(unsigned k, std::size_t base,
-                                                                             std::uint32_t* out) {
-        const __m512i idx = _mm512_add_epi32(_mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
-                                             _mm512_set1_epi32(static_cast<int>(base)));
-        const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
-        _mm512_mask_storeu_epi32(out, static_cast<__mmask16>((1u << count) - 1u),
-                                 _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
-        return count;
-    }
-    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::size_t run(SimdAvx512, const std::uint64_t* flag,
-                                                                       std::size_t n, std::uint32_t* list) {
+    template <class Flag>
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::size_t run(SimdAvx512, const Flag* flag, std::size_t n,
+                                                                       std::uint32_t* list) {
+        constexpr std::size_t chunk = sizeof(Flag) == 1 ? 64 : 16;  // LanesAvx512::nonzero's flags
         std::size_t m = 0, i = 0;
-        for (; i + 16 <= n; i += 16) {
-            const __m512i a = _mm512_loadu_si512(flag + i), b = _mm512_loadu_si512(flag + i + 8);
-            const unsigned k = static_cast<unsigned>(_mm512_test_epi64_mask(a, a)) |
-                               (static_cast<unsigned>(_mm512_test_epi64_mask(b, b)) << 8);
-            m += list_sixteen(k, i, list + m);
-        }
-        for (; i < n; ++i)
-            if (flag[i]) list[m++] = static_cast<std::uint32_t>(i);
-        return m;
-    }
-    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::size_t run(SimdAvx512, const std::uint8_t* flag,
-                                                                       std::size_t n, std::uint32_t* list) {
-        std::size_t m = 0, i = 0;
-        for (; i + 64 <= n; i += 64) {
-            const __m512i a = _mm512_loadu_si512(flag + i);
-            const std::uint64_t k64 = _mm512_test_epi8_mask(a, a);
-            for (unsigned part = 0; part < 4; ++part) {
-                const unsigned k = static_cast<unsigned>(k64 >> (16u * part)) & 0xFFFFu;
-                m += list_sixteen(k, i + 16u * part, list + m);
+        for (; i + chunk <= n; i += chunk) {
+            const std::uint64_t k = LanesAvx512::nonzero(flag + i);
+            for (unsigned part = 0; part < chunk / 16; ++part) {
+                const unsigned k16 = static_cast<unsigned>(k >> (16u * part)) & 0xFFFFu;
+                m += LanesAvx512::list_sixteen(k16, i + 16u * part, list + m);
             }
         }
         for (; i < n; ++i)
