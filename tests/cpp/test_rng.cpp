@@ -58,6 +58,33 @@ TEST(ziggurat_is_a_standard_normal_tails_included) {
     CHECK_NEAR(double(far), n * p4, 5.0 * std::sqrt(n * p4) + 1.0);
 }
 
+namespace {
+/// A kernel of at_simd_level whose code at each level returns that level and counts its calls
+/// in the caller's variable (so the argument must reach it by reference, not copied).
+struct WhichLevel {
+    template <class Level>
+    static SimdLevel run(Level, int& calls) {
+        ++calls;
+        return Level::level;
+    }
+};
+}  // namespace
+
+TEST(at_simd_level_runs_the_code_of_the_current_level_once) {
+    const SimdLevel before = simd_level();
+    for (SimdLevel l : {SimdLevel::Baseline, SimdLevel::AVX2, SimdLevel::AVX512}) {
+        if (!simd_level_supported(l)) {
+            CHECK_THROWS(set_simd_level(l));
+            continue;
+        }
+        set_simd_level(l);
+        int calls = 0;
+        CHECK(at_simd_level<WhichLevel>(calls) == l);
+        CHECK(calls == 1);
+    }
+    set_simd_level(before);
+}
+
 TEST(batched_philox_and_ziggurat_match_the_scalar_ones_at_every_simd_level) {
     // 1000 counters (odd length: the vector loops' remainders too), words through both paths.
     const std::size_t n = 1001;

@@ -13,7 +13,8 @@
 // Dispatch: GCC and Clang on x86-64 compile the batch loops three times (baseline, AVX2,
 // AVX-512: target attributes, so the rest of the program keeps the baseline) and pick one by
 // __builtin_cpu_supports; other compilers and processors get the baseline loop, which the
-// compiler vectorises for whatever the build targets.
+// compiler vectorises for whatever the build targets. One mechanism does it for every batched
+// loop of the engine: at_simd_level<Kernel>(args...) below.
 #pragma once
 
 #include <atomic>
@@ -21,6 +22,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "config.hpp"
 #include "rng.hpp"
@@ -82,19 +84,59 @@ inline std::atomic<int>& simd_level_slot() {
 /// The level the batched loops use now (process-wide; the best supported one by default).
 inline SimdLevel simd_level() { return static_cast<SimdLevel>(detail::simd_level_slot().load(std::memory_order_relaxed)); }
 
-/// The body of a function that calls NAME_avx512, NAME_avx2 or NAME_baseline (NAME may be
-/// qualified, e.g. detail::philox_batch) with the arguments, at the current level: the one
-/// dispatch of every batched loop, here and in pixel.hpp.
+/// A SIMD level as a type, for overloading a kernel's code by level (see at_simd_level).
+template <SimdLevel L>
+struct SimdAt {
+    static constexpr SimdLevel level = L;
+};
+using SimdBaseline = SimdAt<SimdLevel::Baseline>;
+using SimdAvx2 = SimdAt<SimdLevel::AVX2>;
+using SimdAvx512 = SimdAt<SimdLevel::AVX512>;
+
+namespace detail {
+/// Kernel::run(tag, args...) compiled for the tag's level: called from a function that carries
+/// the level's target attribute, into which a run() written once (a template over the tag,
+/// EVSTWIN_ALWAYS_INLINE, no attribute of its own) is inlined and so compiled for that level.
+/// Where a level's vector form differs, Kernel has an overload of run() for that tag alone,
+/// with the level's EVSTWIN_TARGET_* (and its intrinsics).
+template <class Kernel, class... Args>
+inline decltype(auto) run_at_level(SimdBaseline tag, Args&&... args) {
+    return Kernel::run(tag, std::forward<Args>(args)...);
+}
 #if EVSTWIN_MULTIVERSION
-#define EVSTWIN_AT_LEVEL(NAME, ...)                                \
-    switch (::evstwin::simd_level()) {                             \
-        case ::evstwin::SimdLevel::AVX512: return NAME##_avx512(__VA_ARGS__); \
-        case ::evstwin::SimdLevel::AVX2: return NAME##_avx2(__VA_ARGS__);     \
-        default: return NAME##_baseline(__VA_ARGS__);              \
-    }
-#else
-#define EVSTWIN_AT_LEVEL(NAME, ...) return NAME##_baseline(__VA_ARGS__);
+template <class Kernel, class... Args>
+EVSTWIN_TARGET_AVX2 inline decltype(auto) run_at_level(SimdAvx2 tag, Args&&... args) {
+    return Kernel::run(tag, std::forward<Args>(args)...);
+}
+template <class Kernel, class... Args>
+EVSTWIN_TARGET_AVX512 inline decltype(auto) run_at_level(SimdAvx512 tag, Args&&... args) {
+    return Kernel::run(tag, std::forward<Args>(args)...);
+}
 #endif
+}  // namespace detail
+
+/// The one dispatch of every batched loop (here, simd/block_passes.hpp, kernels/quiet_pass.hpp):
+/// Kernel::run(tag, args...) at the current level, compiled for it (detail::run_at_level).
+/// A kernel is a class with a static run() whose first parameter is the level's tag, e.g.
+///
+///     struct Twice {
+///         template <class Level>
+///         static EVSTWIN_ALWAYS_INLINE void run(Level, const double* a, std::size_t n, double* b) {
+///             for (std::size_t i = 0; i < n; ++i) b[i] = 2.0 * a[i];  // one body, every level
+///         }
+///     };
+///     at_simd_level<Twice>(a, n, b);
+template <class Kernel, class... Args>
+inline decltype(auto) at_simd_level(Args&&... args) {
+#if EVSTWIN_MULTIVERSION
+    switch (simd_level()) {
+        case SimdLevel::AVX512: return detail::run_at_level<Kernel>(SimdAvx512{}, std::forward<Args>(args)...);
+        case SimdLevel::AVX2: return detail::run_at_level<Kernel>(SimdAvx2{}, std::forward<Args>(args)...);
+        default: break;
+    }
+#endif
+    return detail::run_at_level<Kernel>(SimdBaseline{}, std::forward<Args>(args)...);
+}
 
 /// Force a level (for tests and benchmarks: the results are the same at every level). Throws
 /// std::invalid_argument for a level this processor or build cannot run.
@@ -156,14 +198,12 @@ EVSTWIN_ALWAYS_INLINE void ziggurat_batch_body(const std::uint32_t* __restrict w
     }
 }
 
-inline void philox_batch_baseline(const std::uint32_t* c0, const std::uint32_t* c1, const std::uint32_t* c2,
-                                  std::uint32_t c3, Philox4x32Key key, std::size_t n, std::uint32_t* r0,
-                                  std::uint32_t* r1, std::uint32_t* r2, std::uint32_t* r3) {
-    philox_batch_body(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
-}
-inline void ziggurat_batch_baseline(const std::uint32_t* w, std::size_t n, double* g, std::uint8_t* slow) {
-    ziggurat_batch_body(w, n, g, slow);
-}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+// GCC 12's AVX-512 and gather intrinsics leave an undefined vector that -Wmaybe-uninitialized
+// reports (GCC bug 105593, fixed in 13).
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #if EVSTWIN_MULTIVERSION
 /// The intrinsic batches' last counters, from `from` to n (fewer than a vector), one by one.
 inline void philox_batch_tail(std::size_t from, const std::uint32_t* c0, const std::uint32_t* c1,
@@ -174,219 +214,217 @@ inline void philox_batch_tail(std::size_t from, const std::uint32_t* c0, const s
         r0[i] = r[0]; r1[i] = r[1]; r2[i] = r[2]; r3[i] = r[3];
     }
 }
-// The AVX2 and AVX-512 batches are written with intrinsics: each 32-bit word rides in a 64-bit
-// lane (its upper half ignored: the multiplication reads the low 32 bits, the stores
-// truncate), so each product is one 32 x 32 -> 64-bit multiplication (vpmuludq) and the three
-// words of an XOR one instruction, with no permutes. From the plain loop GCC made 32-bit
-// lanes and split even from odd ones with permutes for every product (AVX-512), or
-// emulated a 64-bit multiplication with shifts and adds (the loop over 64-bit lanes, AVX2).
-// Integer arithmetic: the same words as philox4x32 at every level. Each batch takes several
-// vectors of counters through the ten rounds side by side, so one vector's multiplications fill
-// another's latency: four at AVX2, two at AVX-512 (more gained nothing), then the rest one
-// vector at a time; the last n % width counters are done by the scalar philox4x32. Figures:
-// bench/philox_batch.cpp (the documentation's performance page).
-// (Macros and functions, not lambdas: a lambda would not inherit the target attribute.)
-#define EVSTWIN_LOAD4(P) _mm256_cvtepu32_epi64(_mm_loadu_si128(reinterpret_cast<const __m128i*>(P)))
-#define EVSTWIN_STORE4(P, V)                                                                      \
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(P),                                               \
-                     _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(V, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7))))
-/// philox_batch_avx2's rounds for the U vectors of counters from index i. With U = 4 some of
-/// them spill (16 registers), which costs instructions but not time here.
-template <int U>
-EVSTWIN_TARGET_AVX2 EVSTWIN_ALWAYS_INLINE void philox_vectors_avx2(const std::uint32_t* c0, const std::uint32_t* c1,
-                                                                 const std::uint32_t* c2, std::size_t i,
-                                                                 const __m256i* k0, const __m256i* k1,
-                                                                 const __m256i& x3_0, std::uint32_t* r0,
-                                                                 std::uint32_t* r1, std::uint32_t* r2,
-                                                                 std::uint32_t* r3) {
-    const __m256i m0 = _mm256_set1_epi64x(0xD2511F53u), m1 = _mm256_set1_epi64x(0xCD9E8D57u);
-    __m256i x0[U], x1[U], x2[U], x3[U];
-#if defined(__GNUC__)
-#pragma GCC unroll 4
-#endif
-    for (int u = 0; u < U; ++u) {
-        x0[u] = EVSTWIN_LOAD4(c0 + i + 4 * u);
-        x1[u] = EVSTWIN_LOAD4(c1 + i + 4 * u);
-        x2[u] = EVSTWIN_LOAD4(c2 + i + 4 * u);
-        x3[u] = x3_0;
+// The AVX2 and AVX-512 batches are written once (simd/lane_batches.hpp, Stim's way: the
+// algorithms once, the intrinsics in a small class per instruction set, LanesAvx2 and
+// LanesAvx512).
+//
+// Philox: each 32-bit word rides in a 64-bit lane (its upper half ignored: the multiplication
+// reads the low 32 bits, the stores truncate), so each product is one 32 x 32 -> 64-bit
+// multiplication (vpmuludq) and the three words of an XOR one or two instructions, with no
+// permutes. From the plain loop GCC made 32-bit lanes and split even from odd ones with
+// permutes for every product (AVX-512), or emulated a 64-bit multiplication with shifts and
+// adds (the loop over 64-bit lanes, AVX2). Integer arithmetic: the same words as philox4x32 at
+// every level. Each batch takes several vectors of counters through the ten rounds side by
+// side, so one vector's multiplications fill another's latency: four at AVX2 (some of them
+// spill: 16 registers, which costs instructions but not time here), two at AVX-512 (more
+// gained nothing), then the rest one vector at a time; the last n % width counters are done by
+// the scalar philox4x32. Figures: bench/philox_batch.cpp (the documentation's performance page).
+//
+// The ziggurat: gathers. From the plain loop GCC 12 looked the tables up lane by lane (an
+// extract and an insert a lane), most of the batch's time (found by bench/precision_study.cpp;
+// bench/draw_floor.cpp at AVX-512, before and after: 3.2-3.3 -> 2.2-2.3 ns a pixel-update, at
+// the change; git history). The same operations as ziggurat_batch_body: the 24-bit magnitude
+// converted exactly, one multiplication by the layer's width, the sign set by an XOR of the
+// sign bit (x * (1 - 2 s) only flips it, zeros included), the slow flag from j >= k (both below
+// 2^31, so a signed comparison is the unsigned one). So the same normals and flags, bit for
+// bit. (Processors whose microcode slows gathers, the Gather Data Sampling mitigation, may gain
+// less or lose; not measured here. The bits are the same either way.)
+/// The intrinsics of the AVX2 batches. Philox: its words in the 64-bit lanes of a vector (V),
+/// four counters a vector, four vectors side by side. The ziggurat: eight words a vector
+/// (Words), four of them (Half) for a vector of four doubles.
+struct LanesAvx2 {
+    using V = __m256i;
+    static constexpr std::size_t width = 4, unroll = 4;
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE V set1(std::uint32_t v) { return _mm256_set1_epi64x(v); }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE V load(const std::uint32_t* p) {
+        return _mm256_cvtepu32_epi64(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
     }
-#if defined(__GNUC__)
-#pragma GCC unroll 10
-#endif
-    for (int round = 0; round < 10; ++round) {
-#if defined(__GNUC__)
-#pragma GCC unroll 4
-#endif
-        for (int u = 0; u < U; ++u) {
-            const __m256i p0 = _mm256_mul_epu32(x0[u], m0), p1 = _mm256_mul_epu32(x2[u], m1);
-            x0[u] = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1, 32), x1[u]), k0[round]);
-            x1[u] = p1;
-            x2[u] = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0, 32), x3[u]), k1[round]);
-            x3[u] = p0;
-        }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void store(std::uint32_t* p, V v) {
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(p),
+                         _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(v, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7))));
     }
-#if defined(__GNUC__)
-#pragma GCC unroll 4
-#endif
-    for (int u = 0; u < U; ++u) {
-        EVSTWIN_STORE4(r0 + i + 4 * u, x0[u]);
-        EVSTWIN_STORE4(r1 + i + 4 * u, x1[u]);
-        EVSTWIN_STORE4(r2 + i + 4 * u, x2[u]);
-        EVSTWIN_STORE4(r3 + i + 4 * u, x3[u]);
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE V mul(V a, V b) { return _mm256_mul_epu32(a, b); }
+    /// The high half of each lane of p (in the low 32 bits) ^ x ^ k.
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE V high_xor(V p, V x, V k) {
+        return _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p, 32), x), k);
     }
-}
-#undef EVSTWIN_LOAD4
-#undef EVSTWIN_STORE4
-EVSTWIN_TARGET_AVX2 inline void philox_batch_avx2(const std::uint32_t* c0, const std::uint32_t* c1,
-                                                  const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key,
-                                                  std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
-                                                  std::uint32_t* r2, std::uint32_t* r3) {
-    constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
-    __m256i k0[10], k1[10];
-    for (int round = 0; round < 10; ++round) {
-        k0[round] = _mm256_set1_epi64x(static_cast<std::uint32_t>(key[0] + static_cast<std::uint32_t>(round) * W0));
-        k1[round] = _mm256_set1_epi64x(static_cast<std::uint32_t>(key[1] + static_cast<std::uint32_t>(round) * W1));
+
+    using Words = __m256i;
+    using Half = __m128i;
+    static constexpr std::size_t words = 8;
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words load_words(const std::uint32_t* p) {
+        return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
     }
-    const __m256i x3_0 = _mm256_set1_epi64x(c3);
-    std::size_t i = 0;
-    for (; i + 16 <= n; i += 16) philox_vectors_avx2<4>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
-    for (; i + 4 <= n; i += 4) philox_vectors_avx2<1>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
-    philox_batch_tail(i, c0, c1, c2, c3, key, n, r0, r1, r2, r3);
-}
-// GCC 12's AVX-512 intrinsics leave an undefined vector that -Wmaybe-uninitialized reports
-// (GCC bug 105593, fixed in 13): silenced for the AVX-512 functions below only.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
-#define EVSTWIN_LOAD8(P) _mm512_cvtepu32_epi64(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(P)))
-#define EVSTWIN_STORE8(P, V) _mm256_storeu_si256(reinterpret_cast<__m256i*>(P), _mm512_cvtepi64_epi32(V))
-/// philox_batch_avx512's rounds for the U vectors of counters from index i. Each product's high
-/// half reaches the low 32 bits by swapping the halves of its lane (vpshufd, a shuffle port)
-/// rather than by a shift, which shares its port with the multiplications; the upper halves then
-/// hold the low halves, ignored as above. (At AVX2, with four vectors, the swap lost.)
-template <int U>
-EVSTWIN_TARGET_AVX512 EVSTWIN_ALWAYS_INLINE void philox_vectors_avx512(const std::uint32_t* c0, const std::uint32_t* c1,
-                                                                     const std::uint32_t* c2, std::size_t i,
-                                                                     const __m512i* k0, const __m512i* k1,
-                                                                     const __m512i& x3_0, std::uint32_t* r0,
-                                                                     std::uint32_t* r1, std::uint32_t* r2,
-                                                                     std::uint32_t* r3) {
-    const __m512i m0 = _mm512_set1_epi64(0xD2511F53u), m1 = _mm512_set1_epi64(0xCD9E8D57u);
-    __m512i x0[U], x1[U], x2[U], x3[U];
-#if defined(__GNUC__)
-#pragma GCC unroll 2
-#endif
-    for (int u = 0; u < U; ++u) {
-        x0[u] = EVSTWIN_LOAD8(c0 + i + 8 * u);
-        x1[u] = EVSTWIN_LOAD8(c1 + i + 8 * u);
-        x2[u] = EVSTWIN_LOAD8(c2 + i + 8 * u);
-        x3[u] = x3_0;
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words set1_words(int v) { return _mm256_set1_epi32(v); }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words and_words(Words a, Words b) { return _mm256_and_si256(a, b); }
+    template <int S>
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words shift_right(Words a) { return _mm256_srli_epi32(a, S); }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Words gather_words(const int* t, Words i) {
+        return _mm256_i32gather_epi32(t, i, 4);
     }
-#if defined(__GNUC__)
-#pragma GCC unroll 10
-#endif
-    for (int round = 0; round < 10; ++round) {
-#if defined(__GNUC__)
-#pragma GCC unroll 2
-#endif
-        for (int u = 0; u < U; ++u) {
-            const __m512i p0 = _mm512_mul_epu32(x0[u], m0), p1 = _mm512_mul_epu32(x2[u], m1);
-            x0[u] = _mm512_ternarylogic_epi64(_mm512_shuffle_epi32(p1, _MM_PERM_CDAB), x1[u], k0[round], 0x96);  // a ^ b ^ c
-            x1[u] = p1;
-            x2[u] = _mm512_ternarylogic_epi64(_mm512_shuffle_epi32(p0, _MM_PERM_CDAB), x3[u], k1[round], 0x96);
-            x3[u] = p0;
-        }
-    }
-#if defined(__GNUC__)
-#pragma GCC unroll 2
-#endif
-    for (int u = 0; u < U; ++u) {
-        EVSTWIN_STORE8(r0 + i + 8 * u, x0[u]);
-        EVSTWIN_STORE8(r1 + i + 8 * u, x1[u]);
-        EVSTWIN_STORE8(r2 + i + 8 * u, x2[u]);
-        EVSTWIN_STORE8(r3 + i + 8 * u, x3[u]);
-    }
-}
-#undef EVSTWIN_LOAD8
-#undef EVSTWIN_STORE8
-EVSTWIN_TARGET_AVX512 inline void philox_batch_avx512(const std::uint32_t* c0, const std::uint32_t* c1,
-                                                      const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key,
-                                                      std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
-                                                      std::uint32_t* r2, std::uint32_t* r3) {
-    constexpr std::uint32_t W0 = 0x9E3779B9u, W1 = 0xBB67AE85u;
-    __m512i k0[10], k1[10];
-    for (int round = 0; round < 10; ++round) {
-        k0[round] = _mm512_set1_epi64(static_cast<std::uint32_t>(key[0] + static_cast<std::uint32_t>(round) * W0));
-        k1[round] = _mm512_set1_epi64(static_cast<std::uint32_t>(key[1] + static_cast<std::uint32_t>(round) * W1));
-    }
-    const __m512i x3_0 = _mm512_set1_epi64(c3);
-    std::size_t i = 0;
-    for (; i + 16 <= n; i += 16) philox_vectors_avx512<2>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
-    for (; i + 8 <= n; i += 8) philox_vectors_avx512<1>(c0, c1, c2, i, k0, k1, x3_0, r0, r1, r2, r3);
-    philox_batch_tail(i, c0, c1, c2, c3, key, n, r0, r1, r2, r3);
-}
-// The ziggurat's batches are written with gathers: from the plain loop GCC 12 looked the
-// tables up lane by lane (an extract and an insert a lane), most of the batch's time (found by
-// bench/precision_study.cpp; bench/draw_floor.cpp at AVX-512, before and after: 3.2-3.3 ->
-// 2.2-2.3 ns a pixel-update, at the change; git history). The same operations as
-// ziggurat_batch_body: the 24-bit magnitude converted exactly, one multiplication by the
-// layer's width, the sign set by an XOR of the sign bit (x * (1 - 2 s)
-// only flips it, zeros included), the slow flag from j >= k (both below 2^31, so a signed
-// comparison is the unsigned one). So the same normals and flags, bit for bit. (Processors
-// whose microcode slows gathers, the Gather Data Sampling mitigation, may gain less or lose;
-// not measured here. The bits are the same either way.)
-EVSTWIN_TARGET_AVX2 inline void ziggurat_batch_avx2(const std::uint32_t* w, std::size_t n, double* g,
-                                                    std::uint8_t* slow) {
-    const double* tw = ZIGGURAT.w;
-    const int* tk = reinterpret_cast<const int*>(ZIGGURAT.k);
-    const __m256i m127 = _mm256_set1_epi32(127), one = _mm256_set1_epi32(1);
-    std::size_t i = 0;
-    for (; i + 8 <= n; i += 8) {
-        const __m256i wi = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(w + i));
-        const __m256i layer = _mm256_and_si256(wi, m127), j = _mm256_srli_epi32(wi, 8);
-        const __m256i sign = _mm256_and_si256(_mm256_srli_epi32(wi, 7), one);
-        // slow = 1 - (k > j), eight 32-bit lanes packed to bytes.
-        const __m256i slow32 = _mm256_add_epi32(_mm256_cmpgt_epi32(_mm256_i32gather_epi32(tk, layer, 4), j), one);
+    /// slow = j >= k as bytes: 1 - (k > j), eight 32-bit lanes packed to bytes.
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void store_slow(std::uint8_t* slow, Words j, Words k) {
+        const __m256i slow32 = _mm256_add_epi32(_mm256_cmpgt_epi32(k, j), _mm256_set1_epi32(1));
         const __m128i slow16 = _mm_packus_epi32(_mm256_castsi256_si128(slow32), _mm256_extracti128_si256(slow32, 1));
-        _mm_storel_epi64(reinterpret_cast<__m128i*>(slow + i), _mm_packus_epi16(slow16, slow16));
-        for (int h = 0; h < 2; ++h) {
-            const __m128i lh = h ? _mm256_extracti128_si256(layer, 1) : _mm256_castsi256_si128(layer);
-            const __m128i jh = h ? _mm256_extracti128_si256(j, 1) : _mm256_castsi256_si128(j);
-            const __m128i sh = h ? _mm256_extracti128_si256(sign, 1) : _mm256_castsi256_si128(sign);
-            const __m256d x = _mm256_mul_pd(_mm256_cvtepi32_pd(jh), _mm256_i32gather_pd(tw, lh, 8));
-            const __m256i bits = _mm256_slli_epi64(_mm256_cvtepu32_epi64(sh), 63);
-            _mm256_storeu_pd(g + i + 4 * h, _mm256_castsi256_pd(_mm256_xor_si256(_mm256_castpd_si256(x), bits)));
-        }
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(slow), _mm_packus_epi16(slow16, slow16));
     }
-    ziggurat_batch_body(w + i, n - i, g + i, slow + i);
-}
-EVSTWIN_TARGET_AVX512 inline void ziggurat_batch_avx512(const std::uint32_t* w, std::size_t n, double* g,
-                                                        std::uint8_t* slow) {
-    const double* tw = ZIGGURAT.w;
-    const int* tk = reinterpret_cast<const int*>(ZIGGURAT.k);
-    const __m512i m127 = _mm512_set1_epi32(127), one = _mm512_set1_epi32(1);
-    std::size_t i = 0;
-    for (; i + 16 <= n; i += 16) {
-        const __m512i wi = _mm512_loadu_si512(w + i);
-        const __m512i layer = _mm512_and_si512(wi, m127), j = _mm512_srli_epi32(wi, 8);
-        const __m512i sign = _mm512_and_si512(_mm512_srli_epi32(wi, 7), one);
-        const __mmask16 s = _mm512_cmpge_epu32_mask(j, _mm512_i32gather_epi32(layer, tk, 4));
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(slow + i), _mm_maskz_mov_epi8(s, _mm_set1_epi8(1)));
-        for (int h = 0; h < 2; ++h) {
-            const __m256i lh = h ? _mm512_extracti64x4_epi64(layer, 1) : _mm512_castsi512_si256(layer);
-            const __m256i jh = h ? _mm512_extracti64x4_epi64(j, 1) : _mm512_castsi512_si256(j);
-            const __m256i sh = h ? _mm512_extracti64x4_epi64(sign, 1) : _mm512_castsi512_si256(sign);
-            const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(jh), _mm512_i32gather_pd(lh, tw, 8));
-            const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(sh), 63);
-            _mm512_storeu_pd(g + i + 8 * h, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
-        }
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE Half half(Words v, int h) {
+        return h ? _mm256_extracti128_si256(v, 1) : _mm256_castsi256_si128(v);
     }
-    ziggurat_batch_body(w + i, n - i, g + i, slow + i);
-}
+    /// g = j * tw[layer], its sign bit flipped where s = 1.
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void store_normals(double* g, Half j, Half layer, Half s,
+                                                                        const double* tw) {
+        const __m256d x = _mm256_mul_pd(_mm256_cvtepi32_pd(j), _mm256_i32gather_pd(tw, layer, 8));
+        const __m256i bits = _mm256_slli_epi64(_mm256_cvtepu32_epi64(s), 63);
+        _mm256_storeu_pd(g, _mm256_castsi256_pd(_mm256_xor_si256(_mm256_castpd_si256(x), bits)));
+    }
+};
+/// The same for AVX-512: eight counters a vector, two vectors side by side; sixteen words a
+/// vector. high_xor swaps the halves of each lane (vpshufd, a shuffle port) rather than
+/// shifting, which shares its port with the multiplications; the upper halves then hold the low
+/// halves, ignored as above. (At AVX2, with four vectors, the swap lost.) The three-way XOR is
+/// one vpternlogq; the slow flags a mask. With list_flagged's, every AVX-512 intrinsic of the
+/// engine is here.
+struct LanesAvx512 {
+    using V = __m512i;
+    static constexpr std::size_t width = 8, unroll = 2;
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE V set1(std::uint32_t v) { return _mm512_set1_epi64(v); }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE V load(const std::uint32_t* p) {
+        return _mm512_cvtepu32_epi64(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void store(std::uint32_t* p, V v) {
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(p), _mm512_cvtepi64_epi32(v));
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE V mul(V a, V b) { return _mm512_mul_epu32(a, b); }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE V high_xor(V p, V x, V k) {
+        return _mm512_ternarylogic_epi64(_mm512_shuffle_epi32(p, _MM_PERM_CDAB), x, k, 0x96);  // a ^ b ^ c
+    }
+
+    using Words = __m512i;
+    using Half = __m256i;
+    static constexpr std::size_t words = 16;
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words load_words(const std::uint32_t* p) {
+        return _mm512_loadu_si512(p);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words set1_words(int v) { return _mm512_set1_epi32(v); }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words and_words(Words a, Words b) {
+        return _mm512_and_si512(a, b);
+    }
+    template <int S>
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words shift_right(Words a) { return _mm512_srli_epi32(a, S); }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Words gather_words(const int* t, Words i) {
+        return _mm512_i32gather_epi32(i, t, 4);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void store_slow(std::uint8_t* slow, Words j, Words k) {
+        const __mmask16 s = _mm512_cmpge_epu32_mask(j, k);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(slow), _mm_maskz_mov_epi8(s, _mm_set1_epi8(1)));
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE Half half(Words v, int h) {
+        return h ? _mm512_extracti64x4_epi64(v, 1) : _mm512_castsi512_si256(v);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void store_normals(double* g, Half j, Half layer, Half s,
+                                                                          const double* tw) {
+        const __m512d x = _mm512_mul_pd(_mm512_cvtepi32_pd(j), _mm512_i32gather_pd(layer, tw, 8));
+        const __m512i bits = _mm512_slli_epi64(_mm512_cvtepu32_epi64(s), 63);
+        _mm512_storeu_pd(g, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
+    }
+
+    // list_flagged's (simd/block_passes.hpp, ListFlagged).
+    /// Which of the 16 flags from f are nonzero, as the bits of a mask (two vptestmq).
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::uint64_t nonzero(const std::uint64_t* f) {
+        const __m512i a = _mm512_loadu_si512(f), b = _mm512_loadu_si512(f + 8);
+        return static_cast<unsigned>(_mm512_test_epi64_mask(a, a)) |
+               (static_cast<unsigned>(_mm512_test_epi64_mask(b, b)) << 8);
+    }
+    /// The same for the 64 flags from f (one vptestmb).
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::uint64_t nonzero(const std::uint8_t* f) {
+        const __m512i a = _mm512_loadu_si512(f);
+        return _mm512_test_epi8_mask(a, a);
+    }
+    /// The indices base + b of the set bits b of the 16-bit mask k, compressed into out in order
+    /// (their count returned): vpcompressd and a store under a mask of the count's length.
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE unsigned list_sixteen(unsigned k, std::size_t base,
+                                                                             std::uint32_t* out) {
+        const __m512i idx = _mm512_add_epi32(_mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+                                             _mm512_set1_epi32(static_cast<int>(base)));
+        const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
+        _mm512_mask_storeu_epi32(out, static_cast<__mmask16>((1u << count) - 1u),
+                                 _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
+        return count;
+    }
+};
+/// The batches over the vectors of Lanes (philox, ziggurat), defined in simd/lane_batches.hpp
+/// once for each lane class.
+template <class Lanes>
+struct LaneBatches;
+#define EVSTWIN_LANES LanesAvx2
+#define EVSTWIN_LANES_TARGET EVSTWIN_TARGET_AVX2
+#include "simd/lane_batches.hpp"
+#undef EVSTWIN_LANES
+#undef EVSTWIN_LANES_TARGET
+#define EVSTWIN_LANES LanesAvx512
+#define EVSTWIN_LANES_TARGET EVSTWIN_TARGET_AVX512
+#include "simd/lane_batches.hpp"
+#undef EVSTWIN_LANES
+#undef EVSTWIN_LANES_TARGET
+#endif
+
+/// Philox4x32-10 of a list of counters (philox4x32_batch): the plain loop at the baseline,
+/// LaneBatches' at AVX2 and AVX-512.
+struct PhiloxBatch {
+    template <class Level>
+    static EVSTWIN_ALWAYS_INLINE void run(Level, const std::uint32_t* c0, const std::uint32_t* c1,
+                                          const std::uint32_t* c2, std::uint32_t c3, Philox4x32Key key, std::size_t n,
+                                          std::uint32_t* r0, std::uint32_t* r1, std::uint32_t* r2, std::uint32_t* r3) {
+        philox_batch_body(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+    }
+#if EVSTWIN_MULTIVERSION
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void run(SimdAvx2, const std::uint32_t* c0, const std::uint32_t* c1,
+                                                              const std::uint32_t* c2, std::uint32_t c3,
+                                                              Philox4x32Key key, std::size_t n, std::uint32_t* r0,
+                                                              std::uint32_t* r1, std::uint32_t* r2, std::uint32_t* r3) {
+        LaneBatches<LanesAvx2>::philox(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void run(SimdAvx512, const std::uint32_t* c0,
+                                                                const std::uint32_t* c1, const std::uint32_t* c2,
+                                                                std::uint32_t c3, Philox4x32Key key, std::size_t n,
+                                                                std::uint32_t* r0, std::uint32_t* r1, std::uint32_t* r2,
+                                                                std::uint32_t* r3) {
+        LaneBatches<LanesAvx512>::philox(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
+    }
+#endif
+};
+
+/// normal_ziggurat's common path for a list of words (ziggurat_batch): the plain loop at the
+/// baseline, LaneBatches' (gathers) at AVX2 and AVX-512.
+struct ZigguratBatch {
+    template <class Level>
+    static EVSTWIN_ALWAYS_INLINE void run(Level, const std::uint32_t* w, std::size_t n, double* g, std::uint8_t* slow) {
+        ziggurat_batch_body(w, n, g, slow);
+    }
+#if EVSTWIN_MULTIVERSION
+    EVSTWIN_TARGET_AVX2 static EVSTWIN_ALWAYS_INLINE void run(SimdAvx2, const std::uint32_t* w, std::size_t n, double* g,
+                                                              std::uint8_t* slow) {
+        LaneBatches<LanesAvx2>::ziggurat(w, n, g, slow);
+    }
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE void run(SimdAvx512, const std::uint32_t* w, std::size_t n,
+                                                                double* g, std::uint8_t* slow) {
+        LaneBatches<LanesAvx512>::ziggurat(w, n, g, slow);
+    }
+#endif
+};
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
-#endif
 #endif
 }  // namespace detail
 
@@ -394,12 +432,12 @@ EVSTWIN_TARGET_AVX512 inline void ziggurat_batch_avx512(const std::uint32_t* w, 
 inline void philox4x32_batch(const std::uint32_t* c0, const std::uint32_t* c1, const std::uint32_t* c2,
                              std::uint32_t c3, Philox4x32Key key, std::size_t n, std::uint32_t* r0, std::uint32_t* r1,
                              std::uint32_t* r2, std::uint32_t* r3) {
-    EVSTWIN_AT_LEVEL(detail::philox_batch, c0, c1, c2, c3, key, n, r0, r1, r2, r3)
+    at_simd_level<detail::PhiloxBatch>(c0, c1, c2, c3, key, n, r0, r1, r2, r3);
 }
 
 /// normal_ziggurat's common path for n words, at the current level (see ziggurat_batch_body).
 inline void ziggurat_batch(const std::uint32_t* w, std::size_t n, double* g, std::uint8_t* slow) {
-    EVSTWIN_AT_LEVEL(detail::ziggurat_batch, w, n, g, slow)
+    at_simd_level<detail::ZigguratBatch>(w, n, g, slow);
 }
 
 }  // namespace evstwin

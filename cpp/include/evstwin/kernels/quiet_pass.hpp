@@ -131,40 +131,24 @@ EVSTWIN_ALWAYS_INLINE void quiet_pass_body(const QuietPass& q, const Real* __res
     }
 }
 
-#define EVSTWIN_QUIET_PASS_LEVEL(NAME, TARGET)                                                        \
-    template <QuietChain Chain, bool Noise, bool Background, class Real>                              \
-    TARGET inline void NAME(const QuietPass& q, const Real* rate) {                                   \
-        quiet_pass_body<Chain, Noise, Background>(q, rate);                                           \
+/// quiet_pass_body() as a kernel of at_simd_level (simd.hpp): one body at every level.
+template <QuietChain Chain, bool Noise, bool Background>
+struct QuietPassKernel {
+    template <class Level, class Real>
+    static EVSTWIN_ALWAYS_INLINE void run(Level, const QuietPass& q, const Real* rate) {
+        quiet_pass_body<Chain, Noise, Background>(q, rate);
     }
-EVSTWIN_QUIET_PASS_LEVEL(quiet_pass_baseline, )
-#if EVSTWIN_MULTIVERSION
-EVSTWIN_QUIET_PASS_LEVEL(quiet_pass_avx2, EVSTWIN_TARGET_AVX2)
-EVSTWIN_QUIET_PASS_LEVEL(quiet_pass_avx512, EVSTWIN_TARGET_AVX512)
-#endif
-#undef EVSTWIN_QUIET_PASS_LEVEL
-
-/// quiet_pass_body() at the current SIMD level (simd.hpp).
-template <QuietChain Chain, bool Noise, bool Background, class Real>
-inline void quiet_pass_at_level(const QuietPass& q, const Real* rate) {
-#if EVSTWIN_MULTIVERSION
-    switch (simd_level()) {
-        case SimdLevel::AVX512: return quiet_pass_avx512<Chain, Noise, Background>(q, rate);
-        case SimdLevel::AVX2: return quiet_pass_avx2<Chain, Noise, Background>(q, rate);
-        default: break;
-    }
-#endif
-    quiet_pass_baseline<Chain, Noise, Background>(q, rate);
-}
+};
 
 /// quiet_pass_body() for the run-time noise and background switches.
 template <QuietChain Chain, class Real>
 inline void quiet_pass(const QuietPass& q, const Real* rate, bool noise, bool background) {
     if (noise) {
-        if (background) return quiet_pass_at_level<Chain, true, true>(q, rate);
-        return quiet_pass_at_level<Chain, true, false>(q, rate);
+        if (background) return at_simd_level<QuietPassKernel<Chain, true, true>>(q, rate);
+        return at_simd_level<QuietPassKernel<Chain, true, false>>(q, rate);
     }
-    if (background) return quiet_pass_at_level<Chain, false, true>(q, rate);
-    quiet_pass_at_level<Chain, false, false>(q, rate);
+    if (background) return at_simd_level<QuietPassKernel<Chain, false, true>>(q, rate);
+    at_simd_level<QuietPassKernel<Chain, false, false>>(q, rate);
 }
 
 }  // namespace detail

@@ -1,5 +1,5 @@
 // The block kernels' small vectorised passes, compiled per SIMD level and chosen at run time
-// (EVSTWIN_AT_LEVEL, simd.hpp): listing flagged pixels, the bridge's bracketed
+// (at_simd_level, simd.hpp): listing flagged pixels, the bridge's bracketed
 // probabilities and decisions, and the bookkeeping of a block's random words.
 #pragma once
 
@@ -61,23 +61,27 @@ EVSTWIN_ALWAYS_INLINE std::size_t list_flagged_body(const Flag* __restrict flag,
 /// The bridge stage's bracket of each candidate's crossing probability: q[i] =
 /// exp_neg_bracket(e_on[i]) + exp_neg_bracket(e_off[i]), a term 0 where its exponent is above
 /// 40 (as bridge_crossing_probability cuts), and -1 where an exponent is negative or NaN (the
-/// caller then takes the exact probability). Without branches, so it vectorises.
-EVSTWIN_ALWAYS_INLINE void bridge_bracket_body(const double* __restrict e_on, const double* __restrict e_off,
-                                               std::size_t m, double* __restrict q) {
-    for (std::size_t i = 0; i < m; ++i) {
-        const double eo = e_on[i], ef = e_off[i];
-        const bool in_range = (eo >= 0.0) & (ef >= 0.0);
-        // Clamped so the bracket's arithmetic stays finite; the lanes clamped are cut below.
-        const double bo = exp_neg_bracket(eo < 40.0 ? eo : 40.0);
-        const double bf = exp_neg_bracket(ef < 40.0 ? ef : 40.0);
-        const double sum = (eo > 40.0 ? 0.0 : bo) + (ef > 40.0 ? 0.0 : bf);
-        q[i] = in_range ? sum : -1.0;
+/// caller then takes the exact probability). Without branches, so it vectorises: one body at
+/// every level (at_simd_level, simd.hpp).
+struct BridgeBracket {
+    template <class Level>
+    static EVSTWIN_ALWAYS_INLINE void run(Level, const double* __restrict e_on, const double* __restrict e_off,
+                                          std::size_t m, double* __restrict q) {
+        for (std::size_t i = 0; i < m; ++i) {
+            const double eo = e_on[i], ef = e_off[i];
+            const bool in_range = (eo >= 0.0) & (ef >= 0.0);
+            // Clamped so the bracket's arithmetic stays finite; the lanes clamped are cut below.
+            const double bo = exp_neg_bracket(eo < 40.0 ? eo : 40.0);
+            const double bf = exp_neg_bracket(ef < 40.0 ? ef : 40.0);
+            const double sum = (eo > 40.0 ? 0.0 : bo) + (ef > 40.0 ? 0.0 : bf);
+            q[i] = in_range ? sum : -1.0;
+        }
     }
-}
+};
 
 /// The bridge stage's decision for a uniform u: whether u < p_on + p_off, p = exp(-e) of the
 /// exponents (0 above 40, as bridge_crossing_probability), given q, their sum's bracket from
-/// bridge_bracket_body (-1: exponents the bracket does not cover). Decided on q where u lies
+/// BridgeBracket (-1: exponents the bracket does not cover). Decided on q where u lies
 /// farther than a relative 1e-6 from it (q is within 1e-8 of the sum), else on the library's
 /// exps: the same answer as the exps for every u.
 inline bool bracket_fires(double u, double q, double e_on, double e_off) {
@@ -89,72 +93,40 @@ inline bool bracket_fires(double u, double q, double e_on, double e_off) {
     return u < q;
 }
 
-#define EVSTWIN_LIST_FLAGGED_LEVEL(SUFFIX, TARGET)                                                              \
-    TARGET inline std::size_t list_flagged_##SUFFIX(const std::uint64_t* flag, std::size_t n, std::uint32_t* list) { \
-        return list_flagged_body(flag, n, list);                                                                \
-    }                                                                                                           \
-    TARGET inline std::size_t list_flagged_##SUFFIX(const std::uint8_t* flag, std::size_t n, std::uint32_t* list) {  \
-        return list_flagged_body(flag, n, list);                                                                \
-    }                                                                                                           \
-    TARGET inline void bridge_bracket_##SUFFIX(const double* e_on, const double* e_off, std::size_t m, double* q) {   \
-        bridge_bracket_body(e_on, e_off, m, q);                                                                 \
+/// list_flagged()'s kernel: list_flagged_body at the baseline and AVX2, at AVX-512 16 flags at
+/// a time become a 16-bit mask (vptestm), their indices are compressed to the front of a
+/// vector (vpcompressd) and stored under a mask of the count's length, so no branch depends on
+/// the flags (list_flagged_body's loop over a word's bits ends at a branch mispredicted about
+/// once a word: perf had the two listings at ~9 % of continuous 260). The last n % 16 (n % 64
+/// for bytes) flags as in the plain list. Same list. (The intrinsics: LanesAvx512, simd.hpp.)
+struct ListFlagged {
+    template <class Level, class Flag>
+    static EVSTWIN_ALWAYS_INLINE std::size_t run(Level, const Flag* flag, std::size_t n, std::uint32_t* list) {
+        return list_flagged_body(flag, n, list);
     }
-EVSTWIN_LIST_FLAGGED_LEVEL(baseline, )
 #if EVSTWIN_MULTIVERSION
-EVSTWIN_LIST_FLAGGED_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
-#endif
-#undef EVSTWIN_LIST_FLAGGED_LEVEL
-
-#if EVSTWIN_MULTIVERSION
-// AVX-512: 16 flags at a time become a 16-bit mask (vptestm), their indices are compressed to
-// the front of a vector (vpcompressd) and stored under a mask of the count's length, so no
-// branch depends on the flags (list_flagged_body's loop over a word's bits ends at a branch
-// mispredicted about once a word: perf had the two listings at ~9 % of continuous 260).
-// The last n % 16 (n % 64 for bytes) flags as in the plain list. Same list.
-/// The indices base + b of the set bits b of the 16-bit mask k, compressed into out in order
-/// (their count returned): vpcompressd and a store under a mask of the count's length.
-EVSTWIN_TARGET_AVX512 inline unsigned list_sixteen(unsigned k, std::size_t base, std::uint32_t* out) {
-    const __m512i idx = _mm512_add_epi32(_mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
-                                         _mm512_set1_epi32(static_cast<int>(base)));
-    const unsigned count = static_cast<unsigned>(__builtin_popcount(k));
-    _mm512_mask_storeu_epi32(out, static_cast<__mmask16>((1u << count) - 1u),
-                             _mm512_maskz_compress_epi32(static_cast<__mmask16>(k), idx));
-    return count;
-}
-EVSTWIN_TARGET_AVX512 inline std::size_t list_flagged_avx512(const std::uint64_t* flag, std::size_t n, std::uint32_t* list) {
-    std::size_t m = 0, i = 0;
-    for (; i + 16 <= n; i += 16) {
-        const __m512i a = _mm512_loadu_si512(flag + i), b = _mm512_loadu_si512(flag + i + 8);
-        const unsigned k = static_cast<unsigned>(_mm512_test_epi64_mask(a, a)) |
-                           (static_cast<unsigned>(_mm512_test_epi64_mask(b, b)) << 8);
-        m += list_sixteen(k, i, list + m);
-    }
-    for (; i < n; ++i)
-        if (flag[i]) list[m++] = static_cast<std::uint32_t>(i);
-    return m;
-}
-EVSTWIN_TARGET_AVX512 inline std::size_t list_flagged_avx512(const std::uint8_t* flag, std::size_t n, std::uint32_t* list) {
-    std::size_t m = 0, i = 0;
-    for (; i + 64 <= n; i += 64) {
-        const __m512i a = _mm512_loadu_si512(flag + i);
-        const std::uint64_t k64 = _mm512_test_epi8_mask(a, a);
-        for (unsigned part = 0; part < 4; ++part) {
-            const unsigned k = static_cast<unsigned>(k64 >> (16u * part)) & 0xFFFFu;
-            m += list_sixteen(k, i + 16u * part, list + m);
+    template <class Flag>
+    EVSTWIN_TARGET_AVX512 static EVSTWIN_ALWAYS_INLINE std::size_t run(SimdAvx512, const Flag* flag, std::size_t n,
+                                                                       std::uint32_t* list) {
+        constexpr std::size_t chunk = sizeof(Flag) == 1 ? 64 : 16;  // LanesAvx512::nonzero's flags
+        std::size_t m = 0, i = 0;
+        for (; i + chunk <= n; i += chunk) {
+            const std::uint64_t k = LanesAvx512::nonzero(flag + i);
+            for (unsigned part = 0; part < chunk / 16; ++part) {
+                const unsigned k16 = static_cast<unsigned>(k >> (16u * part)) & 0xFFFFu;
+                m += LanesAvx512::list_sixteen(k16, i + 16u * part, list + m);
+            }
         }
+        for (; i < n; ++i)
+            if (flag[i]) list[m++] = static_cast<std::uint32_t>(i);
+        return m;
     }
-    for (; i < n; ++i)
-        if (flag[i]) list[m++] = static_cast<std::uint32_t>(i);
-    return m;
-}
-EVSTWIN_TARGET_AVX512 inline void bridge_bracket_avx512(const double* e_on, const double* e_off, std::size_t m, double* q) {
-    bridge_bracket_body(e_on, e_off, m, q);
-}
 #endif
+};
 
-/// bridge_bracket_body() at the current SIMD level (simd.hpp).
+/// BridgeBracket at the current SIMD level.
 inline void bridge_bracket(const double* e_on, const double* e_off, std::size_t m, double* q) {
-    EVSTWIN_AT_LEVEL(bridge_bracket, e_on, e_off, m, q)
+    at_simd_level<BridgeBracket>(e_on, e_off, m, q);
 }
 }  // namespace detail
 
@@ -166,64 +138,53 @@ namespace detail {
 /// even_counters: the counters of an even sample's Philox batch, and the OR of the samples
 /// (odd bit set: some pixel's sample is odd); keep_for_next: every pixel's words now belong
 /// to its sample | 1.
-EVSTWIN_ALWAYS_INLINE std::uint64_t sample_words_off_body(const std::uint64_t* __restrict kept_for,
-                                                         const std::uint64_t* __restrict sample, std::uint64_t step,
-                                                         std::size_t n) {
-    std::uint64_t off = 0;
-    for (std::size_t j = 0; j < n; ++j) {
-        const std::uint64_t now = sample[j] + step;
-        off |= (kept_for[j] ^ now) | (~now & 1u);
+struct SampleWordsOff {
+    template <class Level>
+    static EVSTWIN_ALWAYS_INLINE std::uint64_t run(Level, const std::uint64_t* __restrict kept_for,
+                                                   const std::uint64_t* __restrict sample, std::uint64_t step,
+                                                   std::size_t n) {
+        std::uint64_t off = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            const std::uint64_t now = sample[j] + step;
+            off |= (kept_for[j] ^ now) | (~now & 1u);
+        }
+        return off;
     }
-    return off;
-}
-EVSTWIN_ALWAYS_INLINE std::uint64_t even_counters_body(const std::uint64_t* __restrict sample, std::uint64_t step,
-                                                      const std::uint32_t* __restrict ids, std::size_t n,
-                                                      std::uint32_t* __restrict c0, std::uint32_t* __restrict c1,
-                                                      std::uint32_t* __restrict c2) {
-    std::uint64_t any = 0;
-    for (std::size_t j = 0; j < n; ++j) {
-        const std::uint64_t now = sample[j] + step, pair = now >> 1;
-        c0[j] = static_cast<std::uint32_t>(pair);
-        c1[j] = static_cast<std::uint32_t>(pair >> 32);
-        c2[j] = ids[j];
-        any |= now;
+};
+struct EvenCounters {
+    template <class Level>
+    static EVSTWIN_ALWAYS_INLINE std::uint64_t run(Level, const std::uint64_t* __restrict sample, std::uint64_t step,
+                                                   const std::uint32_t* __restrict ids, std::size_t n,
+                                                   std::uint32_t* __restrict c0, std::uint32_t* __restrict c1,
+                                                   std::uint32_t* __restrict c2) {
+        std::uint64_t any = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            const std::uint64_t now = sample[j] + step, pair = now >> 1;
+            c0[j] = static_cast<std::uint32_t>(pair);
+            c1[j] = static_cast<std::uint32_t>(pair >> 32);
+            c2[j] = ids[j];
+            any |= now;
+        }
+        return any;
     }
-    return any;
-}
-EVSTWIN_ALWAYS_INLINE void keep_for_next_body(const std::uint64_t* __restrict sample, std::uint64_t step, std::size_t n,
-                                              std::uint64_t* __restrict kept_for) {
-    for (std::size_t j = 0; j < n; ++j) kept_for[j] = (sample[j] + step) | 1u;
-}
-#define EVSTWIN_WORD_BOOKS_LEVEL(SUFFIX, TARGET)                                                               \
-    TARGET inline std::uint64_t sample_words_off_##SUFFIX(const std::uint64_t* k, const std::uint64_t* s,      \
-                                                          std::uint64_t step, std::size_t n) {                 \
-        return sample_words_off_body(k, s, step, n);                                                           \
-    }                                                                                                          \
-    TARGET inline std::uint64_t even_counters_##SUFFIX(const std::uint64_t* s, std::uint64_t step,             \
-                                                       const std::uint32_t* ids, std::size_t n,                \
-                                                       std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) { \
-        return even_counters_body(s, step, ids, n, c0, c1, c2);                                                \
-    }                                                                                                          \
-    TARGET inline void keep_for_next_##SUFFIX(const std::uint64_t* s, std::uint64_t step, std::size_t n,       \
-                                              std::uint64_t* k) {                                              \
-        keep_for_next_body(s, step, n, k);                                                                     \
+};
+struct KeepForNext {
+    template <class Level>
+    static EVSTWIN_ALWAYS_INLINE void run(Level, const std::uint64_t* __restrict sample, std::uint64_t step,
+                                          std::size_t n, std::uint64_t* __restrict kept_for) {
+        for (std::size_t j = 0; j < n; ++j) kept_for[j] = (sample[j] + step) | 1u;
     }
-EVSTWIN_WORD_BOOKS_LEVEL(baseline, )
-#if EVSTWIN_MULTIVERSION
-EVSTWIN_WORD_BOOKS_LEVEL(avx2, EVSTWIN_TARGET_AVX2)
-EVSTWIN_WORD_BOOKS_LEVEL(avx512, EVSTWIN_TARGET_AVX512)
-#endif
-#undef EVSTWIN_WORD_BOOKS_LEVEL
+};
 inline std::uint64_t sample_words_off(const std::uint64_t* kept_for, const std::uint64_t* sample, std::uint64_t step,
                                       std::size_t n) {
-    EVSTWIN_AT_LEVEL(sample_words_off, kept_for, sample, step, n)
+    return at_simd_level<SampleWordsOff>(kept_for, sample, step, n);
 }
 inline std::uint64_t even_counters(const std::uint64_t* sample, std::uint64_t step, const std::uint32_t* ids,
                                    std::size_t n, std::uint32_t* c0, std::uint32_t* c1, std::uint32_t* c2) {
-    EVSTWIN_AT_LEVEL(even_counters, sample, step, ids, n, c0, c1, c2)
+    return at_simd_level<EvenCounters>(sample, step, ids, n, c0, c1, c2);
 }
 inline void keep_for_next(const std::uint64_t* sample, std::uint64_t step, std::size_t n, std::uint64_t* kept_for) {
-    EVSTWIN_AT_LEVEL(keep_for_next, sample, step, n, kept_for)
+    at_simd_level<KeepForNext>(sample, step, n, kept_for);
 }
 }  // namespace detail
 
@@ -233,7 +194,7 @@ inline void keep_for_next(const std::uint64_t* sample, std::uint64_t step, std::
 /// std::uint8_t (the ziggurat batch's slow flags).
 template <class Flag>
 inline std::size_t list_flagged(const Flag* flag, std::size_t n, std::uint32_t* list) {
-    EVSTWIN_AT_LEVEL(detail::list_flagged, flag, n, list)
+    return at_simd_level<detail::ListFlagged>(flag, n, list);
 }
 
 }  // namespace evstwin
