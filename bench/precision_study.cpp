@@ -463,7 +463,11 @@ EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_batch_avx512(const
     ziggurat_batch_body(w, n, g, slow);
 }
 void ziggurat_batch(const std::uint32_t* w, std::size_t n, float* g, std::uint8_t* slow) {
-    EVSTWIN_AT_LEVEL(ziggurat_batch, w, n, g, slow)
+    switch (evstwin::simd_level()) {
+        case SimdLevel::AVX512: return ziggurat_batch_avx512(w, n, g, slow);
+        case SimdLevel::AVX2: return ziggurat_batch_avx2(w, n, g, slow);
+        default: return ziggurat_batch_baseline(w, n, g, slow);
+    }
 }
 
 // GCC 12 does not use gather instructions for the loops above (its generic tuning turns them
@@ -572,7 +576,7 @@ EVSTWIN_TARGET_AVX512 __attribute__((noinline)) void ziggurat_permute_d(const st
             _mm512_storeu_pd(g + i + 8 * h, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(x), bits)));
         }
     }
-    evstwin::detail::ziggurat_batch_avx512(w + i, n - i, g + i, slow + i);
+    evstwin::detail::ZigguratBatch::run(evstwin::SimdAvx512{}, w + i, n - i, g + i, slow + i);
 }
 #undef STUDY_LOOKUP128_32
 #undef STUDY_STORE_FLAGS16
