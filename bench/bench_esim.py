@@ -6,25 +6,28 @@ circling on a static dim background (bench_engine.render_chunk, the engine bench
 as photon rates [photons/s].
 
 - ESIM (uzh-rpg/rpg_vid2e, esim_py): ``EventSimulator::imageCallback`` fed the natural log of
-  those frames, frame by frame from memory (no disk I/O), 1 thread, refractory period 0: ESIM's
-  ideal pixel (it has no noise model). Its Python binding only reads images or videos from
-  disk, so this script compiles bench/esim_harness.cpp together with ESIM's own
+  those frames (relative to the background, float32), frame by frame from memory (no disk
+  I/O), 1 thread, refractory period 0: ESIM's ideal pixel (it has no noise model). Its
+  Python binding only reads images or videos from disk, so this script compiles bench/esim_harness.cpp together with ESIM's own
   esim_py/src/esim.cpp (-O3 -DNDEBUG, as ESIM's setup.py builds it) and pipes the log frames
   into it; no ESIM code is in this repository.
 - evstwin, on the photon-rate frames through ``Sensor.run`` (one call of 500 samples), 1 and 2
   threads: its ideal pixel (the DAVIS346 preset's thresholds, every noise source, the filter,
   the refractory period and the mismatch off: bench_engine.ideal_pixel_params' "no filter",
   ESIM's model) and its full physics (the DAVIS346 preset's pixel as it is: photon and dark
-  shot noise, leak, 10 Hz follower, 1 ms refractory, threshold mismatch).
+  current shot noise through the continuous noise model, the leak with its spread across
+  pixels, the 10 Hz source follower, 1 ms refractory period; the preset has no threshold
+  mismatch and no hot pixels).
 - The thresholds are the same: ESIM's Cp / Cn = the preset's theta_on / theta_off
-  (0.2061 / 0.093 ln units).
+  (0.2060 / 0.0930 ln units).
 
 Each is timed over its simulator calls only (frames are rendered, and for ESIM piped, before
 the clock starts), best of --repeats runs, each run from a fresh simulator. evstwin's time
 includes taking the log of the photon rates; ESIM is given the logs. Prints seconds per run,
 the events (ON / OFF), each one's speed against ESIM's (ESIM's best wall time / its best),
 its CPU time (the process's, all threads: steadier than wall time on a shared machine) against
-ESIM's, and whether the issue's goal (full physics on 2 threads at least 2x ESIM's ideal core) is met.
+ESIM's, and whether the issue's goal (full physics on 2 threads at least 2x ESIM's ideal
+core) is met.
 
 Getting and building ESIM (Debian/Ubuntu; the figures in docs/explanation/performance.md are
 from commit ecbb11a):
@@ -230,14 +233,16 @@ def main() -> int:
 
     t_s = np.arange(N_FRAMES) / FRAME_RATE_HZ
     frames = render_chunk(t_s, WIDTH, HEIGHT)  # (500, 260, 346) float32 photons/s
-    log_frames = np.log(frames)
+    # ESIM's levels are single precision: the log relative to the background (0 to 6.2, as
+    # small as ESIM's own log(image / 255 + eps)) keeps them finer than ln(photons/s) ~ 14.5.
+    log_frames = np.log(frames / frames.min())
     full = DAVIS346.pixel
     ideal = ideal_pixel_params(full)["no filter"]
 
     print(f"machine: {platform.processor() or platform.machine()}, {len(os.sched_getaffinity(0))} cores, "
           f"load average {os.getloadavg()[0]:.1f}; evstwin SIMD: {simd_level()}")
     print(f"input: {WIDTH}x{HEIGHT}, {N_FRAMES} frames at {FRAME_RATE_HZ:g} fps, 5 spots circling; "
-          f"Cp = theta_on = {full.theta_on:.4g}, Cn = theta_off = {full.theta_off:.4g}; best of {args.repeats}")
+          f"Cp = theta_on = {full.theta_on:.4f}, Cn = theta_off = {full.theta_off:.4f}; best of {args.repeats}")
     try:
         esim = time_esim(harness, log_frames, t_s, full.theta_on, full.theta_off, args.repeats)
     except EsimUnavailable as exc:
