@@ -67,7 +67,7 @@ from bench_engine import ideal_pixel_params, render_chunk  # noqa: E402
 
 from evstwin import PixelParams, Sensor  # noqa: E402
 from evstwin.presets import DAVIS346  # noqa: E402
-from evstwin.sensor import simd_level  # noqa: E402
+from evstwin.sensor import EVENT_DTYPE, simd_level  # noqa: E402
 
 WIDTH, HEIGHT = 346, 260
 N_FRAMES = 500
@@ -197,7 +197,9 @@ def time_esim(harness: Path, log_frames: np.ndarray, t_s: np.ndarray, c_pos: flo
 
 def time_evstwin(params: PixelParams, threads: int, frames: np.ndarray, t_s: np.ndarray, repeats: int) -> Timing:
     """evstwin's Sensor.run over the photon-rate frames, one call, from a fresh sensor each run."""
-    times, cpu, events = [], [], np.empty(0)
+    times: list[float] = []
+    cpu: list[float] = []
+    events = np.empty(0, dtype=EVENT_DTYPE)
     for _ in range(repeats):
         sensor = Sensor(frames.shape[2], frames.shape[1], params, seed=1, num_threads=threads)
         start, start_cpu = time.perf_counter(), time.process_time()
