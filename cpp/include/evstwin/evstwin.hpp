@@ -11,6 +11,7 @@
 #include "rng.hpp"
 #include "sensor.hpp"
 #include "simd.hpp"
+#include "sparse_step.hpp"
 #include "stamp.hpp"
 #include "state.hpp"
 #include "version.hpp"
