@@ -20,6 +20,12 @@ def add_force(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="overwrite existing outputs (default: refuse)")
 
 
+def add_sets(p: argparse.ArgumentParser, help_text: str) -> None:
+    """The repeatable ``--set KEY=VALUE`` scenario override (into ``args.sets``); ``help_text``
+    says what it overrides for this command."""
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE", help=help_text)
+
+
 def check_output_file(path: str | Path, force: bool, option: str = "--output") -> Path:
     """Refuse an output file that exists (unless ``force``) or whose folder is missing, before
     any work is done."""

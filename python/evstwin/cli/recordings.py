@@ -12,6 +12,7 @@ from typing import Any
 from ._common import (
     add_force,
     add_region,
+    add_sets,
     add_size,
     check_output_dir,
     check_output_file,
@@ -79,8 +80,7 @@ def register(sub: Any) -> None:
                    help="seeds per scenario SIM, a Monte Carlo run in parallel processes (default 1; paper: 20)")
     p.add_argument("--duration", type=float,
                    help="sensor time simulated per scenario SIM [s] (default: the real recording's span)")
-    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a value of every scenario SIM, e.g. pixel.theta_on=0.25 (repeatable)")
+    add_sets(p, "override a value of every scenario SIM, e.g. pixel.theta_on=0.25 (repeatable)")
     add_size(p)
     add_region(p)
     add_force(p)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ._common import add_force, check_output_file
+from ._common import add_force, add_sets, check_output_file
 
 
 def register(sub: Any) -> None:
@@ -17,8 +17,7 @@ def register(sub: Any) -> None:
     p.add_argument("--threads", type=int,
                    help="engine threads (default: the cores this process may use, less those other processes keep "
                         "busy as it starts; the events are the same for any count)")
-    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="override one scenario value, e.g. pixel.theta_on=0.25 (repeatable)")
+    add_sets(p, "override one scenario value, e.g. pixel.theta_on=0.25 (repeatable)")
     p.add_argument("--labels", action="store_true",
                    help="also write why each event fired (0 signal, 1 shot_noise, 2 leak, 3 background, "
                         "4 hot_pixel) as a label column: .h5, .npz, .txt, .csv only")

@@ -28,7 +28,16 @@ from ..tune import (
     sweep,
 )
 from ..tune.limits import Setup
-from ._common import add_force, add_region, add_size, check_output_dir, region_args, resumable, staged_folder
+from ._common import (
+    add_force,
+    add_region,
+    add_sets,
+    add_size,
+    check_output_dir,
+    region_args,
+    resumable,
+    staged_folder,
+)
 
 
 def register(subparsers: Any) -> None:
@@ -91,14 +100,7 @@ def register(subparsers: Any) -> None:
         "carry timing (delays after a source's passage, intervals between a pixel's events, ON/OFF "
         "alternation); counts: the per-pixel counts alone (default %(default)s)",
     )
-    p.add_argument(
-        "--set",
-        dest="sets",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario value before fitting (repeatable)",
-    )
+    add_sets(p, "override a scenario value before fitting (repeatable)")
     p.add_argument("--out", help="output folder (default: <REAL stem>_fit)")
     add_size(p)
     add_region(p)
@@ -121,8 +123,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--runs", type=int, default=1, help="seeds per point (default 1)")
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--duration", type=float, help="sensor time per run [s] (default: the scenario's)")
-    p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scenario value at every point, e.g. sensor.bias_set=paper_run_3 (repeatable)")
+    add_sets(p, "override a scenario value at every point, e.g. sensor.bias_set=paper_run_3 (repeatable)")
     p.add_argument("--out", default="sweep", help="output folder (default ./sweep)")
     p.add_argument(
         "--resume", action="store_true", help="keep the finished rows of OUT/sweep.csv, run the rest"
@@ -183,14 +184,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--runs", type=int, default=1, help="seeds per (rate, magnitude) (default 1)")
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--duration", type=float, help="sensor time per run [s] (default: the scenario's)")
-    p.add_argument(
-        "--set",
-        dest="sets",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="bias configuration etc., e.g. sensor.bias_set=paper_run_3 (repeatable)",
-    )
+    add_sets(p, "bias configuration etc., e.g. sensor.bias_set=paper_run_3 (repeatable)")
     p.add_argument("--out", default="limiting_magnitude", help="output folder (default ./limiting_magnitude)")
     p.add_argument("--resume", action="store_true",
                    help="keep the finished rows of OUT/sweep.csv and run only the rest")
@@ -261,6 +255,31 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     return 0
 
 
+def _prepare_sweep_dir(args: argparse.Namespace) -> None:
+    """Check --out for a new sweep (nothing to do with --resume); with --force drop its old
+    ``sweep.csv``, which would otherwise be taken for one to resume."""
+    if not args.resume:
+        check_output_dir(args.out, args.force)
+        if args.force:
+            (Path(args.out) / "sweep.csv").unlink(missing_ok=True)
+
+
+def _sweep_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments ``sweep`` and ``limiting_magnitude`` both take from the command
+    line: runs, output folder, resuming, execution, seed, overrides, duration, progress."""
+    return {
+        "runs": args.runs,
+        "out_dir": args.out,
+        "resume": args.resume,
+        "scheduler": args.scheduler,
+        "workers": args.workers,
+        "seed": args.seed,
+        "sets": args.sets,
+        "duration_s": args.duration,
+        "progress": not args.no_progress,
+    }
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     _check_workers(args)
     _check_at_least(args, runs=1, seed=0)
@@ -273,26 +292,15 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if args.objective != "match" and (roi is not None or pixels or mask_hot):
         raise ValueError(f"--roi and the --mask options are for --objective match; got --objective {args.objective}")
     grid = parse_grid(args.grid)
-    if not args.resume:
-        check_output_dir(args.out, args.force)
-        if args.force:  # overwrite: the old table would otherwise be taken for one to resume
-            (Path(args.out) / "sweep.csv").unlink(missing_ok=True)
+    _prepare_sweep_dir(args)
     with resumable(args.out, math.prod(len(v) for v in grid.values()) * args.runs):
         result = sweep(
             args.scenario,
             grid,
             objective=args.objective,
-            runs=args.runs,
-            out_dir=args.out,
-            resume=args.resume,
-            scheduler=args.scheduler,
-            workers=args.workers,
             real=args.real,
             target=args.target,
-            duration_s=args.duration,
-            seed=args.seed,
-            sets=args.sets,
-            progress=not args.no_progress,
+            **_sweep_options(args),
             roi=roi,
             mask_pixels=pixels,
             mask_hot=mask_hot,
@@ -320,25 +328,14 @@ def _cmd_limiting(args: argparse.Namespace) -> int:
     rates = parse_float_list(args.rates_arcsec_s, "--rates-arcsec-s")
     mags = parse_float_list(args.magnitudes, "--magnitudes")
     setup = _setup(args)
-    if not args.resume:
-        check_output_dir(args.out, args.force)
-        if args.force:
-            (Path(args.out) / "sweep.csv").unlink(missing_ok=True)
+    _prepare_sweep_dir(args)
     with resumable(args.out, len(rates) * len(mags) * args.runs):
         result = limiting_magnitude(
             args.scenario,
             rates,
             mags,
-            runs=args.runs,
             criterion=(metric.strip(), threshold),
-            out_dir=args.out,
-            resume=args.resume,
-            scheduler=args.scheduler,
-            workers=args.workers,
-            seed=args.seed,
-            sets=args.sets,
-            duration_s=args.duration,
-            progress=not args.no_progress,
+            **_sweep_options(args),
             setup=setup,
             pointing=args.pointing,
             declination_deg=args.declination_deg,

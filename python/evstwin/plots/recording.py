@@ -20,8 +20,6 @@ else:
     to_rgb = require("matplotlib.colors").to_rgb
     Figure = require("matplotlib.figure").Figure
     MaxNLocator = require("matplotlib.ticker").MaxNLocator
-if TYPE_CHECKING:  # pragma: no cover
-    pass
 from .style import (
     DPI,
     KIND_COLOURS,

@@ -231,6 +231,35 @@ def _subpixel(value: int) -> int:
     return integer("psf_subpixel", value, 1, 32)
 
 
+def _pupil_options(
+    obstruction_ratio: float, spider_vanes: int, spider_width_ratio: float, spider_angle_deg: float,
+    extra_blur_sigma_px: float, subpixel: int, max_vanes: int,
+) -> tuple[float, int, float, float, float, int]:
+    """The pupil and blur arguments ``airy_psf`` and ``defocus_psf`` share, each checked in turn
+    (ValueError naming the first bad one): (obstruction_ratio, spider_vanes, spider_width_ratio,
+    spider_angle_deg, extra_blur_sigma_px, subpixel)."""
+    eps = in_range("obstruction_ratio", obstruction_ratio, 0.0, 1.0, hi_open=True)
+    integer("spider_vanes", spider_vanes, 0, max_vanes)
+    width = in_range("spider_width_ratio", spider_width_ratio, 0.0, 0.5, hi_open=True)
+    angle_deg = finite("spider_angle_deg", spider_angle_deg)
+    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
+    return eps, int(spider_vanes), width, angle_deg, blur, _subpixel(subpixel)
+
+
+def _close_vanes(
+    open_: np.ndarray, ux: np.ndarray, uy: np.ndarray, vanes: int, angle_rad: float, half_width: float
+) -> None:
+    """Close, in place, the shadows of ``vanes`` radial bars ``2 half_width`` wide (in the units
+    of the coordinates ux, uy) from the centre out, the first at ``angle_rad`` from +x towards
+    +y, the others equally spaced."""
+    for v in range(vanes):
+        th = angle_rad + 2.0 * math.pi * v / vanes
+        c, s = math.cos(th), math.sin(th)
+        along = ux * c + uy * s
+        across = uy * c - ux * s
+        open_ &= ~((along >= 0.0) & (np.abs(across) <= half_width))
+
+
 # -- diffraction -------------------------------------------------------------------------------
 
 
@@ -247,12 +276,7 @@ def pupil(n: int, obstruction_ratio: float = 0.0, spider_vanes: int = 0, spider_
     ux, uy = u[None, :], u[:, None]
     r2 = ux * ux + uy * uy
     open_ = (r2 <= 0.25) & (r2 >= 0.25 * obstruction_ratio**2)
-    for v in range(spider_vanes):
-        th = math.radians(spider_angle_deg) + 2.0 * math.pi * v / spider_vanes
-        c, s = math.cos(th), math.sin(th)
-        along = ux * c + uy * s
-        across = uy * c - ux * s
-        open_ &= ~((along >= 0.0) & (np.abs(across) <= 0.5 * spider_width_ratio))
+    _close_vanes(open_, ux, uy, spider_vanes, math.radians(spider_angle_deg), 0.5 * spider_width_ratio)
     return open_.reshape(n, ss, n, ss).mean(axis=(1, 3))
 
 
@@ -285,12 +309,9 @@ def airy_psf(
     if not 0.02 <= lam <= 50.0:
         raise ValueError("airy PSF: mean_wavelength_m x f_number / pixel_pitch_m (lambda N) must be in [0.02, 50] px "
                          f"(under 0.02 px the pattern is far inside a pixel: use psf='gaussian'); got {lam:.4g} px")
-    eps = in_range("obstruction_ratio", obstruction_ratio, 0.0, 1.0, hi_open=True)
-    integer("spider_vanes", spider_vanes, 0, 64)
-    w = in_range("spider_width_ratio", spider_width_ratio, 0.0, 0.5, hi_open=True)
-    angle = finite("spider_angle_deg", spider_angle_deg)
-    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
-    k = _subpixel(subpixel)
+    eps, vanes, w, angle, blur, k = _pupil_options(
+        obstruction_ratio, spider_vanes, spider_width_ratio, spider_angle_deg, extra_blur_sigma_px, subpixel, 64
+    )
     h = _half_from("airy", half_width_px, _default_half(2.0 * lam / (math.pi**2 * DEFAULT_TAIL_FRACTION), blur))
     m = max(1, math.ceil(4.0 / (k * lam)))  # cells <= lambda N / 4
     n = _grid("airy", h, k, m)
@@ -304,7 +325,7 @@ def airy_psf(
     if work > _MAX_TRANSFORM_WORK:
         raise ValueError(f"airy PSF: a {2 * h + 1} px window at psf_subpixel={k} for lambda N = {lam:.3g} px needs "
                          f"{work:.3g} multiply-adds (> {_MAX_TRANSFORM_WORK:g}): lower psf_half_width_px or psf_subpixel")
-    p = pupil(n_p, eps, int(spider_vanes), w, angle)
+    p = pupil(n_p, eps, vanes, w, angle)
     u = (np.arange(n_p, dtype=np.float64) + 0.5 - 0.5 * n_p) / n_p
     a = np.exp(-2j * math.pi * np.outer(x, u))  # (n, n_p): E = a p a^T / n_p^2
     b = p @ a.T  # (n_p, n): sum over the pupil's columns
@@ -323,7 +344,7 @@ def airy_psf(
     norm = float(np.sum(p)) * n_p**2
     mass = intensity * ((cell / lam) ** 2 / norm)
     mass = _blur(mass, blur, cell)
-    params = {"lambda_n_px": lam, "obstruction_ratio": eps, "spider_vanes": int(spider_vanes),
+    params = {"lambda_n_px": lam, "obstruction_ratio": eps, "spider_vanes": vanes,
               "spider_width_ratio": w, "spider_angle_deg": angle, "extra_blur_sigma_px": blur}
     return KernelPSF(mass, k, m, h, "airy", params)
 
@@ -412,15 +433,12 @@ def defocus_psf(
     phases (its pixel values change by ~(1/k)^2/8 of their curvature, only at the edge).
     """
     r = in_range("defocus_radius_px", radius_px, 0.5, 120.0)
-    eps = in_range("obstruction_ratio", obstruction_ratio, 0.0, 1.0, hi_open=True)
-    integer("spider_vanes", spider_vanes, 0, 16)
-    width = in_range("spider_width_ratio", spider_width_ratio, 0.0, 0.5, hi_open=True)
-    angle = math.radians(finite("spider_angle_deg", spider_angle_deg))
-    blur = non_negative("extra_blur_sigma_px", extra_blur_sigma_px)
-    k = _subpixel(subpixel)
+    eps, vanes, width, angle_deg, blur, k = _pupil_options(
+        obstruction_ratio, spider_vanes, spider_width_ratio, spider_angle_deg, extra_blur_sigma_px, subpixel, 16
+    )
     h = _half_from("defocus", half_width_px, _default_half(r, blur))
     # Cells at least 8 across the smaller of the radius and the vanes' shadow (2 r width wide).
-    finest = min(r, max(2.0 * r * width, 0.25) if spider_vanes else r)
+    finest = min(r, max(2.0 * r * width, 0.25) if vanes else r)
     m = max(1, math.ceil(8.0 / (k * finest)))
     m = max(1, min(m, _MAX_GRID_SIDE // (2 * k * (h + 1))))
     n = _grid("defocus", h, k, m)
@@ -429,11 +447,7 @@ def defocus_psf(
     ux, uy = c[None, :], c[:, None]
     rr = np.hypot(ux, uy)
     open_ = (rr <= r) & (rr >= eps * r)
-    for v in range(int(spider_vanes)):
-        th = angle + 2.0 * math.pi * v / spider_vanes
-        along = ux * math.cos(th) + uy * math.sin(th)
-        across = uy * math.cos(th) - ux * math.sin(th)
-        open_ &= ~((along >= 0.0) & (np.abs(across) <= width * r))
+    _close_vanes(open_, ux, uy, vanes, math.radians(angle_deg), width * r)
     mass = open_.astype(np.float64)
     total = mass.sum()
     if not total > 0.0:
@@ -441,6 +455,6 @@ def defocus_psf(
                          f"spider_vanes={spider_vanes!r}, spider_width_ratio={spider_width_ratio!r})")
     mass /= total
     mass = _blur(mass, blur, cell)
-    params = {"radius_px": r, "obstruction_ratio": eps, "spider_vanes": int(spider_vanes),
+    params = {"radius_px": r, "obstruction_ratio": eps, "spider_vanes": vanes,
               "spider_width_ratio": width, "extra_blur_sigma_px": blur}
     return KernelPSF(mass, k, m, h, "defocus", params)

@@ -397,6 +397,11 @@ class Scintillation:
 # -- the atmosphere on targets ------------------------------------------------------------------
 
 
+def _plus(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) + (dx, dy): a target's own position or velocity plus the image motion's."""
+    return a[0] + b[0], a[1] + b[1]
+
+
 @dataclass(frozen=True, eq=False)
 class AtmosphericTarget(Target):
     """A target seen through the atmosphere: its position plus the field's image motion
@@ -414,11 +419,8 @@ class AtmosphericTarget(Target):
         adopt(self, self.target, brightness=False)  # its brightness: the scintillating curve
 
     def position_px(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        x, y = self.target.position_px(t_s)
-        if self.motion is None:
-            return x, y
-        dx, dy = self.motion.offset_px(t_s)
-        return x + dx, y + dy
+        own = self.target.position_px(t_s)
+        return own if self.motion is None else _plus(own, self.motion.offset_px(t_s))
 
     def flux_ph_s(self, t_s: npt.ArrayLike) -> np.ndarray:
         flux = self.target.flux_ph_s(t_s)
@@ -428,11 +430,8 @@ class AtmosphericTarget(Target):
         return flux * np.interp(np.asarray(t_s, np.float64), t_grid, m)
 
     def velocity_px_s(self, t_s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        vx, vy = self.target.velocity_px_s(t_s)
-        if self.motion is None:
-            return vx, vy
-        wx, wy = self.motion.velocity_px_s(t_s)
-        return vx + wx, vy + wy
+        own = self.target.velocity_px_s(t_s)
+        return own if self.motion is None else _plus(own, self.motion.velocity_px_s(t_s))
 
     def max_speed_px_s(self, t0_s: float, t1_s: float) -> float:
         """The target's own largest speed plus the motion's (a bound: exact when they align)."""
