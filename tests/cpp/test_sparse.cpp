@@ -145,27 +145,37 @@ TEST(run_sparse_with_every_pixel_lit_is_the_dense_run) {
 }
 
 TEST(run_sparse_is_the_same_whatever_the_threads) {
+    // The follower at 1 Hz (long steps for the pixels the spot leaves alone) and at 100 Hz
+    // (every pixel noisy: the steps run densely, SPARSE_DENSE_SHARE).
     const int w = 48, h = 16;
     std::vector<double> background(w * h, 3e5), t0{0.0};
-    std::vector<Event> runs[2];
-    for (int threads : {1, 2}) {
-        Sensor s(w, h, sparse_params(), 5, threads);
-        s.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
-        for (int unit = 0; unit < 3; ++unit) {
-            // 0.1 s steps of 4 fine samples per 1 ms base sample, groups of 5 base samples.
-            std::vector<double> t(400);
-            for (int k = 0; k < 400; ++k) t[k] = 0.1 * unit + 2.5e-4 * (k + 1);
-            const Spot spot(w, h, t);
-            const auto ev = s.run_sparse(spot.step(background, t, 4, 5));
-            // The spot's pixels finely, its trail's at the base rate while they relax (0.8 s).
-            CHECK(s.last_pixel_updates() < 400u * w * h / 4);
-            for (std::size_t i = 1; i < ev.size(); ++i)
-                CHECK(ev[i - 1].t < ev[i].t || (ev[i - 1].t == ev[i].t && ev[i - 1].y * w + ev[i - 1].x <= ev[i].y * w + ev[i].x));
-            runs[threads - 1].insert(runs[threads - 1].end(), ev.begin(), ev.end());
+    for (const double cutoff_hz : {1.0, 100.0}) {
+        std::vector<Event> runs[2];
+        for (int threads : {1, 2}) {
+            Sensor s(w, h, sparse_params(cutoff_hz), 5, threads);
+            s.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
+            for (int unit = 0; unit < 3; ++unit) {
+                // 0.1 s steps of 4 fine samples per 1 ms base sample, groups of 5 base samples.
+                std::vector<double> t(400);
+                for (int k = 0; k < 400; ++k) t[k] = 0.1 * unit + 2.5e-4 * (k + 1);
+                const Spot spot(w, h, t);
+                const auto ev = s.run_sparse(spot.step(background, t, 4, 5));
+                // The spot's pixels finely, its trail's at the base rate while they relax (0.8 s);
+                // densely, every pixel at the 100 base samples but those the spot lights (at
+                // most its 49 a sample) at the fine ones.
+                if (cutoff_hz < 50.0)
+                    CHECK(s.last_pixel_updates() < 400u * w * h / 4);
+                else
+                    CHECK(s.last_pixel_updates() > 90u * w * h && s.last_pixel_updates() <= 100u * w * h + 49u * 400u);
+                for (std::size_t i = 1; i < ev.size(); ++i)
+                    CHECK(ev[i - 1].t < ev[i].t ||
+                          (ev[i - 1].t == ev[i].t && ev[i - 1].y * w + ev[i - 1].x <= ev[i].y * w + ev[i].x));
+                runs[threads - 1].insert(runs[threads - 1].end(), ev.begin(), ev.end());
+            }
         }
+        CHECK(runs[0].size() > 50);
+        CHECK(same_events(runs[0], runs[1]));
     }
-    CHECK(runs[0].size() > 50);
-    CHECK(same_events(runs[0], runs[1]));
 }
 
 TEST(run_sparse_refuses_bad_input_before_any_pixel_moves) {

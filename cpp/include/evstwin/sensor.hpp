@@ -425,6 +425,10 @@ private:
     /// the vector kernel). Speed only: either way the statistics are the same.
     static constexpr double SPARSE_NOISY_SIGMAS = 7.0;
     static constexpr double SPARSE_PIECE_COST = 8.0;
+    /// run_sparse() runs a step densely (every pixel at the base samples, the lit ones at
+    /// the fine ones) where more than this share of the pixels takes the base samples anyway.
+    /// Speed only.
+    static constexpr double SPARSE_DENSE_SHARE = 0.25;
     /// Time constants a pixel's levels take to settle (settle_time_s): e^-5 = 0.7 % of a step is left.
     static constexpr double SETTLE_TIME_CONSTANTS = 5.0;
     /// The smaller of two rates, ignoring a zero (a stage that is off).

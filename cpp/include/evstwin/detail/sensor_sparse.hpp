@@ -214,6 +214,11 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             updates += start.second.size();
         }
     };
+    // Where most pixels take the base samples anyway, the step runs densely: each group's lit
+    // pixels through run_pixels, then every pixel through run() at the group's base times (it
+    // skips the lit ones, ahead already), as the dense path does (geo-stare's sky on the
+    // IMX636: through run_pixels those pixels cost 10-20 % more, and a copy of their states).
+    const bool dense = SPARSE_DENSE_SHARE * static_cast<double>(npix) < static_cast<double>(busy.size());
     if (sparse_mark_.size() != npix) sparse_mark_.assign(npix, 0);
     std::uint8_t* in_group = sparse_mark_.data();  // 1: lit in this group, 2: sampled in it; 0 after the call
     try {
@@ -222,14 +227,14 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             const double t_start = k0 == 0 ? t_begin : step.t_s[k0 - 1], t_end = step.t_s[k1 - 1];
             const SparseRun& r = lit[g];
             for (const std::uint32_t px : r.pixels) in_group[px] = 1;
-            std::vector<std::uint32_t> settle;
+            std::vector<std::uint32_t> settle;  // the base samples through run_pixels (not dense)
             for (const std::uint32_t px : settling_)
-                if (in_group[px] == 0 && settle_until_[px] > t_start) {
+                if (!dense && in_group[px] == 0 && settle_until_[px] > t_start) {
                     in_group[px] = 2;
                     settle.push_back(px);
                 }
             for (const std::uint32_t px : busy)
-                if (in_group[px] == 0) {
+                if (!dense && in_group[px] == 0) {
                     in_group[px] = 2;
                     settle.push_back(px);
                 }
@@ -248,10 +253,13 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                 take(run_pixels(r.pixels.data(), r.pixels.size(), r.rate.data(), r.times.data(), r.times.size()));
                 updates += r.pixels.size() * r.times.size();
             }
-            if (!settle.empty()) {
-                std::vector<double> base;
-                for (std::size_t k = k0; k < k1; ++k)
-                    if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
+            std::vector<double> base;
+            for (std::size_t k = k0; k < k1; ++k)
+                if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
+            if (dense) {
+                take(run(step.static_rate, base.data(), base.size(), nullptr, nullptr, true));
+                updates += (npix - r.pixels.size()) * base.size();
+            } else if (!settle.empty()) {
                 const std::vector<double> rate = static_rates(settle);
                 take(run_pixels(settle.data(), settle.size(), rate.data(), base.data(), base.size(), true));
                 updates += settle.size() * base.size();
@@ -272,7 +280,9 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         // The last group's pixels stand at the step's end already (its last sample is a base
         // time).
         const double t_last = step.t_s[n - 1];
-        if (step.reach_all) {
+        if (dense) {
+            // Every pixel stands at t_last: the last group's run() took them there.
+        } else if (step.reach_all) {
             // run() skips the pixels already there; a block whose pixels stand apart takes the
             // kernel for those that start together (run_block).
             std::size_t behind = 0;
