@@ -16,8 +16,10 @@ namespace {
 
 /// Continuous noise, exact low-pass, every noise source on, the source follower alone at
 /// cutoff_hz: a long step is cut into 8 x 2 pi cutoff_hz pieces a second where its noise may
-/// cross (PixelModel::refine_pieces_per_s), so run_sparse gives long steps only where the
-/// base samples are more frequent than that (at 1 Hz: 50.3 pieces a second), and a pixel a
+/// cross (PixelModel::refine_pieces_per_s), and the noise's standard deviation on the level
+/// grows as sqrt(cutoff_hz). At 1 Hz it stays far below the thresholds (run_sparse gives long
+/// steps); at 100 Hz it comes within reach of them and 5,027 pieces a second would cost more
+/// than the base samples (the base samples throughout, Sensor::SPARSE_NOISY_SIGMAS). A pixel a
 /// source left relaxes for 5 / (2 pi cutoff_hz) (0.796 s at 1 Hz).
 PixelParams sparse_params(double cutoff_hz = 1.0) {
     PixelParams p;
@@ -70,13 +72,13 @@ struct Spot {
 
 TEST(run_sparse_takes_the_steps_counted_by_hand) {
     // 4 x 4 px, steps of 8 samples 10 ms apart in groups of 2; pixel 5 lit at sample 2 only
-    // (group 1). The follower at 1 Hz: 50.3 pieces a second against 100 base samples, so no
-    // pixel is sampled throughout; pixel 5 relaxes for 0.796 s once lit.
+    // (group 1). The follower at 1 Hz: quiet pixels, none sampled throughout; pixel 5 relaxes
+    // for 0.796 s once lit.
     // Step 1. Group 1: pixel 5's long step to t[1] (1), its 2 fine samples; groups 2 and 3:
     // its 2 + 2 base samples; then the 15 others' long step to t[7]: 1 + 2 + 4 + 15 = 22.
     // Step 2 (nothing lit): pixel 5 still relaxes, 8 base samples, and the 15 others: 23.
-    // A pixel sampled throughout instead (the follower at 100 Hz: 5,027 pieces a second):
-    // all 16 take the 8 base samples (pixel 5 its 2 fine ones in place of 2 of them): 128.
+    // Every pixel noisy instead (the follower at 100 Hz): the steps run densely, all 16
+    // pixels at the 8 base samples (pixel 5 its 2 fine ones in place of 2 of them): 128.
     const int w = 4, h = 4;
     for (const double cutoff_hz : {1.0, 100.0}) {
         Sensor s(w, h, sparse_params(cutoff_hz), 3, 1);
