@@ -76,8 +76,10 @@ class Scene:
     """sampling.static_step_s [s]: the longest step of a pixel whose light is constant (0: every
     pixel at rate_hz). In a sparse run with the continuous noise model and the exact low-pass
     (whose statistics do not depend on the step: the engine refines an interval where a
-    crossing is plausible), a pixel no moving source touches and that has settled is advanced
-    once per ``static_step_s``, rounded down to whole base intervals (``simulate``)."""
+    crossing is plausible), each unit of ``static_step_s`` (rounded down to whole base
+    intervals) is one ``Sensor.run_sparse`` step: a pixel no moving source touches, that has
+    settled and whose noise stays clear of its thresholds takes long steps, waiting while its
+    light is constant (``simulate``; the performance page measures it)."""
     pre_roll_rate_hz: float | None = None
     """sampling.pre_roll_rate_hz: the pre-roll's sampling rate [Hz] (None: rate_hz). Whole
     frames, no sub-sampling: a pre-roll only sets the pixels' state, and with the continuous
