@@ -340,11 +340,10 @@ class _Runner:
                     light_rate = np.concatenate([c[1] for c in parts])
             unit += 1
             sync = b == self.n_base or unit % sync_every == 0
+            next_rate = unit_light(min(b + self.static_every, self.n_base), unit) if b < self.n_base else static_rate
             reach: np.ndarray | None = None
-            next_rate = static_rate
             if not sync:
                 # Only the pixels whose static light changes at the unit's end must be there.
-                next_rate = unit_light(min(b + self.static_every, self.n_base), unit)
                 reach = np.flatnonzero(next_rate != static_rate) if next_rate is not static_rate else empty_i
             s1 = time.perf_counter()
             events = self.sensor.run_sparse(static_rate, t, base_every=n_sub, group_base_samples=self.unit,
@@ -355,8 +354,6 @@ class _Runner:
             self.pixel_updates += self.sensor.last_pixel_updates
             self.scene_s += s1 - s0
             self.engine_s += s2 - s1
-            if sync and b < self.n_base:
-                next_rate = unit_light(min(b + self.static_every, self.n_base), unit)
             static_rate = next_rate
             if sync:
                 # Every pixel stands at b: the period's events, in order.
@@ -481,15 +478,14 @@ class _Runner:
             buf = self._buffers[name] = np.empty(size, np.float64)
         return buf[:size].reshape(shape)
 
-    def _lit(self, x: np.ndarray, y: np.ndarray, f: np.ndarray,
-             groups: Sequence[tuple[psf.PSFShape, np.ndarray]] | None = None) -> np.ndarray:
+    def _lit(self, x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
         """Flat mask of the pixels inside the window of a fine-sampled source with flux > 0
         at any of the (T, S) positions: a PSF's window is the (2 h + 1)^2 pixels around the
         pixel the source is on (``psf.render``), those on the sensor. A difference table of
         the rectangles' corners, summed along both axes: linear in the rectangles and pixels."""
         sc = self.scene
         rects = []
-        for shape, cols in self._fine_groups if groups is None else groups:
+        for shape, cols in self._fine_groups:
             h = int(shape.half_width_px)
             xs, ys, fs = x[:, cols].reshape(-1), y[:, cols].reshape(-1), f[:, cols].reshape(-1)
             with np.errstate(invalid="ignore"):
@@ -548,12 +544,10 @@ class _Runner:
                 rates[k * n_sub : (k + 1) * n_sub] += (1.0 - w) * at_hot[k] + w * at_hot[k + 1]
         return out
 
-    def _window_rates(self, hot: np.ndarray, x: np.ndarray, y: np.ndarray, f: np.ndarray,
-                      groups: Sequence[tuple[psf.PSFShape, np.ndarray]] | None = None) -> np.ndarray:
+    def _window_rates(self, hot: np.ndarray, x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
         """The (T, hot.size) photon rates of the pixels ``hot`` (flat indices, increasing) at
         the T times of the (T, S) sources: the static light plus the moving sources' sharp
-        parts (``groups``, default ``_fine_groups``). Every window pixel of those sources must
-        be in ``hot``."""
+        parts (``_fine_groups``). Every window pixel of those sources must be in ``hot``."""
         sc = self.scene
         npix = sc.width * sc.height
         column = self._column
@@ -565,7 +559,7 @@ class _Runner:
         # and a mask split them into (sample, pixel): NumPy's integer division by a scalar cost
         # ~10 times a shift (and its divmod by hand a division, a multiply and a subtraction).
         shift = (npix - 1).bit_length()
-        for idx, val in self._contribution_parts(x, y, f, self._fine_groups if groups is None else groups,
+        for idx, val in self._contribution_parts(x, y, f, self._fine_groups,
                                                  stride=1 << shift):
             # Scatter-add only where the windows are (a bincount over every hot pixel and
             # sample would zero and add the whole table); the chunks in order, each

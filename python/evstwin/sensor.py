@@ -269,7 +269,8 @@ class Sensor:
             step with ``reach_pixel=None``.
 
         In each group, a pixel some entry lights takes the fine samples; one whose levels still
-        relax after a source left it (``settle_time_s``) the base samples; every other pixel
+        relax after a source left it (``settle_time_s``), or whose noise would have its long
+        steps refined more finely than the base samples, the base samples; every other pixel
         one long exact step. Needs the continuous noise model and the exact low-pass. Returns
         the step's events sorted by (t, pixel); ``last_pixel_updates`` counts the steps taken.
         """

@@ -10,9 +10,11 @@
 //   - the others wait.
 // Then one run() of the static map at the step's end moves every pixel that stands earlier
 // there in one long exact step (run() skips the pixels already there); or, where the step
-// lets pixels wait (reach_all false), only the pixels it lists, whose light changes there. Which pixel takes
-// which grid depends on the step alone, so the events do not depend on the threads or on how
-// a simulation is cut into steps of the same groups. Every call it makes is an ordinary
+// lets pixels wait (reach_all false), only the pixels it lists, whose light changes there.
+// Where most pixels take the base samples anyway, the step runs densely instead (each
+// group's lit pixels, then run() of every pixel at its base times). Which pixel takes which
+// grid depends on the step alone, so the events do not depend on the threads or on how a
+// simulation is cut into steps of the same groups. Every call it makes is an ordinary
 // run_pixels / run call; the step's events are their events, merged by (t, pixel).
 #pragma once
 
@@ -95,6 +97,14 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         std::vector<std::size_t> next(first.begin(), first.end() - 1);
         for (std::size_t i = 0; i < step.n_light; ++i) order[next[step.light_sample[i] / group]++] = i;
     }
+    // A pixel the step will sample must stand before its first sample (run_pixels would
+    // refuse it part-way, after other pixels had moved).
+    const auto check_before_step = [&](std::uint32_t px) {
+        if (!(state_[px].t < step.t_s[0]))
+            throw std::invalid_argument("run_sparse: pixel (x, y) = (" + std::to_string(px % width_) + ", " +
+                                        std::to_string(px / width_) + ") stands at " + detail::fmt(state_[px].t) +
+                                        " s, not before the step's first sample t_s[0]=" + detail::fmt(step.t_s[0]));
+    };
     std::vector<SparseRun> lit(n_groups);
     if (sparse_column_.size() != npix) sparse_column_.assign(npix, -1);
     std::int32_t* column = sparse_column_.data();  // -1 but while a group's lit pixels are listed
@@ -129,17 +139,9 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                                ")",
                            r.rate[bad]);
         }
-        for (const std::uint32_t px : r.pixels)
-            if (!(state_[px].t < step.t_s[0]))
-                throw std::invalid_argument("run_sparse: pixel (x, y) = (" + std::to_string(px % width_) + ", " +
-                                            std::to_string(px / width_) + ") stands at " + detail::fmt(state_[px].t) +
-                                            " s, not before the step's first sample t_s[0]=" + detail::fmt(step.t_s[0]));
+        for (const std::uint32_t px : r.pixels) check_before_step(px);
     }
-    for (const std::uint32_t px : settling_)
-        if (!(state_[px].t < step.t_s[0]))
-            throw std::invalid_argument("run_sparse: pixel (x, y) = (" + std::to_string(px % width_) + ", " +
-                                        std::to_string(px / width_) + ") stands at " + detail::fmt(state_[px].t) +
-                                        " s, not before the step's first sample t_s[0]=" + detail::fmt(step.t_s[0]));
+    for (const std::uint32_t px : settling_) check_before_step(px);
 
     // --- the pixels that take the base samples throughout: those whose noise comes within
     // reach of a threshold in a long step (crossing_plausible then refines it: ~6.9 of its
@@ -221,6 +223,7 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     const bool dense = SPARSE_DENSE_SHARE * static_cast<double>(npix) < static_cast<double>(busy.size());
     if (sparse_mark_.size() != npix) sparse_mark_.assign(npix, 0);
     std::uint8_t* in_group = sparse_mark_.data();  // 1: lit in this group, 2: sampled in it; 0 after the call
+    std::size_t at_end = 0;  // pixels the last group took to the step's end (its last sample is a base time)
     try {
         for (std::size_t g = 0; g < n_groups; ++g) {
             const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
@@ -276,6 +279,7 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                             settling_.end());
             for (const std::uint32_t px : r.pixels) in_group[px] = 0;
             for (const std::uint32_t px : settle) in_group[px] = 0;
+            at_end = r.pixels.size() + settle.size();
         }
         // The last group's pixels stand at the step's end already (its last sample is a base
         // time).
@@ -285,10 +289,8 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         } else if (step.reach_all) {
             // run() skips the pixels already there; a block whose pixels stand apart takes the
             // kernel for those that start together (run_block).
-            std::size_t behind = 0;
-            for (std::size_t i = 0; i < npix; ++i) behind += state_[i].t < t_last;
             take(run(step.static_rate, &t_last, 1, nullptr, nullptr, true));
-            updates += behind;
+            updates += npix - at_end;
         } else {
             std::vector<std::uint32_t> reach;
             for (std::size_t i = 0; i < step.n_reach; ++i) {
