@@ -15,7 +15,7 @@
 
 int main() {
     evstwin::PixelParams params;  // the paper's DAVIS346 pixel, its noise on
-    params.cutoff_hz = 1.0;       // a slow follower: quiet long steps (refine_pieces_per_s)
+    params.cutoff_hz = 1.0;       // a slow follower: quiet long steps (long_steps_cut_below)
     const int width = 640, height = 480;
     evstwin::Sensor sensor(width, height, params, /*seed=*/1);
 

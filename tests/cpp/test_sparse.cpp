@@ -15,12 +15,12 @@ using namespace evstwin;
 namespace {
 
 /// Continuous noise, exact low-pass, every noise source on, the source follower alone at
-/// cutoff_hz: a long step is cut into 8 x 2 pi cutoff_hz pieces a second where its noise may
-/// cross (PixelModel::refine_pieces_per_s), and the noise's standard deviation on the level
-/// grows as sqrt(cutoff_hz). At 1 Hz it stays far below the thresholds (run_sparse gives long
-/// steps); at 100 Hz it comes within reach of them and 5,027 pieces a second would cost more
-/// than the base samples (the base samples throughout, Sensor::SPARSE_NOISY_SIGMAS). A pixel a
-/// source left relaxes for 5 / (2 pi cutoff_hz) (0.796 s at 1 Hz).
+/// cutoff_hz, whose noise's standard deviation on the level grows as sqrt(cutoff_hz). At 1 Hz
+/// it stays far below the thresholds (run_sparse gives long steps); at 100 Hz it stays within
+/// reach of them over any piece of a long step longer than 1 / (8 x 2 pi cutoff_hz), so
+/// refine_and_compare would cut a long step into pieces shorter than the base samples' (the
+/// base samples throughout: PixelModel::long_steps_cut_below). A pixel a source left relaxes
+/// for 5 / (2 pi cutoff_hz) (0.796 s at 1 Hz).
 PixelParams sparse_params(double cutoff_hz = 1.0) {
     PixelParams p;
     p.threshold_sigma = 0.04;

@@ -71,7 +71,7 @@ struct PixelModel {
     std::vector<HotChainTerms> hot_chains;
     bool leak_off = false;  ///< LeakPolarity::Off: the leak drifts d = y - ref down, to OFF
     /// The longest piece, in source-follower time constants (b h), that the continuous model
-    /// takes where a crossing is plausible with the follower alone (refine_sf_and_compare).
+    /// takes where a crossing is plausible with the follower alone (refine_and_compare with a = 0).
     /// Unrefined, the DAVIS346 preset's dark pixel (10 Hz follower) counts +1.0-1.4 % more
     /// events at 1 kHz (b dt = 1/16) than at 16 kHz, +1.5-2 % at 250 Hz and +20-24 % at 50 Hz
     /// (bench/noise_convergence.py --preset davis346); refined to 1/8, the paper's pixel
@@ -83,6 +83,9 @@ struct PixelModel {
     /// limit 2 (13.8 + 10) var then stays under the quiet test's 48 var (bridge_bound_for), so
     /// a pixel the block kernels settle as quiet is one continuous_finish() leaves alone.
     static constexpr double MAX_EXCURSIONS = 22026.0;
+    /// The deepest cut of refine_and_compare: 2^20 pieces, enough for a h <= 1 over 4 s behind
+    /// a 40 kHz pole. It cuts only where a crossing stays plausible, so depth costs little.
+    static constexpr int MAX_REFINE_LEVELS = 20;
 
     explicit PixelModel(const PixelParams& params) : p(params) {
         validate(p);
@@ -314,11 +317,6 @@ struct PixelModel {
     /// describes as rougher than it is (the dark DAVIS346 pixel with the pole, 128 x 128 px, 4 s,
     /// 3 seeds: 1,750 OFF events at 1 kHz, 2,063 at 5 Hz cut to a h <= 1, 1,715 cut to 1/8).
     double pole_refine_ah(double a) const { return a < sf_rate() ? SF_REFINE_BH : 1.0; }
-    /// Pieces per second of sensor time into which a long interval of a pixel at this photon
-    /// rate is cut where a crossing is plausible (refine_and_compare behind the pole,
-    /// refine_sf_and_compare with the follower alone); 0 where none is. A pixel whose long
-    /// steps would be cut finer than a dense run's samples is cheaper sampled densely
-    /// (Sensor::run_sparse).
     /// Stationary standard deviation of the noise on the level y at a constant photon rate [ln
     /// units]: white noise of intensity D (noise_intensity) through the pole (rate a) and the
     /// follower (rate b) has variance D a b / (2 (a + b)); through one of them, D r / 2.
@@ -329,13 +327,28 @@ struct PixelModel {
         const double r = a > 0.0 && b > 0.0 ? a * b / (a + b) : (a > 0.0 ? a : b);
         return r > 0.0 ? std::sqrt(0.5 * D * r) : 0.0;
     }
-    double refine_pieces_per_s(double photon_rate) const {
-        if (!has_filter) return 0.0;
-        if (p.pr_pole) {
-            const double a = pole_rate(ELEMENTARY_CHARGE_C * mean_electron_rate(photon_rate));
-            return a / pole_refine_ah(a);
-        }
-        return euler ? 0.0 : sf_rate() / SF_REFINE_BH;
+    /// Whether a long interval of a pixel at this photon rate, where refine_and_compare() cuts
+    /// it, would be cut into pieces shorter than piece_s [s]: a crossing of a level theta away
+    /// at both ends stays plausible over such a piece (crossing_plausible's limit, with the
+    /// piece's chances to cross). The noise on the level is taken as one OU process of its
+    /// stationary sigma at the slower of the pole and the follower, whose bridge is at least as
+    /// wide as the two poles' (so the answer errs toward yes). A pixel whose long steps are cut
+    /// that fine costs more than a dense run's samples (Sensor::run_sparse). Speed only.
+    bool long_steps_cut_below(double photon_rate, double theta, double piece_s) const {
+        if (!continuous || !has_filter || euler) return false;
+        const double mean_e = mean_electron_rate(photon_rate);
+        if (noise_intensity(photon_rate, mean_e) <= 0.0) return false;
+        const double b = sf_rate(), a = p.pr_pole ? pole_rate(ELEMENTARY_CHARGE_C * mean_e) : 0.0;
+        if (p.pr_pole && !(a > 0.0)) return false;  // no refinement: the line and the bridge
+        // The rate refine_and_compare cuts by and its finest piece: no cut goes below that.
+        const double cut_rate = p.pr_pole ? a : b, finest_s = (p.pr_pole ? pole_refine_ah(a) : SF_REFINE_BH) / cut_rate;
+        if (piece_s <= finest_s) return false;
+        const double sigma = stationary_noise_sigma(photon_rate);
+        const double rho2 = std::exp(-(p.pr_pole ? std::min(a, b) : b) * piece_s);  // rho^2 at half the piece
+        const double bridge_var = sigma * sigma * (1.0 - rho2) / (1.0 + rho2);
+        // continuous_finish's chances: one behind a pole at least as fast as the follower.
+        const double chances = p.pr_pole && a >= b ? 1.0 : std::max(1.0, cut_rate * piece_s);
+        return theta * theta < plausible_limit(bridge_var, chances);
     }
     /// Source-follower rate 2 pi f_sf [1/s] (0 without the filter).
     double sf_rate() const { return has_filter ? 2.0 * PI * *p.cutoff_hz : 0.0; }
@@ -786,12 +799,18 @@ struct PixelModel {
         // time constant: its pieces are cut to a h <= SF_REFINE_BH too (the dark DAVIS346 pixel
         // with the pole counted +18 % OFF events at 5 Hz against 1 kHz when cut to a h <= 1).
         const double pole_piece = pole_refine_ah(a);
-        if (two_poles && a * c.dt > pole_piece &&
-            crossing_plausible(s, y, c, leak_g, bridge_var, pole_piece < 1.0 ? std::min(a * c.dt, MAX_EXCURSIONS) : 1.0)) {
-            refine_and_compare(s, x, z, y - ny, nz, ny, c, leak_g, a, D, pulses, key, pixel, emit);
+        if (two_poles && a * c.dt > pole_piece) {
+            const double chances = pole_piece < 1.0 ? std::min(a * c.dt, MAX_EXCURSIONS) : 1.0;
+            if (crossing_plausible(s, y, c, leak_g, bridge_var, chances)) {
+                refine_and_compare(s, x, z, y - ny, nz, ny, c, leak_g, a, b_sf, D, bridge_var, chances, pulses, key,
+                                   pixel, emit);
+            } else {
+                compare_bridged(s, y, ny, c, leak_g, bridge_var, pulses, key, pixel, PURPOSE_BRIDGE, emit, pre);
+            }
         } else if (sf_noise && b_sf * c.dt > SF_REFINE_BH &&
                    crossing_plausible(s, y, c, leak_g, bridge_var, std::min(b_sf * c.dt, MAX_EXCURSIONS))) {
-            refine_sf_and_compare(s, x, y - ny, ny, c, leak_g, b_sf, D, pulses, key, pixel, emit);
+            refine_and_compare(s, x, x, y - ny, 0.0, ny, c, leak_g, 0.0, b_sf, D, bridge_var,
+                               std::min(b_sf * c.dt, MAX_EXCURSIONS), pulses, key, pixel, emit);
         } else {
             compare_bridged(s, y, ny, c, leak_g, bridge_var, pulses, key, pixel, PURPOSE_BRIDGE, emit, pre);
         }
@@ -810,11 +829,19 @@ struct PixelModel {
     /// leak_g: leak_slope() of the sample.
     EVSTWIN_ALWAYS_INLINE bool crossing_plausible(const PixelState& s, double y1, const SampleConstants& c,
                                                   double leak_g, double bridge_var, double excursions = 1.0) const {
+        return crossing_within(s, y1, c, leak_g, plausible_limit(bridge_var, excursions));
+    }
+    /// crossing_plausible()'s limit on the product of the distances to a level at both ends.
+    static double plausible_limit(double bridge_var, double excursions) {
+        return 2.0 * (excursions > 1.0 ? 13.8 + std::log(excursions) : 13.8) * bridge_var;
+    }
+    /// crossing_plausible() with its limit (plausible_limit) known.
+    EVSTWIN_ALWAYS_INLINE bool crossing_within(const PixelState& s, double y1, const SampleConstants& c, double leak_g,
+                                               double lim) const {
         const double g = detail::comparator_slope(s.y, y1, leak_g, c.inv_dt);
         const double d0 = s.y - s.ref, d1 = detail::comparator_end(s.y, s.ref, g, c.dt);
         const double th_on = s.theta_on, th_off = s.theta_off;
         if (!detail::inside_levels(d0, d1, th_on, th_off)) return true;
-        const double lim = 2.0 * (excursions > 1.0 ? 13.8 + std::log(excursions) : 13.8) * bridge_var;
         return (th_on - d0) * (th_on - d1) < lim || (th_off + d0) * (th_off + d1) < lim;
     }
 
@@ -829,30 +856,22 @@ struct PixelModel {
                                                std::uint32_t pixel, std::uint32_t purpose, Emit& emit,
                                                const BridgePre* pre = nullptr) const;
 
-    /// The interval (c.t0, c.t1] cut into m = 2^L pieces with a h <= pole_refine_ah(a) (h = dt / m), the noise
-    /// state at each cut drawn exactly from its law given the states at both ends (a Levy
-    /// bridge construction of the two-pole OU process: midpoints first, then quarter points,
-    /// ...), the noise-free chain stepped through the cuts, and the comparator (with its
-    /// bridge, now over pieces the pole resolves) run piece by piece. x1, z1, yd1, nz1, ny1:
-    /// the sample's values at c.t1 (already drawn); s still holds those at c.t0.
+    /// The interval (c.t0, c.t1], where a crossing in it is plausible (crossing_plausible
+    /// with `excursions` chances and the interval's bridge_var), cut adaptively: the noise at
+    /// its middle drawn exactly from its law given the states at both ends (a Levy bridge
+    /// construction of the OU process: two poles behind the pole a > 0, the follower's one
+    /// with a = 0), and each half cut again while a crossing in it stays plausible (its own
+    /// bridge, its share of the chances), down to pieces of a h <= pole_refine_ah(a) (b h <=
+    /// SF_REFINE_BH with the follower alone; at most 2^MAX_REFINE_LEVELS pieces). The
+    /// noise-free chain is stepped exactly through the cuts for the input linear in the
+    /// interval, and the comparator runs piece by piece with each piece's bridge. x1, z1, yd1,
+    /// nz1, ny1: the sample's values at c.t1 (already drawn; z1 = x1 and nz1 = 0 with the
+    /// follower alone); s still holds those at c.t0.
     template <class Emit>
     void refine_and_compare(PixelState& s, double x1, double z1, double yd1, double nz1, double ny1,
-                            const SampleConstants& c, double leak_g, double a, double D, NoisePulses& pulses,
-                            Philox4x32Key key, std::uint32_t pixel, Emit& emit) const;
-
-    /// refine_and_compare() for the source follower alone (no pole): the noise n_y is a 1-D
-    /// OU process of rate b. The interval is cut into m = 2^L pieces with b h <= SF_REFINE_BH
-    /// (h = dt / m, L <= 10), the noise at each cut drawn exactly given both ends (a Levy
-    /// bridge construction: for halves of length T, transition phi = exp(-b T) and innovation
-    /// variance Q, the middle given the ends has mean phi y0 + phi / (1 + phi^2) (y1 - phi^2 y0)
-    /// and variance Q / (1 + phi^2)), the noise-free level stepped through the cuts for the
-    /// input linear in each piece (its end forced to the sample's own value), and the
-    /// comparator with each piece's bridge. x1, yd1, ny1: the sample's values at c.t1; s still
-    /// holds those at c.t0.
-    template <class Emit>
-    void refine_sf_and_compare(PixelState& s, double x1, double yd1, double ny1, const SampleConstants& c, double leak_g,
-                               double b, double D, NoisePulses& pulses, Philox4x32Key key, std::uint32_t pixel,
-                               Emit& emit) const;
+                            const SampleConstants& c, double leak_g, double a, double b, double D, double bridge_var,
+                            double excursions, NoisePulses& pulses, Philox4x32Key key, std::uint32_t pixel,
+                            Emit& emit) const;
 
     /// Why a threshold crossing of the line fired, at a point a share f into the interval:
     /// the largest of the changes since the last event in the crossing's direction, of the

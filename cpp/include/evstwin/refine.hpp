@@ -1,11 +1,18 @@
 // An interval's refinement where a crossing is plausible (the noise model page, "Long
 // intervals"): the noise at cuts of the interval drawn exactly given both ends (a Levy bridge
 // construction), the noise-free chain stepped through the cuts, and the comparator with each
-// piece's bridge. PixelModel declares these; pixel.hpp includes this file after it.
+// piece's bridge. The cuts are adaptive: a piece is halved only while a crossing in it stays
+// plausible (the test continuous_finish applies to the whole interval, with the piece's own
+// bridge and chances), down to the pieces the pole or the follower resolves. A long step of a
+// quiet stretch then costs a few pieces where it would cost thousands cut evenly, with the
+// same law: a piece left whole is one whose crossing the test finds implausible, exactly as
+// an unrefined interval is. PixelModel declares these; pixel.hpp includes this file after it.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "config.hpp"
 #include "noise.hpp"
@@ -17,151 +24,185 @@ EVSTWIN_FP_STRICT_BEGIN
 namespace evstwin {
 
 namespace detail {
-/// Piece i (1..m) of an interval c cut into m pieces of length h: its ends exactly the
-/// interval's at i = 1 and i = m.
-inline SampleConstants refined_piece(const SampleConstants& c, int i, int m, double h) {
+/// The span (l, r] of an interval c cut into m pieces of length h (piece indices 0..m): its
+/// ends exactly the interval's at l = 0 and r = m.
+inline SampleConstants refined_span(const SampleConstants& c, std::uint32_t l, std::uint32_t r, std::uint32_t m,
+                                    double h) {
     SampleConstants piece = c;
-    piece.t0 = i == 1 ? c.t0 : c.t0 + (i - 1) * h;
-    piece.t1 = i == m ? c.t1 : c.t0 + i * h;
+    piece.t0 = l == 0 ? c.t0 : c.t0 + l * h;
+    piece.t1 = r == m ? c.t1 : c.t0 + r * h;
     piece.dt = piece.t1 - piece.t0;
     piece.inv_dt = 1.0 / piece.dt;
     return piece;
 }
 
-/// Piece i (1..m, length h) of a refined interval c: the comparator with the pieces' bridge
-/// (variance piece_bridge, its draws keyed by the piece) toward the noise-free level yd plus
-/// the noise ny, then that level as the pixel's. The background's events due by the piece's
-/// end are its own (compare takes them).
-template <class Emit>
-EVSTWIN_ALWAYS_INLINE void compare_refined_piece(const PixelModel& model, PixelState& s, double yd, double ny,
-                                                 const SampleConstants& c, int i, int m, double h, double leak_g,
-                                                 double piece_bridge, NoisePulses& pulses, Philox4x32Key key,
-                                                 std::uint32_t pixel, Emit& emit) {
-    const SampleConstants piece = refined_piece(c, i, m, h);
-    model.compare_bridged(s, yd + ny, ny, piece, leak_g, piece_bridge, pulses, key, pixel,
-                          PURPOSE_BRIDGE + 16u * static_cast<std::uint32_t>(i), emit);
-    s.y = yd + ny;
-    s.ny = ny;
+/// What refine_and_compare needs of the pieces of one level (length T = dt / 2^level): their
+/// bridge variance, the noise-free chain's decays over one, and the law of a piece's midpoint
+/// given its ends (the halves' transition Phi and innovation Q: mean Phi X_0 + K (X_1 - Phi^2
+/// X_0), covariance Q - K Phi Q with K = Q Phi^T (Phi Q Phi^T + Q)^-1, factor L).
+struct RefineLevel {
+    bool ready = false;
+    double bridge_var = 0;
+    double plausible_limit = 0;  // PixelModel::plausible_limit at the piece's bridge and chances
+    double pole_decay = 1, pole_ramp = 1, sf_decay = 1, sf_ramp = 1;
+    // the halves of a piece of this level (the next level's length)
+    double Pzz = 0, Pyz = 0, Pyy = 0, Kzz = 0, Kzy = 0, Kyz = 0, Kyy = 0, lzz = 0, lyz = 0, lyy = 0;
+};
+
+/// RefineLevel of pieces of length T behind the pole a (0: the follower alone) and the follower b.
+/// bridge_var: the piece's, where the caller has it (the whole interval's); else NaN.
+inline RefineLevel refine_level(double a, double b, double D, double T, double bridge_var) {
+    RefineLevel v;
+    v.ready = true;
+    if (a > 0.0) {
+        v.pole_decay = std::exp(-a * T);
+        v.pole_ramp = one_minus_exp_over(a * T);
+    }
+    v.sf_decay = std::exp(-b * T);
+    v.sf_ramp = one_minus_exp_over(b * T);
+    if (std::isnan(bridge_var)) {
+        NoiseCoeffs piece = noise_coeffs_interval(a, b, D, T);
+        noise_coeffs_bridge(piece, a, b, D, T);
+        bridge_var = piece.bridge_var;
+    }
+    v.bridge_var = bridge_var;
+    const NoiseCoeffs q = noise_coeffs_interval(a, b, D, 0.5 * T);
+    if (a > 0.0) {
+        const double Qzz = q.l_zz * q.l_zz, Qzy = q.l_zz * q.l_yz, Qyy = q.l_yz * q.l_yz + q.l_yy * q.l_yy;
+        const double Pzz = q.phi_zz, Pyz = q.phi_yz, Pyy = q.phi_yy;  // Phi = [[Pzz, 0], [Pyz, Pyy]]
+        // A = Q Phi^T; M = Phi A + Q (symmetric); K = A M^-1; C = Q - K A^T (A^T = Phi Q).
+        const double Azz = Qzz * Pzz, Azy = Qzz * Pyz + Qzy * Pyy;
+        const double Ayz = Qzy * Pzz, Ayy = Qzy * Pyz + Qyy * Pyy;
+        const double Mzz = Pzz * Azz + Qzz, Mzy = Pzz * Azy + Qzy, Myy = Pyz * Azy + Pyy * Ayy + Qyy;
+        const double det = Mzz * Myy - Mzy * Mzy;
+        v.Kzz = (Azz * Myy - Azy * Mzy) / det;
+        v.Kzy = (Azy * Mzz - Azz * Mzy) / det;
+        v.Kyz = (Ayz * Myy - Ayy * Mzy) / det;
+        v.Kyy = (Ayy * Mzz - Ayz * Mzy) / det;
+        const double Czz = Qzz - (v.Kzz * Azz + v.Kzy * Azy);
+        const double Czy = Qzy - (v.Kzz * Ayz + v.Kzy * Ayy);
+        const double Cyy = Qyy - (v.Kyz * Ayz + v.Kyy * Ayy);
+        v.lzz = Czz > 0.0 ? std::sqrt(Czz) : 0.0;
+        v.lyz = v.lzz > 0.0 ? Czy / v.lzz : 0.0;
+        v.lyy = std::sqrt(std::max(0.0, Cyy - v.lyz * v.lyz));
+        v.Pzz = Pzz;
+        v.Pyz = Pyz;
+        v.Pyy = Pyy;
+    } else {
+        // One OU process: the middle given the ends has mean phi y0 + phi / (1 + phi^2) (y1 -
+        // phi^2 y0) and variance Q / (1 + phi^2).
+        const double phi = q.phi_yy, Q = q.l_yy * q.l_yy, w = 1.0 + phi * phi;
+        v.Pyy = phi;
+        v.Kyy = phi / w;
+        v.lyy = std::sqrt(Q / w);
+    }
+    return v;
 }
 }  // namespace detail
 
 template <class Emit>
 void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double yd1, double nz1, double ny1,
-                                    const SampleConstants& c, double leak_g, double a, double D, NoisePulses& pulses,
-                                    Philox4x32Key key, std::uint32_t pixel, Emit& emit) const {
-    constexpr int MAX_LEVELS = 10;
-    int levels = 1;
-    while (levels < MAX_LEVELS && a * c.dt > pole_refine_ah(a) * static_cast<double>(1 << levels)) ++levels;
-    const int m = 1 << levels;
+                                    const SampleConstants& c, double leak_g, double a, double b, double D,
+                                    double bridge_var, double excursions, NoisePulses& pulses, Philox4x32Key key,
+                                    std::uint32_t pixel, Emit& emit) const {
+    const bool pole = a > 0.0;
+    // The deepest level: pieces of a h <= pole_refine_ah(a) behind the pole, b h <=
+    // SF_REFINE_BH with the follower alone.
+    const double rate = pole ? a : b, piece_rh = pole ? pole_refine_ah(a) : SF_REFINE_BH;
+    int deepest = 1;
+    while (deepest < MAX_REFINE_LEVELS && rate * c.dt > piece_rh * static_cast<double>(1u << deepest)) ++deepest;
+    const std::uint32_t m = 1u << deepest;
     const double h = c.dt / m;
-    const double b = sf_rate();
-    double nzs[(1 << MAX_LEVELS) + 1], nys[(1 << MAX_LEVELS) + 1];
-    nzs[0] = s.nz;
-    nys[0] = s.ny;
-    nzs[m] = nz1;
-    nys[m] = ny1;
+    // The levels' constants depend on (a, b, D, dt) alone: the same for every pixel of a
+    // uniform sky, so each thread keeps the last interval's (the same bits either way).
+    struct LevelCache {
+        double a = -1, b = -1, D = -1, dt = -1, bridge_var = -1, excursions = -1;
+        detail::RefineLevel levels[MAX_REFINE_LEVELS + 1];
+    };
+    static thread_local LevelCache cache;
+    if (!(cache.a == a && cache.b == b && cache.D == D && cache.dt == c.dt && cache.bridge_var == bridge_var &&
+          cache.excursions == excursions)) {
+        cache.a = a;
+        cache.b = b;
+        cache.D = D;
+        cache.dt = c.dt;
+        cache.bridge_var = bridge_var;
+        cache.excursions = excursions;
+        for (detail::RefineLevel& l : cache.levels) l.ready = false;
+    }
+    detail::RefineLevel* levels = cache.levels;
+    const auto level = [&](int l) -> const detail::RefineLevel& {
+        if (!levels[l].ready) {
+            const double share = static_cast<double>(1u << l);
+            levels[l] = detail::refine_level(a, b, D, l == 0 ? c.dt : c.dt / share,
+                                             l == 0 ? bridge_var : std::numeric_limits<double>::quiet_NaN());
+            // A piece's chances to cross: its share of the interval's, at least one.
+            levels[l].plausible_limit = plausible_limit(levels[l].bridge_var, std::max(1.0, excursions / share));
+        }
+        return levels[l];
+    };
+    // The pieces still to run, the last first: each its level, its end (in pieces of h) and
+    // the noise there. The piece run next starts where the one before ended (at `at`), at
+    // the state s holds, with the noise-free chain (x, z, yd) and the noise n_z there.
+    struct Pending {
+        int level;
+        std::uint32_t end;
+        double nz, ny;
+    };
+    Pending stack[MAX_REFINE_LEVELS + 2];
+    int top = 0;
+    stack[top++] = {0, m, nz1, ny1};
+    std::uint32_t at = 0;
+    const double x0 = pole ? s.x : s.z;  // without the pole the follower's input is x itself (s.z at c.t0)
+    double x_at = x0, z_at = pole ? s.z : x0, yd_at = s.y - s.ny, nz_at = s.nz;
     CounterStream normals(key, pixel, s.n, PURPOSE_REFINE);
-    double piece_bridge = 0.0;  // the pieces' bridge variance: noise_coeffs_bridge's at (a, b, D, h), from step 1
-    for (int step = m / 2; step >= 1; step /= 2) {
-        // X_mid | X_0, X_1 for two halves of length T = step h: mean Phi X_0 + K (X_1 -
-        // Phi^2 X_0), covariance Q - K Phi Q, with K = Q Phi^T (Phi Q Phi^T + Q)^-1.
-        const double T = step * h;
-        // Only the last level (T = h, the pieces' length) needs the bridge's variance.
-        NoiseCoeffs q = noise_coeffs_interval(a, b, D, T);
-        if (step == 1) {
-            noise_coeffs_bridge(q, a, b, D, T);
-            piece_bridge = q.bridge_var;
-        }
-        const double Qzz = q.l_zz * q.l_zz, Qzy = q.l_zz * q.l_yz, Qyy = q.l_yz * q.l_yz + q.l_yy * q.l_yy;
-        const double Pzz = q.phi_zz, Pyz = q.phi_yz, Pyy = q.phi_yy;  // Phi = [[Pzz, 0], [Pyz, Pyy]]
-        // A = Q Phi^T
-        const double Azz = Qzz * Pzz, Azy = Qzz * Pyz + Qzy * Pyy;
-        const double Ayz = Qzy * Pzz, Ayy = Qzy * Pyz + Qyy * Pyy;
-        // M = Phi A + Q (symmetric)
-        const double Mzz = Pzz * Azz + Qzz, Mzy = Pzz * Azy + Qzy, Myy = Pyz * Azy + Pyy * Ayy + Qyy;
-        const double det = Mzz * Myy - Mzy * Mzy;
-        // K = A M^-1
-        const double Kzz = (Azz * Myy - Azy * Mzy) / det, Kzy = (Azy * Mzz - Azz * Mzy) / det;
-        const double Kyz = (Ayz * Myy - Ayy * Mzy) / det, Kyy = (Ayy * Mzz - Ayz * Mzy) / det;
-        // C = Q - K A^T (A^T = Phi Q), and its Cholesky factor.
-        const double Czz = Qzz - (Kzz * Azz + Kzy * Azy);
-        const double Czy = Qzy - (Kzz * Ayz + Kzy * Ayy);
-        const double Cyy = Qyy - (Kyz * Ayz + Kyy * Ayy);
-        const double lzz = Czz > 0.0 ? std::sqrt(Czz) : 0.0;
-        const double lyz = lzz > 0.0 ? Czy / lzz : 0.0;
-        const double lyy = std::sqrt(std::max(0.0, Cyy - lyz * lyz));
-        for (int i = step; i < m; i += 2 * step) {
-            const double z0 = nzs[i - step], y0 = nys[i - step];
-            const double mz = Pzz * z0, my = Pyz * z0 + Pyy * y0;  // Phi X_0
-            const double ez = nzs[i + step] - Pzz * mz, ey = nys[i + step] - (Pyz * mz + Pyy * my);
-            const double g1 = normal_from_uniforms(normals.uniform(), normals.uniform());
-            const double g2 = normal_from_uniforms(normals.uniform(), normals.uniform());
-            nzs[i] = mz + Kzz * ez + Kzy * ey + lzz * g1;
-            nys[i] = my + Kyz * ez + Kyy * ey + lyz * g1 + lyy * g2;
-        }
-    }
-    // The pieces: the noise-free chain stepped exactly for the input linear in each piece
-    // (its end forced to the sample's own value), the comparator with the piece's bridge.
-    const double pole_decay = std::exp(-a * h), pole_ramp = one_minus_exp_over(a * h);
-    const double sf_decay = std::exp(-b * h), sf_ramp = one_minus_exp_over(b * h);
-    double x_prev = s.x, z_prev = s.z, yd_prev = s.y - s.ny;
-    for (int i = 1; i <= m; ++i) {
-        double xi, zi, ydi;
-        if (i == m) {
-            xi = x1;
-            zi = z1;
-            ydi = yd1;
+    while (top > 0) {
+        const Pending piece = stack[top - 1];
+        const detail::RefineLevel& lv = level(piece.level);
+        // The noise-free chain at the piece's end: exactly, for the input linear in it (the
+        // interval's end forced to the sample's own values).
+        double x_end, z_end, yd_end;
+        if (piece.end == m) {
+            x_end = x1;
+            z_end = pole ? z1 : x1;
+            yd_end = yd1;
         } else {
-            xi = s.x + (x1 - s.x) * (static_cast<double>(i) / m);
-            zi = detail::low_pass_exact(z_prev, x_prev, xi, pole_decay, pole_ramp);
-            ydi = detail::low_pass_exact(yd_prev, z_prev, zi, sf_decay, sf_ramp);
+            x_end = x0 + (x1 - x0) * (static_cast<double>(piece.end) / m);
+            z_end = pole ? detail::low_pass_exact(z_at, x_at, x_end, lv.pole_decay, lv.pole_ramp) : x_end;
+            yd_end = detail::low_pass_exact(yd_at, z_at, z_end, lv.sf_decay, lv.sf_ramp);
         }
-        detail::compare_refined_piece(*this, s, ydi, nys[i], c, i, m, h, leak_g, piece_bridge, pulses, key, pixel, emit);
-        x_prev = xi;
-        z_prev = zi;
-        yd_prev = ydi;
-    }
-}
-
-template <class Emit>
-void PixelModel::refine_sf_and_compare(PixelState& s, double x1, double yd1, double ny1, const SampleConstants& c, double leak_g,
-                                       double b, double D, NoisePulses& pulses, Philox4x32Key key, std::uint32_t pixel,
-                                       Emit& emit) const {
-    constexpr int MAX_LEVELS = 10;
-    int levels = 1;
-    while (levels < MAX_LEVELS && b * c.dt > SF_REFINE_BH * static_cast<double>(1 << levels)) ++levels;
-    const int m = 1 << levels;
-    const double h = c.dt / m;
-    double nys[(1 << MAX_LEVELS) + 1];
-    nys[0] = s.ny;
-    nys[m] = ny1;
-    CounterStream normals(key, pixel, s.n, PURPOSE_REFINE);
-    for (int step = m / 2; step >= 1; step /= 2) {
-        const NoiseCoeffs q = noise_coeffs_interval(0.0, b, D, step * h);
-        const double phi = q.phi_yy, Q = q.l_yy * q.l_yy, w = 1.0 + phi * phi;
-        const double gain = phi / w, sd = std::sqrt(Q / w);
-        for (int i = step; i < m; i += 2 * step) {
-            const double y0 = nys[i - step];
-            const double g1 = normal_from_uniforms(normals.uniform(), normals.uniform());
-            nys[i] = phi * y0 + gain * (nys[i + step] - phi * (phi * y0)) + sd * g1;
+        const double y_end = yd_end + piece.ny;
+        const SampleConstants span = detail::refined_span(c, at, piece.end, m, h);
+        if (piece.level == deepest || (piece.level > 0 && !crossing_within(s, y_end, span, leak_g, lv.plausible_limit))) {
+            // The comparator over the piece with its bridge (its draws keyed by the piece's
+            // end); the background's events due by its end are its own (compare takes them).
+            compare_bridged(s, y_end, piece.ny, span, leak_g, lv.bridge_var, pulses, key, pixel,
+                            PURPOSE_BRIDGE + 16u * piece.end, emit);
+            s.y = y_end;
+            s.ny = piece.ny;
+            x_at = x_end;
+            z_at = z_end;
+            yd_at = yd_end;
+            nz_at = piece.nz;
+            at = piece.end;
+            --top;
+            continue;
         }
-    }
-    const double piece_bridge = noise_coeffs_interval(0.0, b, D, h).bridge_var;
-    const double sf_decay = std::exp(-b * h), sf_ramp = one_minus_exp_over(b * h);
-    // Without the pole the follower's input is x itself (z = x, s.z its value at c.t0).
-    double x_prev = s.z, yd_prev = s.y - s.ny;
-    for (int i = 1; i <= m; ++i) {
-        double xi, ydi;
-        if (i == m) {
-            xi = x1;
-            ydi = yd1;
+        // Halve it: the noise at its middle given both ends.
+        double g1, g2;
+        normal_pair(normals.word(), normals.word(), g1, g2);
+        double mid_z = 0.0, mid_y;
+        if (pole) {
+            const double mz = lv.Pzz * nz_at, my = lv.Pyz * nz_at + lv.Pyy * s.ny;  // Phi X_0
+            const double ez = piece.nz - lv.Pzz * mz, ey = piece.ny - (lv.Pyz * mz + lv.Pyy * my);
+            mid_z = mz + lv.Kzz * ez + lv.Kzy * ey + lv.lzz * g1;
+            mid_y = my + lv.Kyz * ez + lv.Kyy * ey + lv.lyz * g1 + lv.lyy * g2;
         } else {
-            xi = s.z + (x1 - s.z) * (static_cast<double>(i) / m);
-            ydi = detail::low_pass_exact(yd_prev, x_prev, xi, sf_decay, sf_ramp);
+            const double phi = lv.Pyy;
+            mid_y = phi * s.ny + lv.Kyy * (piece.ny - phi * (phi * s.ny)) + lv.lyy * g1;
         }
-        detail::compare_refined_piece(*this, s, ydi, nys[i], c, i, m, h, leak_g, piece_bridge, pulses, key, pixel, emit);
-        x_prev = xi;
-        yd_prev = ydi;
+        stack[top - 1].level = piece.level + 1;
+        stack[top++] = {piece.level + 1, at + ((piece.end - at) >> 1), mid_z, mid_y};
     }
 }
 

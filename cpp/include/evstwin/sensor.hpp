@@ -368,7 +368,7 @@ public:
     /// take the fine samples, those whose levels still relax after a source left them
     /// (settle_time_s(), carried from step to step) and those whose long steps would be cut
     /// finer than the base samples where their noise may cross (PixelModel::
-    /// refine_pieces_per_s) take the base samples, and every other pixel one long exact step;
+    /// long_steps_cut_below) take the base samples, and every other pixel one long exact step;
     /// then all reach the step's end (or those the step names: SparseStep::reach_all). The noise, background
     /// clocks, leak, hot pixels and refractory keep their laws over any step (the continuous
     /// model; the documentation's noise model page), so the statistics are those of a dense
@@ -418,12 +418,14 @@ private:
     /// How many pixels ahead run()'s first pass over a block's states asks for their cache lines.
     /// Speed only.
     static constexpr std::size_t STATE_PREFETCH_AHEAD = 8;
-    /// run_sparse() samples a pixel at the base rate throughout where its long steps would be
-    /// refined (its noise's standard deviation over SPARSE_NOISY_SIGMAS of the smaller
-    /// threshold: crossing_plausible's reach is ~6.9 of them) into pieces that cost more than
-    /// the base samples (a refined piece, scalar, costs about SPARSE_PIECE_COST samples of
-    /// the vector kernel). Speed only: either way the statistics are the same.
-    static constexpr double SPARSE_NOISY_SIGMAS = 7.0;
+    /// run_sparse() samples a pixel at the base rate throughout where refine_and_compare would
+    /// cut its long steps into pieces shorter than SPARSE_PIECE_COST base intervals
+    /// (PixelModel::long_steps_cut_below): a piece of the finest level the bisection reaches
+    /// costs about two of its nodes (a midpoint's draw or a piece's comparator, scalar, ~60 ns
+    /// here), each about four quiet samples of the vector kernel. geo-stare's dark IMX636
+    /// pixel (pole at 18 /s, 100 Hz base rate) reaches pieces of ~110 ms, and its long steps
+    /// cost half its base samples (bench/bench_long_steps.py). Speed only: either way the
+    /// statistics are the same.
     static constexpr double SPARSE_PIECE_COST = 8.0;
     /// run_sparse() runs a step densely (every pixel at the base samples, the lit ones at
     /// the fine ones) where more than this share of the pixels takes the base samples anyway.

@@ -5,8 +5,8 @@
 //   - the pixels some source's light touches (the lit list) take the group's fine samples,
 //     after one long step at the static light to the group's start if they stood earlier;
 //   - those whose levels still relax after a source left them (settle_until_), and those
-//     whose long steps would cost more than the base samples (refine_pieces_per_s), take its
-//     base samples, after the same long step;
+//     whose long steps would cost more than the base samples (long_steps_cut_below), take
+//     its base samples, after the same long step;
 //   - the others wait.
 // Then one run() of the static map at the step's end moves every pixel that stands earlier
 // there in one long exact step (run() skips the pixels already there); or, where the step
@@ -143,13 +143,10 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     }
     for (const std::uint32_t px : settling_) check_before_step(px);
 
-    // --- the pixels that take the base samples throughout: those whose noise comes within
-    // reach of a threshold in a long step (crossing_plausible then refines it: ~6.9 of its
-    // standard deviations) and whose refined pieces would cost more than the base samples (a
-    // bright pixel behind a fast pole, a noisy dim one behind a slow pole, the follower alone
-    // at a high cutoff). For them long steps cost more than they save: geo-stare's sky on the
-    // IMX636 took 121 s for one 4 s step of the whole array, against 6 s for 4 s of base
-    // samples. Speed only: either way the pixel's statistics are the same. ---
+    // --- the pixels that take the base samples throughout: those whose long steps
+    // refine_and_compare would cut into pieces shorter than SPARSE_PIECE_COST base intervals
+    // (their noise stays within reach of a threshold that long). For them long steps cost
+    // more than they save. Speed only: either way the pixel's statistics are the same. ---
     double base_dt = std::numeric_limits<double>::infinity();
     {
         double prev = t_begin;
@@ -162,7 +159,7 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     if (std::isfinite(base_dt)) {
         // Judged again only where the light or the base interval changed since the last step
         // (a drifting star field changes a few percent of the pixels a step).
-        const double most_pieces_per_s = 1.0 / (SPARSE_PIECE_COST * base_dt);
+        const double piece_s = SPARSE_PIECE_COST * base_dt;
         const double theta = std::min(model_.p.theta_on, model_.p.theta_off);
         const bool all = sparse_busy_.size() != npix || base_dt != sparse_busy_dt_;
         if (all) {
@@ -170,12 +167,17 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             sparse_static_.assign(npix, std::numeric_limits<double>::quiet_NaN());
             sparse_busy_dt_ = base_dt;
         }
+        double last_rate = std::numeric_limits<double>::quiet_NaN();  // a uniform sky: judged once
+        bool last_busy = false;
         for (std::size_t i = 0; i < npix; ++i) {
             const double rate = step.static_rate[i];
             if (rate != sparse_static_[i]) {
                 sparse_static_[i] = rate;
-                sparse_busy_[i] = model_.refine_pieces_per_s(rate) > most_pieces_per_s &&
-                                  SPARSE_NOISY_SIGMAS * model_.stationary_noise_sigma(rate) > theta;
+                if (rate != last_rate) {
+                    last_rate = rate;
+                    last_busy = model_.long_steps_cut_below(rate, theta, piece_s);
+                }
+                sparse_busy_[i] = last_busy;
             }
             if (sparse_busy_[i]) busy.push_back(static_cast<std::uint32_t>(i));
         }
