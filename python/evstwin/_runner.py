@@ -305,17 +305,27 @@ class _Runner:
         empty_i, empty_f = np.zeros(0, np.int64), np.zeros(0)
         sync_every = max(1, math.ceil(SPARSE_SYNC_S / unit_s - 1e-9))
 
+        # Where each slow source is drawn: moved only once it has drifted max_shift_px from
+        # there (a star at 0.07 px/s every 3.6 s at 0.25 px), so a unit's end changes the
+        # light of the few stars that moved, not of every star (each changed pixel takes a
+        # long step there). The same bound on the position's error as drawing each unit at
+        # its end, which the slow ones' speed keeps under max_shift_px.
+        drawn_x = np.full(len(self.moving), np.nan)
+        drawn_y = np.full(len(self.moving), np.nan)
+
         def unit_light(b: int, slot: int) -> np.ndarray:
             """The static light of the unit ending at base sample b: the static map, with the
-            slow sources where they are at its end (in buffer slot % 2: this unit's and the
+            slow sources where they were last drawn (in buffer slot % 2: this unit's and the
             next's)."""
             if not slow_groups:
                 return self.static_map
             out = self._buffer(f"unit_frame{slot % 2}", (sc.height, sc.width))
             x, y, f = self._sources(np.array([b * self.dt]), truth=not fast_groups)
+            moved = ~(np.hypot(x[0] - drawn_x, y[0] - drawn_y) <= sc.max_shift_px)  # NaN: not drawn yet
+            drawn_x[moved], drawn_y[moved] = x[0, moved], y[0, moved]
             out[:] = self.static_map
             for shape, cols in slow_groups:
-                psf.render_points(sc.width, sc.height, x[0, cols], y[0, cols], f[0, cols], shape, out=out)
+                psf.render_points(sc.width, sc.height, drawn_x[cols], drawn_y[cols], f[0, cols], shape, out=out)
             return out
 
         pending: list[_Chunk] = []

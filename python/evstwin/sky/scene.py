@@ -431,15 +431,21 @@ def stars_to_targets(ctx: _Context, grid: np.ndarray, attitude: Attitude, direct
     el = ctx.elevation_deg(grid, directions[seen])
     out: list[Target] = []
     t_mid = grid.size // 2
-    for col, j in enumerate(np.flatnonzero(seen)):
+    tt = grid - grid[0]
+    seen_j = np.flatnonzero(seen)
+    # a straight line through each track, all stars in one least-squares solve
+    if grid.size > 1 and seen_j.size:
+        (vxs, x0s), (vys, y0s) = np.polyfit(tt, x[:, seen_j], 1), np.polyfit(tt, y[:, seen_j], 1)
+    else:
+        vxs, vys = np.zeros(seen_j.size), np.zeros(seen_j.size)
+        x0s, y0s = x[0, seen_j], y[0, seen_j]
+    for col, j in enumerate(seen_j):
         label = f"star {j} mag={mag_v[j]:.3f}"  # j: its place among the drawn stars, whatever is kept
         xs, ys, on = xc[:, j], yc[:, j], inside[:, j]
         el_j = el[:, col]
         if np.all(front[:, j]) and el_j[t_mid] > 0.0:
             # a straight line (or a point) through the track, if one holds it
-            tt = grid - grid[0]
-            vx, x0 = np.polyfit(tt, x[:, j], 1) if grid.size > 1 else (0.0, x[0, j])
-            vy, y0 = np.polyfit(tt, y[:, j], 1) if grid.size > 1 else (0.0, y[0, j])
+            vx, x0, vy, y0 = vxs[col], x0s[col], vys[col], y0s[col]
             resid = np.max(np.hypot(x0 + vx * tt - x[:, j], y0 + vy * tt - y[:, j]))
             if resid <= LINEAR_TOLERANCE_PX:
                 flux = float(ctx.optics.flux_from_magnitude(mag_v[j] + photometry.extinction_mag(el_j[t_mid],
