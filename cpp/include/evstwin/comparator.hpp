@@ -161,6 +161,9 @@ EVSTWIN_ALWAYS_INLINE void PixelModel::compare_bridged(PixelState& s, double y, 
                 double tc = 0.0;
                 if (decided && pre->timed) {
                     tc = pre->tc;  // bridge_decisions drew it, from the same words
+                } else if (!decided && detail::bridge_cannot_fire(th_on - d_start, th_on - d_end, th_off + d_start,
+                                                                   th_off + d_end, mid)) {
+                    fires = false;  // no uniform could fire it: none drawn
                 } else {
                     PrefilledStream more(key, pixel, s.n, purpose, decided ? &pre->words : nullptr);
                     const double u = more.uniform();

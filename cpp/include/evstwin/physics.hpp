@@ -48,6 +48,16 @@ inline bool below_exp_neg(double u, double e) {
     return u < std::exp(-e);
 }
 
+/// Whether bridge_fires() is false for every uniform uniform_open() gives (u >= 2^-33): no
+/// variance, or both exponents above 24 (two e^-24 sum to 7.6e-11, below 2^-33). compare_bridged()
+/// then draws no uniform: a counter-based draw changes nothing else, so the events are the
+/// same, and a long step's refined pieces that cannot fire cost no Philox call.
+inline bool bridge_cannot_fire(double on0, double on1, double off0, double off1, double mid) {
+    if (!(mid > 0.0)) return true;
+    const double e_on = on0 * on1 / (2.0 * mid), e_off = off0 * off1 / (2.0 * mid);
+    return (e_on > 24.0) & (e_off > 24.0);
+}
+
 /// Whether a uniform u in (0, 1) fires a Brownian bridge that crosses the ON level with
 /// probability bridge_crossing_probability(on0, on1, mid) = p_on and the OFF one with p_off
 /// (u < p_on + p_off), and at which (on: u < p_on): the decisions compare_bridged() takes,

@@ -112,7 +112,7 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
     int deepest = 1;
     while (deepest < MAX_REFINE_LEVELS && rate * c.dt > piece_rh * static_cast<double>(1u << deepest)) ++deepest;
     const std::uint32_t m = 1u << deepest;
-    const double h = c.dt / m;
+    const double h = c.dt / m, inv_m = 1.0 / m;  // m a power of two: x * inv_m is x / m exactly
     // The levels' constants depend on (a, b, D, dt) alone: the same for every pixel of a
     // uniform sky, so each thread keeps the last interval's (the same bits either way).
     struct LevelCache {
@@ -167,7 +167,7 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
             z_end = pole ? z1 : x1;
             yd_end = yd1;
         } else {
-            x_end = x0 + (x1 - x0) * (static_cast<double>(piece.end) / m);
+            x_end = x0 + (x1 - x0) * (static_cast<double>(piece.end) * inv_m);
             z_end = pole ? detail::low_pass_exact(z_at, x_at, x_end, lv.pole_decay, lv.pole_ramp) : x_end;
             yd_end = detail::low_pass_exact(yd_at, z_at, z_end, lv.sf_decay, lv.sf_ramp);
         }
