@@ -100,9 +100,13 @@ def test_steady_star_with_a_halo_ghost_at_its_old_light_and_a_pre_roll() -> None
 
 
 def test_short_window_simulates_and_its_star_moves() -> None:
-    res = simulate(NAME, duration_s=0.2, sets=[f"sensor.roi={list(ROI)}"])
+    # A 1 s pre-roll in place of the scenario's 12 s (the test above checks that value): the
+    # window still starts after a pre-roll whose events are dropped, and the run takes ~2 s of
+    # engine time in place of ~22 s (the 12 s at 20 Hz were nine tenths of it).
+    res = simulate(NAME, duration_s=0.2, sets=[f"sensor.roi={list(ROI)}", "sampling.pre_roll_s=1"])
     ev = res.events
     assert res.meta["width"] == ROI[2] and res.meta["height"] == ROI[3]
+    assert res.meta["pre_roll_s"] == pytest.approx(1.0)
     assert len(ev) > 1000  # the moving core fires in every frame
     assert 0 < int(res.n_on) < len(ev) and ev["t"].min() >= 0  # the pre-roll's events are dropped
     assert int(ev["x"].max()) < ROI[2] and int(ev["y"].max()) < ROI[3]
