@@ -100,6 +100,12 @@ inline RefineLevel refine_level(double a, double b, double D, double T, double b
 }
 }  // namespace detail
 
+// A piece's bridge draws are keyed PURPOSE_BRIDGE + 16 x its end (up to 2^MAX_REFINE_LEVELS),
+// each with a few blocks of its own: they must stay below the next purpose's range.
+static_assert(static_cast<std::uint64_t>(PURPOSE_BRIDGE) + 16u * ((1ull << PixelModel::MAX_REFINE_LEVELS) + 1u) <
+                  static_cast<std::uint64_t>(PURPOSE_INIT),
+              "refine_and_compare's bridge keys would reach PURPOSE_INIT");
+
 template <class Emit>
 void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double yd1, double nz1, double ny1,
                                     const SampleConstants& c, double leak_g, double a, double b, double D,
