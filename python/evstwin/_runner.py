@@ -61,14 +61,18 @@ class _LinearColumns:
         self.flux = np.array(flux, np.float64)
         self.max_speed_px_s = max((t.max_speed_px_s(0.0, 0.0) for t in lin), default=0.0)
 
-    def sample(self, t: np.ndarray, x: np.ndarray, y: np.ndarray, f: np.ndarray) -> None:
-        """Fill their columns of the (T, S) arrays x, y [px] and f [photons/s] at times t [s]."""
-        if not self.cols.size:
+    def sample(self, t: np.ndarray, x: np.ndarray, y: np.ndarray, f: np.ndarray,
+               only: np.ndarray | None = None) -> None:
+        """Fill their columns of the (T, S) arrays x, y [px] and f [photons/s] at times t [s]
+        (only those among the columns ``only``, where given)."""
+        keep = slice(None) if only is None else np.isin(self.cols, only)
+        cols = self.cols[keep]
+        if not cols.size:
             return
-        dt = t[:, None] - self.t0[None, :]
-        x[:, self.cols] = self.x0 + self.vx * dt
-        y[:, self.cols] = self.y0 + self.vy * dt
-        f[:, self.cols] = self.flux
+        dt = t[:, None] - self.t0[None, keep]
+        x[:, cols] = self.x0[keep] + self.vx[keep] * dt
+        y[:, cols] = self.y0[keep] + self.vy[keep] * dt
+        f[:, cols] = self.flux[keep]
 
 
 SUB_SAMPLED_UNIT_SAMPLES = 150
@@ -302,6 +306,10 @@ class _Runner:
                 slow[j] = True
         fast_groups = [(shape, cols[~slow[cols]]) for shape, cols in self._fine_groups if (~slow[cols]).any()]
         slow_groups = [(shape, cols[slow[cols]]) for shape, cols in self._fine_groups if slow[cols].any()]
+        # Each call samples only the sources it draws (thousands of slow stars at a unit's
+        # fine times would be most of the scene layer's work).
+        fast_cols = np.flatnonzero(~slow)
+        slow_cols = np.flatnonzero(slow)
         npix_bits = (npix - 1).bit_length()
         empty_i, empty_f = np.zeros(0, np.int64), np.zeros(0)
         sync_every = max(1, math.ceil(SPARSE_SYNC_S / unit_s - 1e-9))
@@ -321,8 +329,9 @@ class _Runner:
             if not slow_groups:
                 return self.static_map
             out = self._buffer(f"unit_frame{slot % 2}", (sc.height, sc.width))
-            x, y, f = self._sources(np.array([b * self.dt]), truth=not fast_groups)
-            moved = ~(np.hypot(x[0] - drawn_x, y[0] - drawn_y) <= sc.max_shift_px)  # NaN: not drawn yet
+            x, y, f = self._sources(np.array([b * self.dt]), truth=not fast_groups, cols=slow_cols)
+            shift = np.hypot(x[0, slow_cols] - drawn_x[slow_cols], y[0, slow_cols] - drawn_y[slow_cols])
+            moved = slow_cols[~(shift <= sc.max_shift_px)]  # NaN: not drawn yet
             drawn_x[moved], drawn_y[moved] = x[0, moved], y[0, moved]
             out[:] = self.static_map
             for shape, cols in slow_groups:
@@ -343,7 +352,7 @@ class _Runner:
             light_sample, light_pixel, light_rate = empty_i, empty_i, empty_f
             if fast_groups:
                 self.sub_sampled_chunks += n_sub > 1
-                x, y, f = self._sources(t)
+                x, y, f = self._sources(t, cols=fast_cols)
                 parts = list(self._contribution_parts(x, y, f, fast_groups, stride=1 << npix_bits))
                 if parts:
                     flat = np.concatenate([c[0] for c in parts])
@@ -394,15 +403,23 @@ class _Runner:
         speed = max(speed, self._linear.max_speed_px_s)
         return max(1, math.ceil(speed * self.dt / self.scene.max_shift_px - 1e-9))
 
-    def _sources(self, t: np.ndarray, truth: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _sources(self, t: np.ndarray, truth: bool = True,
+                 cols: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The sources' (T, S) positions and fluxes at the times t, written to the ground truth
-        (new times at or after 0) unless ``truth`` is False."""
+        (new times at or after 0) unless ``truth`` is False. With ``cols``, only those columns
+        (and the tracked ones, where the truth is written) are filled; the others are
+        undefined."""
         n = len(self.moving)
         x = np.empty((t.size, n))
         y = np.empty((t.size, n))
         f = np.empty((t.size, n))
-        self._linear.sample(t, x, y, f)
+        if cols is not None and truth:
+            cols = np.union1d(cols, np.arange(len(self.track_names)))
+        self._linear.sample(t, x, y, f, only=cols)
+        wanted = None if cols is None else set(cols.tolist())
         for j in self._linear.others:
+            if wanted is not None and j not in wanted:
+                continue
             target = self.moving[j]
             x[:, j], y[:, j] = target.position_px(t)
             f[:, j] = target.flux_ph_s(t)
