@@ -439,6 +439,14 @@ def stars_to_targets(ctx: _Context, grid: np.ndarray, attitude: Attitude, direct
     else:
         vxs, vys = np.zeros(seen_j.size), np.zeros(seen_j.size)
         x0s, y0s = x[0, seen_j], y[0, seen_j]
+    # each star's flux at the middle of the run (where it stands above the horizon there), in
+    # one call: the extinction and the optics' conversion for every star at once
+    el_mid = el[t_mid] if seen_j.size else np.zeros(0)
+    up = el_mid > 0.0
+    flux_mid = np.zeros(seen_j.size)
+    if np.any(up):
+        flux_mid[up] = np.asarray(ctx.optics.flux_from_magnitude(
+            mag_v[seen_j[up]] + photometry.extinction_mag(el_mid[up], ctx.k_ext)), np.float64)
     for col, j in enumerate(seen_j):
         label = f"star {j} mag={mag_v[j]:.3f}"  # j: its place among the drawn stars, whatever is kept
         xs, ys, on = xc[:, j], yc[:, j], inside[:, j]
@@ -448,8 +456,7 @@ def stars_to_targets(ctx: _Context, grid: np.ndarray, attitude: Attitude, direct
             vx, x0, vy, y0 = vxs[col], x0s[col], vys[col], y0s[col]
             resid = np.max(np.hypot(x0 + vx * tt - x[:, j], y0 + vy * tt - y[:, j]))
             if resid <= LINEAR_TOLERANCE_PX:
-                flux = float(ctx.optics.flux_from_magnitude(mag_v[j] + photometry.extinction_mag(el_j[t_mid],
-                                                                                                   ctx.k_ext)))
+                flux = float(flux_mid[col])
                 if math.hypot(vx, vy) * (grid[-1] - grid[0]) <= LINEAR_TOLERANCE_PX:
                     out.append(StaticTarget(float(np.mean(x[:, j])), float(np.mean(y[:, j])), flux, label=label))
                 else:
