@@ -167,8 +167,10 @@ class _Runner:
         # pixel a source ever passed sub-sampled for a quarter second.
         cutoff = scene.params.cutoff_hz
         self.settle_s = 5.0 / (2.0 * math.pi * cutoff) if cutoff is not None else 0.0
-        self.hot_until = np.full(scene.width * scene.height, -np.inf)
-        self._column = np.zeros(scene.width * scene.height, np.int64)  # pixel -> column of the hot list
+        # The sub-sampled dense path's per-pixel tables (16 bytes a pixel: 15 MB for the
+        # IMX636), made when it first runs: a stepped run never needs them.
+        self._hot_until: np.ndarray | None = None
+        self._column_of: np.ndarray | None = None
         # The sensor's readout (rate limit, FIFO, timestamp tick) on each chunk's events as it
         # comes out of the engine: its state carries over, so the chunking changes nothing.
         self.readout = None if scene.readout is None else Readout.from_params(scene.readout)
@@ -232,6 +234,7 @@ class _Runner:
                 bar.set_postfix_str(f"pre-roll {done:.1f}/{self.n_pre * self.dt_pre:.1f} s"
                                     if stop <= self.n_pre else "")
         if self.static_every > 1:
+            self._buffers.pop("frames", None)  # the dense samples' frames: not needed again
             yield from self._stepped_chunks(bar)
             return
         a = 0
@@ -496,6 +499,20 @@ class _Runner:
                 yield from psf.contributions(sc.width, sc.height, x[t0:t1, cols].reshape(-1),
                                              y[t0:t1, cols].reshape(-1), f[t0:t1, cols].reshape(-1), shape,
                                              offset=sample * npix)
+
+    @property
+    def hot_until(self) -> np.ndarray:
+        """Each pixel's end of fine sampling [s] (-inf: none), flat."""
+        if self._hot_until is None:
+            self._hot_until = np.full(self.scene.width * self.scene.height, -np.inf)
+        return self._hot_until
+
+    @property
+    def _column(self) -> np.ndarray:
+        """Pixel -> its column in the hot list (valid for the pixels of the current list)."""
+        if self._column_of is None:
+            self._column_of = np.zeros(self.scene.width * self.scene.height, np.int64)
+        return self._column_of
 
     def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """A C-contiguous float64 array of ``shape``, its memory reused from the last call with
