@@ -199,6 +199,7 @@ TEST(huge_mean_counts_stay_defined) {
     // count must saturate, not overflow (undefined behaviour, caught by the sanitizer build).
     PixelParams p;  // photon shot noise and dark current on; eq. 12-15 noise off (it bounds dt)
     p.shot_noise_rate_hz = 0.0;
+    p.leak_rate_hz = 0.0;  // the leak would fire 6.4 million events a pixel over the two years
     Sensor s(2, 1, p, 3, 1);
     const double rate[6] = {1e20, 1e20, 1e6, 1e20, 1e20, 1e20};
     const double t[3] = {0.0, 3.2e7, 6.4e7};

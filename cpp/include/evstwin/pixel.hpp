@@ -86,6 +86,11 @@ struct PixelModel {
     /// The deepest cut of refine_and_compare: 2^20 pieces, enough for a h <= 1 over 4 s behind
     /// a 40 kHz pole. It cuts only where a crossing stays plausible, so depth costs little.
     static constexpr int MAX_REFINE_LEVELS = 20;
+    /// The most halvings of one interval (then every piece left runs whole): 16 times the
+    /// 1,024 pieces an interval was cut into evenly before the cuts were adaptive. A noisy
+    /// pixel's 4 s step takes ~35 (geo-stare's); only a line that crosses a level in nearly
+    /// every piece (a leak firing every few seconds over a sample a year long) reaches it.
+    static constexpr int MAX_REFINE_SPLITS = 1 << 14;
 
     explicit PixelModel(const PixelParams& params) : p(params) {
         validate(p);

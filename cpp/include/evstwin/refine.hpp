@@ -159,6 +159,7 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
     int top = 0;
     stack[top++] = {0, m, nz1, ny1};
     std::uint32_t at = 0;
+    int splits = 0;
     const double x0 = pole ? s.x : s.z;  // without the pole the follower's input is x itself (s.z at c.t0)
     double x_at = x0, z_at = pole ? s.z : x0, yd_at = s.y - s.ny, nz_at = s.nz;
     CounterStream normals(key, pixel, s.n, PURPOSE_REFINE);
@@ -179,7 +180,11 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
         }
         const double y_end = yd_end + piece.ny;
         const SampleConstants span = detail::refined_span(c, at, piece.end, m, h);
-        if (piece.level == deepest || (piece.level > 0 && !crossing_within(s, y_end, span, leak_g, lv.plausible_limit))) {
+        // A piece is run whole at the deepest level, where no crossing is plausible, or once
+        // the interval has been halved MAX_REFINE_SPLITS times (a line that crosses a level in
+        // every piece: a leak firing every few seconds over a year-long sample).
+        if (piece.level == deepest || splits == MAX_REFINE_SPLITS ||
+            (piece.level > 0 && !crossing_within(s, y_end, span, leak_g, lv.plausible_limit))) {
             // The comparator over the piece with its bridge (its draws keyed by the piece's
             // end); the background's events due by its end are its own (compare takes them).
             compare_bridged(s, y_end, piece.ny, span, leak_g, lv.bridge_var, pulses, key, pixel,
@@ -207,6 +212,7 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
             const double phi = lv.Pyy;
             mid_y = phi * s.ny + lv.Kyy * (piece.ny - phi * (phi * s.ny)) + lv.lyy * g1;
         }
+        ++splits;
         stack[top - 1].level = piece.level + 1;
         stack[top++] = {piece.level + 1, at + ((piece.end - at) >> 1), mid_z, mid_y};
     }

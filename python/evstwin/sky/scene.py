@@ -433,12 +433,14 @@ def stars_to_targets(ctx: _Context, grid: np.ndarray, attitude: Attitude, direct
     t_mid = grid.size // 2
     tt = grid - grid[0]
     seen_j = np.flatnonzero(seen)
-    # a straight line through each track, all stars in one least-squares solve
-    if grid.size > 1 and seen_j.size:
-        (vxs, x0s), (vys, y0s) = np.polyfit(tt, x[:, seen_j], 1), np.polyfit(tt, y[:, seen_j], 1)
-    else:
-        vxs, vys = np.zeros(seen_j.size), np.zeros(seen_j.size)
-        x0s, y0s = x[0, seen_j], y[0, seen_j]
+    # a straight line through each track in front of the sensor throughout (elsewhere its
+    # positions are NaN), all of them in one least-squares solve
+    vxs, vys = np.zeros(seen_j.size), np.zeros(seen_j.size)
+    x0s, y0s = x[0, seen_j].copy(), y[0, seen_j].copy()
+    whole = np.all(front[:, seen_j], axis=0)
+    if grid.size > 1 and np.any(whole):
+        fit = seen_j[whole]
+        (vxs[whole], x0s[whole]), (vys[whole], y0s[whole]) = np.polyfit(tt, x[:, fit], 1), np.polyfit(tt, y[:, fit], 1)
     # each star's flux at the middle of the run (where it stands above the horizon there), in
     # one call: the extinction and the optics' conversion for every star at once
     el_mid = el[t_mid] if seen_j.size else np.zeros(0)
