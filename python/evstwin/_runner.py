@@ -93,8 +93,8 @@ SPARSE_SYNC_S = 8.0
 steps per pixel (``sampling.static_step_s``) [s]. In between, a pixel whose light stays
 constant waits and crosses the period in one long step; its events come out at the period's
 end, sorted with the others'. A longer period spares full-frame steps (each reads and writes
-every pixel's state, 0.4 GB for the IMX636 array: ~0.1 s on 2 cores, a quiet pixel's long
-step costing what its cost does not depend on) and holds more events back."""
+every pixel's state, 0.4 GB for the IMX636 array, at a cost that does not depend on the
+period's length) and holds more events back."""
 
 _Chunk = tuple[np.ndarray, "np.ndarray | None"]
 """A chunk of events (sorted by t) and their labels (None when the runner keeps none)."""

@@ -316,12 +316,18 @@ private:
     double sd_, c_, k_, held_, cross_;
 };
 
+/// The exponent e of bridge_crossing_probability() = exp(-e): 2 u0 u1 / (sigma^2 T) with
+/// sigma^2 T = 4 mid_var.
+EVSTWIN_ALWAYS_INLINE double bridge_exponent(double u0, double u1, double mid_var) {
+    return u0 * u1 / (2.0 * mid_var);
+}
+
 /// Probability that a Brownian bridge whose distance to a level is u0 > 0 and u1 > 0 at the
 /// ends of an interval, with variance `mid_var` at the middle, touches the level in between:
-/// exp(-2 u0 u1 / (sigma^2 T)) with sigma^2 T = 4 mid_var.
+/// exp(-bridge_exponent).
 inline double bridge_crossing_probability(double u0, double u1, double mid_var) {
     if (!(mid_var > 0.0)) return 0.0;
-    const double e = u0 * u1 / (2.0 * mid_var);
+    const double e = bridge_exponent(u0, u1, mid_var);
     // Below exp(-40) = 4e-18 a crossing would not happen once in 1e17 pixel-samples (a year of
     // a megapixel sensor at 1 kHz): 0 saves the exp for the pixels far from both levels.
     return e > 40.0 ? 0.0 : std::exp(-e);

@@ -54,7 +54,7 @@ inline bool below_exp_neg(double u, double e) {
 /// same, and a long step's refined pieces that cannot fire cost no Philox call.
 inline bool bridge_cannot_fire(double on0, double on1, double off0, double off1, double mid) {
     if (!(mid > 0.0)) return true;
-    const double e_on = on0 * on1 / (2.0 * mid), e_off = off0 * off1 / (2.0 * mid);
+    const double e_on = bridge_exponent(on0, on1, mid), e_off = bridge_exponent(off0, off1, mid);
     return (e_on > 24.0) & (e_off > 24.0);
 }
 
@@ -70,7 +70,7 @@ inline bool bridge_fires(double u, double on0, double on1, double off0, double o
         return false;
     }
     // The exponents as bridge_crossing_probability forms them; above 40 it gives 0.
-    const double e_on = on0 * on1 / (2.0 * mid), e_off = off0 * off1 / (2.0 * mid);
+    const double e_on = bridge_exponent(on0, on1, mid), e_off = bridge_exponent(off0, off1, mid);
     // (A negative or NaN exponent, which the comparator's callers never form, goes to the exps.)
     const bool in_range = (e_on >= 0.0) & (e_off >= 0.0);
     const double q_on = !in_range || e_on > 40.0 ? 0.0 : exp_neg_bracket(e_on);

@@ -88,8 +88,8 @@ struct PixelModel {
     static constexpr int MAX_REFINE_LEVELS = 20;
     /// The most halvings of one interval (then every piece left runs whole): 16 times the
     /// 1,024 pieces an interval was cut into evenly before the cuts were adaptive. A noisy
-    /// pixel's 4 s step takes ~35 (geo-stare's); only a line that crosses a level in nearly
-    /// every piece (a leak firing every few seconds over a sample a year long) reaches it.
+    /// pixel's long step takes far fewer; only a line that crosses a level in nearly every
+    /// piece (a leak firing every few seconds over a sample a year long) reaches it.
     static constexpr int MAX_REFINE_SPLITS = 1 << 14;
 
     explicit PixelModel(const PixelParams& params) : p(params) {

@@ -1,5 +1,5 @@
-// An interval's refinement where a crossing is plausible (the noise model page, "Long
-// intervals"): the noise at cuts of the interval drawn exactly given both ends (a Levy bridge
+// An interval's refinement where a crossing is plausible (the noise model page, "Adaptive
+// cuts"): the noise at cuts of the interval drawn exactly given both ends (a Levy bridge
 // construction), the noise-free chain stepped through the cuts, and the comparator with each
 // piece's bridge. The cuts are adaptive: a piece is halved only while a crossing in it stays
 // plausible (the test continuous_finish applies to the whole interval, with the piece's own

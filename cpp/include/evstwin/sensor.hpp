@@ -421,11 +421,11 @@ private:
     /// run_sparse() samples a pixel at the base rate throughout where refine_and_compare would
     /// cut its long steps into pieces shorter than SPARSE_PIECE_COST base intervals
     /// (PixelModel::long_steps_cut_below): a piece of the finest level the bisection reaches
-    /// costs about two of its nodes (a midpoint's draw or a piece's comparator, scalar, ~60 ns
-    /// here), each about four quiet samples of the vector kernel. geo-stare's dark IMX636
-    /// pixel (pole at 18 /s, 100 Hz base rate) reaches pieces of ~110 ms, and its long steps
-    /// cost half its base samples (bench/bench_long_steps.py). Speed only: either way the
-    /// statistics are the same.
+    /// costs about two of its nodes (a midpoint's draw or a piece's comparator, scalar), each
+    /// about four quiet samples of the vector kernel. geo-stare's dark IMX636 pixel (pole at
+    /// 18 /s, 100 Hz base rate) passes the test, and its long steps cost a little less than its
+    /// base samples (bench/bench_long_steps.py). Speed only: either way the statistics are the
+    /// same.
     static constexpr double SPARSE_PIECE_COST = 8.0;
     /// run_sparse() runs a step densely (every pixel at the base samples, the lit ones at
     /// the fine ones) where more than this share of the pixels takes the base samples anyway.
