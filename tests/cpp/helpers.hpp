@@ -35,9 +35,25 @@ inline PixelParams ideal() {
     return p;
 }
 
+template <class T>
+bool same_field(const T& a, const T& b) {
+    return std::memcmp(&a, &b, sizeof a) == 0;
+}
+
+/// A hot pixel's clocks compare by what they hold, not by where they are (below).
+inline bool same_field(const HotBox& a, const HotBox& b);
+
 template <class A, class B, std::size_t... I>
 bool same_bits(const A& a, const B& b, std::index_sequence<I...>) {
-    return ((std::memcmp(&std::get<I>(a), &std::get<I>(b), sizeof(std::get<I>(a))) == 0) && ...);
+    return (same_field(std::get<I>(a), std::get<I>(b)) && ...);
+}
+
+/// Both empty, or the same bits in every field.
+inline bool same_field(const HotBox& a, const HotBox& b) {
+    if (!a || !b) return !a && !b;
+    const auto fa = hot_state_fields(*a);
+    const auto fb = hot_state_fields(*b);
+    return same_bits(fa, fb, std::make_index_sequence<std::tuple_size<decltype(fa)>::value>{});
 }
 
 /// Whether two states hold the same bits in every field (state_fields: a field added to

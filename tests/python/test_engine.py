@@ -781,13 +781,13 @@ def test_an_event_flood_stops_at_max_events_before_memory_runs_out() -> None:
 def test_sizes_and_arguments_out_of_range_are_value_errors() -> None:
     # Issue 9: a 30000 x 30000 sensor ended in MemoryError after minutes; huge integers were
     # pybind11's multi-line "incompatible function arguments" TypeError.
-    # 224 bytes of state a pixel (sizeof(PixelState)); the figure is the engine's own: its C++
+    # 176 bytes of state a pixel (sizeof(PixelState)); the figure is the engine's own: its C++
     # check, reached directly, names the same size (rounded to whole gigabytes).
-    assert evstwin.sensor.STATE_BYTES_PER_PIXEL == 224
+    assert evstwin.sensor.STATE_BYTES_PER_PIXEL == 176
     with pytest.raises(ValueError, match=r"width \* height must be at most 67108864 pixels.*width=30000, "
-                                         r"height=30000: 900000000 pixels, 202 GB"):
+                                         r"height=30000: 900000000 pixels, 158 GB"):
         Sensor(30000, 30000)
-    with pytest.raises(ValueError, match=r"height=30000: 900000000 pixels, 202 GB of pixel state"):
+    with pytest.raises(ValueError, match=r"height=30000: 900000000 pixels, 158 GB of pixel state"):
         evstwin._core.Sensor(30000, 30000, PixelParams().to_core(), 0, 1)
     for name, value in (("width", 2**40), ("height", 0), ("width", 65536)):
         with pytest.raises(ValueError, match=rf"{name} must be in \[1, 65535\]; got {name}={value}"):

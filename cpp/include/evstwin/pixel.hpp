@@ -67,7 +67,7 @@ struct PixelModel {
         }
     };
     /// [0]: PixelParams' chain; [k]: the chains a sensor gave pixels of their own
-    /// (PixelState::hot_chain = k).
+    /// (HotPixelState::chain = k).
     std::vector<HotChainTerms> hot_chains;
     bool leak_off = false;  ///< LeakPolarity::Off: the leak drifts d = y - ref down, to OFF
     /// The longest piece, in source-follower time constants (b h), that the continuous model
@@ -181,21 +181,27 @@ struct PixelModel {
         s.bg_on_hz = bg_on_hz * spread(p.background_rate_sigma, a[0], a[1]);
         s.bg_off_hz = bg_off_hz * spread(p.background_rate_sigma, a[2], a[3]);
         s.leak_spread = spread(p.leak_rate_sigma, b[0], b[1]);
-        if (hot_rate_hz >= 0.0) {
-            s.hot_hz = hot_rate_hz;
-        } else {
+        double hot_hz = hot_rate_hz;
+        if (hot_rate_hz < 0.0) {
             const bool hot = p.hot_pixel_fraction > 0.0 && uniform_open(b[2]) < p.hot_pixel_fraction;
             // Median hot_pixel_rate_hz: exp(sigma z) without the mean correction.
-            s.hot_hz = hot ? p.hot_pixel_rate_hz * (p.hot_pixel_rate_sigma > 0.0
-                                                        ? std::exp(p.hot_pixel_rate_sigma *
-                                                                   normal_from_uniforms(uniform_open(b[3]), uniform_open(a[0] ^ b[2])))
-                                                        : 1.0)
-                           : 0.0;
+            hot_hz = hot ? p.hot_pixel_rate_hz * (p.hot_pixel_rate_sigma > 0.0
+                                                      ? std::exp(p.hot_pixel_rate_sigma *
+                                                                 normal_from_uniforms(uniform_open(b[3]), uniform_open(a[0] ^ b[2])))
+                                                      : 1.0)
+                         : 0.0;
         }
+        s.next_hot_t = std::numeric_limits<double>::infinity();
+        if (!(hot_hz > 0.0)) {
+            s.hot.reset();
+            return;
+        }
+        HotPixelState& h = s.hot.emplace();
+        h.rate_hz = hot_hz;
         // The chain's stationary polarity (the low bit, as before, at an even share).
-        s.hot_chain = hot_chain;
+        h.chain = hot_chain;
         const double on_share = hot_chains[hot_chain].chain.on_share;
-        s.hot_pol = static_cast<std::uint8_t>(on_share == 0.5 ? (b[3] & 1u) : uniform_open(b[3]) < on_share);
+        h.pol = static_cast<std::uint8_t>(on_share == 0.5 ? (b[3] & 1u) : uniform_open(b[3]) < on_share);
     }
 
     /// The first sample of a run: the noise-free state starts at the steady state of the mean
@@ -284,19 +290,21 @@ struct PixelModel {
                 }
             }
         }
-        s.hot_count = s.hot_switches = 0;
-        s.hot_last_t = -std::numeric_limits<double>::infinity();
-        s.hot_event_t = s.hot_switch_t = s.next_hot_t = std::numeric_limits<double>::infinity();
-        if (s.hot_hz > 0.0) {
+        s.next_hot_t = std::numeric_limits<double>::infinity();
+        if (s.hot) {
             // The telegraph's state and the clocks as they stand in the steady state: active
             // with probability duty, and (exponential waits being memoryless) fresh waits.
-            const Philox4x32Counter h = philox4x32({2u, 0u, pixel, PURPOSE_INIT}, key);
-            const double duty = hot_chains[s.hot_chain].chain.duty;
+            HotPixelState& h = *s.hot;
+            h.count = h.switches = 0;
+            h.last_t = -std::numeric_limits<double>::infinity();
+            h.event_t = h.switch_t = std::numeric_limits<double>::infinity();
+            const Philox4x32Counter u = philox4x32({2u, 0u, pixel, PURPOSE_INIT}, key);
+            const double duty = hot_chains[h.chain].chain.duty;
             const bool bursts = duty < 1.0;
-            s.hot_active = !bursts || uniform_open(h[0]) < duty;
-            if (bursts) s.hot_switch_t = t - std::log(uniform_open(h[1])) * hot_dwell_s(s);
-            if (s.hot_active) s.hot_event_t = t - std::log(uniform_open(w[3])) / s.hot_hz;
-            s.next_hot_t = std::min(s.hot_event_t, s.hot_switch_t);
+            h.active = !bursts || uniform_open(u[0]) < duty;
+            if (bursts) h.switch_t = t - std::log(uniform_open(u[1])) * hot_dwell_s(h);
+            if (h.active) h.event_t = t - std::log(uniform_open(w[3])) / h.rate_hz;
+            s.next_hot_t = std::min(h.event_t, h.switch_t);
         }
         // The background clocks start with fresh budgets: a Poisson process is memoryless, so
         // it is stationary from t = 0.
@@ -390,9 +398,9 @@ struct PixelModel {
     }
 
     /// Mean time a hot pixel stays in its present state, active or quiet [s].
-    double hot_dwell_s(const PixelState& s) const {
-        const HotPixelChain& c = hot_chains[s.hot_chain].chain;
-        return s.hot_active ? c.burst_s : c.burst_s * (1.0 - c.duty) / c.duty;
+    double hot_dwell_s(const HotPixelState& h) const {
+        const HotPixelChain& c = hot_chains[h.chain].chain;
+        return h.active ? c.burst_s : c.burst_s * (1.0 - c.duty) / c.duty;
     }
 
     /// A hot pixel's events up to t1 (its own Poisson clock with dead time, polarities from
@@ -401,32 +409,33 @@ struct PixelModel {
     template <class Emit>
     EVSTWIN_ALWAYS_INLINE void hot_events(PixelState& s, double t1, Philox4x32Key key, std::uint32_t pixel,
                                           Emit& emit) const {
+        // next_hot_t is finite only for a hot pixel (init_pixel, init_state).
+        HotPixelState& h = *s.hot;
         while (s.next_hot_t <= t1) {
-            if (s.hot_event_t <= s.hot_switch_t) {
-                emit(s.hot_event_t, static_cast<Polarity>(s.hot_pol), LABEL_HOT_PIXEL);
-                s.hot_last_t = s.hot_event_t;
-                ++s.hot_count;
-                const Philox4x32Counter w = philox4x32({static_cast<std::uint32_t>(s.hot_count),
-                                                        static_cast<std::uint32_t>(s.hot_count >> 32), pixel, PURPOSE_HOT},
-                                                       key);
+            if (h.event_t <= h.switch_t) {
+                emit(h.event_t, static_cast<Polarity>(h.pol), LABEL_HOT_PIXEL);
+                h.last_t = h.event_t;
+                ++h.count;
+                const Philox4x32Counter w = philox4x32(
+                    {static_cast<std::uint32_t>(h.count), static_cast<std::uint32_t>(h.count >> 32), pixel, PURPOSE_HOT},
+                    key);
                 // The next polarity: the same draw's second word decides a switch.
-                const HotChainTerms& chain = hot_chains[s.hot_chain];
-                if (chain.strict || uniform_open(w[1]) < chain.switch_p[s.hot_pol]) s.hot_pol ^= 1u;
-                s.hot_event_t += p.refractory_s - std::log(uniform_open(w[0])) / s.hot_hz;
+                const HotChainTerms& chain = hot_chains[h.chain];
+                if (chain.strict || uniform_open(w[1]) < chain.switch_p[h.pol]) h.pol ^= 1u;
+                h.event_t += p.refractory_s - std::log(uniform_open(w[0])) / h.rate_hz;
             } else {
-                ++s.hot_switches;
-                const Philox4x32Counter w = philox4x32({static_cast<std::uint32_t>(s.hot_switches),
-                                                        static_cast<std::uint32_t>(s.hot_switches >> 32), pixel,
+                ++h.switches;
+                const Philox4x32Counter w = philox4x32({static_cast<std::uint32_t>(h.switches),
+                                                        static_cast<std::uint32_t>(h.switches >> 32), pixel,
                                                         PURPOSE_HOT_SWITCH},
                                                        key);
-                const double now = s.hot_switch_t;
-                s.hot_active ^= 1u;
-                s.hot_switch_t = now - std::log(uniform_open(w[0])) * hot_dwell_s(s);
-                s.hot_event_t = s.hot_active ? std::max(now, s.hot_last_t + p.refractory_s) -
-                                                   std::log(uniform_open(w[1])) / s.hot_hz
-                                             : std::numeric_limits<double>::infinity();
+                const double now = h.switch_t;
+                h.active ^= 1u;
+                h.switch_t = now - std::log(uniform_open(w[0])) * hot_dwell_s(h);
+                h.event_t = h.active ? std::max(now, h.last_t + p.refractory_s) - std::log(uniform_open(w[1])) / h.rate_hz
+                                     : std::numeric_limits<double>::infinity();
             }
-            s.next_hot_t = std::min(s.hot_event_t, s.hot_switch_t);
+            s.next_hot_t = std::min(h.event_t, h.switch_t);
         }
     }
 

@@ -259,7 +259,7 @@ public:
         reset();
     }
 
-    /// Most pixels with a hot-pixel chain of their own (PixelState::hot_chain is 16 bits).
+    /// Most pixels with a hot-pixel chain of their own (HotPixelState::chain is 16 bits).
     static constexpr std::size_t MAX_HOT_PIXEL_CHAINS = 65535;
 
     /// Hot pixels with a telegraph and polarity chain of their own: pixels[k] (row-major
@@ -297,7 +297,7 @@ public:
     /// Each pixel's hot rate [Hz] (0 = not hot), row-major: the draw or the explicit map.
     std::vector<double> hot_pixel_rates() const {
         std::vector<double> out(state_.size());
-        for (std::size_t i = 0; i < state_.size(); ++i) out[i] = state_[i].hot_hz;
+        for (std::size_t i = 0; i < state_.size(); ++i) out[i] = state_[i].hot ? state_[i].hot->rate_hz : 0.0;
         return out;
     }
 
