@@ -2,13 +2,15 @@
 // wall time: a 346-pixel-wide DAVIS346 window, 2e6 photons/s on every pixel, every noise
 // source on, 400 samples at 1 kHz in 4 calls. CUTOFF_HZ (default 10, the reference load)
 // sets the source follower's cutoff: 200 Hz makes the event-heavy load (the 18,000 e-/s dark
-// current's shot noise then crosses the thresholds ~180 times a pixel a second). THREADS
-// (default 1) is the engine's thread count. "pole" is "continuous" with the photoreceptor pole
-// (pr_pole, as the IMX636 and Gen3 VGA presets and mcreynolds have it; the DAVIS346 preset does not).
+// current's shot noise then crosses the thresholds ~900 times a pixel a second, and, b dt = 1.26
+// being above SF_REFINE_BH, an interval where a crossing is plausible is refined:
+// refine_and_compare). THREADS (default 1) is the engine's thread count. "pole" is "continuous"
+// with the photoreceptor pole (pr_pole, as the IMX636 and Gen3 VGA presets and mcreynolds have
+// it; the DAVIS346 preset does not).
 //
 //   g++ -std=c++17 -O3 -DNDEBUG -fopenmp -Icpp/include bench/engine_driver.cpp -o /tmp/engine_driver
 //   valgrind --tool=callgrind /tmp/engine_driver continuous 64          # or: sampled 64
-//   valgrind --tool=callgrind /tmp/engine_driver continuous 64 200      # event-heavy
+//   valgrind --tool=callgrind /tmp/engine_driver continuous 4 200       # event-heavy (~10,500 instructions an event)
 //   time /tmp/engine_driver continuous 260 [CUTOFF_HZ [THREADS]]
 #include <evstwin/evstwin.hpp>
 
