@@ -180,10 +180,12 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
         }
         const double y_end = yd_end + piece.ny;
         const SampleConstants span = detail::refined_span(c, at, piece.end, m, h);
-        // A piece is run whole at the deepest level, where no crossing is plausible, or once
-        // the interval has been halved MAX_REFINE_SPLITS times (a line that crosses a level in
-        // every piece: a leak firing every few seconds over a year-long sample).
-        if (piece.level == deepest || splits == MAX_REFINE_SPLITS ||
+        // A piece is run whole at the deepest level, where no crossing is plausible, inside
+        // the refractory period (nothing fires there: only the noise at its end counts, drawn
+        // already; an event-heavy pixel spent half its cuts there), or once the interval has
+        // been halved MAX_REFINE_SPLITS times (a line that crosses a level in every piece: a
+        // leak firing every few seconds over a year-long sample).
+        if (piece.level == deepest || splits == MAX_REFINE_SPLITS || s.refr_until >= span.t1 ||
             (piece.level > 0 && !crossing_within(s, y_end, span, leak_g, lv.plausible_limit))) {
             // The comparator over the piece with its bridge (its draws keyed by the piece's
             // end); the background's events due by its end are its own (compare takes them).
@@ -199,11 +201,13 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
             --top;
             continue;
         }
-        // Halve it: the noise at its middle given both ends.
-        double g1, g2;
-        normal_pair(normals.word(), normals.word(), g1, g2);
+        // Halve it: the noise at its middle given both ends (two normals behind the pole, one
+        // with the follower alone; ziggurat draws, one word each but rarely).
+        const auto more = [&normals] { return normals.word(); };
+        const double g1 = normal_ziggurat(normals.word(), more);
         double mid_z = 0.0, mid_y;
         if (pole) {
+            const double g2 = normal_ziggurat(normals.word(), more);
             const double mz = lv.Pzz * nz_at, my = lv.Pyz * nz_at + lv.Pyy * s.ny;  // Phi X_0
             const double ez = piece.nz - lv.Pzz * mz, ey = piece.ny - (lv.Pyz * mz + lv.Pyy * my);
             mid_z = mz + lv.Kzz * ez + lv.Kzy * ey + lv.lzz * g1;
