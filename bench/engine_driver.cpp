@@ -10,7 +10,7 @@
 //
 //   g++ -std=c++17 -O3 -DNDEBUG -fopenmp -Icpp/include bench/engine_driver.cpp -o /tmp/engine_driver
 //   valgrind --tool=callgrind /tmp/engine_driver continuous 64          # or: sampled 64
-//   valgrind --tool=callgrind /tmp/engine_driver continuous 4 200       # event-heavy (~10,500 instructions an event)
+//   valgrind --tool=callgrind /tmp/engine_driver continuous 4 200       # event-heavy (~4,300 instructions an event)
 //   time /tmp/engine_driver continuous 260 [CUTOFF_HZ [THREADS]]
 #include <evstwin/evstwin.hpp>
 
