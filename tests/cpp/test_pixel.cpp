@@ -70,6 +70,34 @@ TEST(exponential_ramp_crossings_at_analytic_times) {
     for (std::size_t n = 0; n < ev.size(); ++n) CHECK_NEAR(double(ev[n].t), (n + 1) * theta / g * 1e6, 0.5);
 }
 
+TEST(a_hot_pixels_clocks_copy_with_its_state) {
+    // A hot pixel's clocks live outside PixelState's record (HotBox): a copy of the state
+    // carries a copy of them (stepping one leaves the other's alone), a plain pixel's box
+    // stays empty, and assigning one hot state to another keeps the target's storage (copies
+    // between run_pixels' buffers allocate nothing once both hold one).
+    const PixelModel model(ideal());
+    const Philox4x32Key key{1u, 2u};
+    PixelState hot, plain;
+    model.init_pixel(hot, key, 0, 300.0);
+    model.init_pixel(plain, key, 1, 0.0);
+    CHECK(hot.hot && !plain.hot);
+    CHECK(hot.hot->rate_hz == 300.0);
+    model.init_state(hot, 1e6, 0.0, key, 0);
+    CHECK(std::isfinite(hot.next_hot_t) && !std::isfinite(plain.next_hot_t));
+    PixelState copy = hot;
+    CHECK(copy.hot && &*copy.hot != &*hot.hot && same_state(copy, hot));
+    std::size_t fired = 0;
+    auto emit = [&fired](double, auto, auto) { ++fired; };
+    model.hot_events(hot, 1.0, key, 0, emit);
+    CHECK(fired > 200 && fired < 400);  // 300 Hz over 1 s
+    CHECK(hot.hot->count == fired && copy.hot->count == 0 && !same_state(copy, hot));
+    const HotPixelState* kept = &*copy.hot;
+    copy = hot;
+    CHECK(&*copy.hot == kept && same_state(copy, hot));
+    copy = plain;
+    CHECK(!copy.hot && same_state(copy, plain));
+}
+
 TEST(hot_pixel_chains_of_their_own_leave_every_other_draw_alone) {
     // Every pixel hot at 300 Hz; pixel 5 gets an ON-only-ish chain of its own and pixel 9 the
     // params' own chain: pixel 9 and every pixel without a chain fire as without chains, bit

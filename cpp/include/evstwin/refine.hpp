@@ -182,9 +182,9 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
         const SampleConstants span = detail::refined_span(c, at, piece.end, m, h);
         // A piece is run whole at the deepest level, where no crossing is plausible, inside
         // the refractory period (nothing fires there: only the noise at its end counts, drawn
-        // already; an event-heavy pixel spent half its cuts there), or once the interval has
-        // been halved MAX_REFINE_SPLITS times (a line that crosses a level in every piece: a
-        // leak firing every few seconds over a year-long sample).
+        // already; cutting such pieces cost the event-heavy load half its instructions), or
+        // once the interval has been halved MAX_REFINE_SPLITS times (a line that crosses a
+        // level in every piece: a leak firing every few seconds over a year-long sample).
         if (piece.level == deepest || splits == MAX_REFINE_SPLITS || s.refr_until >= span.t1 ||
             (piece.level > 0 && !crossing_within(s, y_end, span, leak_g, lv.plausible_limit))) {
             // The comparator over the piece with its bridge (its draws keyed by the piece's
