@@ -47,11 +47,15 @@ struct RefineLevel {
     double pole_decay = 1, pole_ramp = 1, sf_decay = 1, sf_ramp = 1;
     // the halves of a piece of this level (the next level's length)
     double Pzz = 0, Pyz = 0, Pyy = 0, Kzz = 0, Kzy = 0, Kyz = 0, Kyy = 0, lzz = 0, lyz = 0, lyy = 0;
+    NoiseCoeffs half;  // noise_coeffs_interval over T / 2: the next level's pieces' own
 };
 
 /// RefineLevel of pieces of length T behind the pole a (0: the follower alone) and the follower b.
-/// bridge_var: the piece's, where the caller has it (the whole interval's); else NaN.
-inline RefineLevel refine_level(double a, double b, double D, double T, double bridge_var) {
+/// bridge_var: the piece's, where the caller has it (the whole interval's); else NaN, and
+/// `piece_coeffs` (if not null) holds noise_coeffs_interval(a, b, D, T): the level above's `half`,
+/// the same bits as computing it again.
+inline RefineLevel refine_level(double a, double b, double D, double T, double bridge_var,
+                                const NoiseCoeffs* piece_coeffs = nullptr) {
     RefineLevel v;
     v.ready = true;
     if (a > 0.0) {
@@ -61,12 +65,13 @@ inline RefineLevel refine_level(double a, double b, double D, double T, double b
     v.sf_decay = std::exp(-b * T);
     v.sf_ramp = one_minus_exp_over(b * T);
     if (std::isnan(bridge_var)) {
-        NoiseCoeffs piece = noise_coeffs_interval(a, b, D, T);
+        NoiseCoeffs piece = piece_coeffs ? *piece_coeffs : noise_coeffs_interval(a, b, D, T);
         noise_coeffs_bridge(piece, a, b, D, T);
         bridge_var = piece.bridge_var;
     }
     v.bridge_var = bridge_var;
-    const NoiseCoeffs q = noise_coeffs_interval(a, b, D, 0.5 * T);
+    v.half = noise_coeffs_interval(a, b, D, 0.5 * T);
+    const NoiseCoeffs& q = v.half;
     if (a > 0.0) {
         const double Qzz = q.l_zz * q.l_zz, Qzy = q.l_zz * q.l_yz, Qyy = q.l_yz * q.l_yz + q.l_yy * q.l_yy;
         const double Pzz = q.phi_zz, Pyz = q.phi_yz, Pyy = q.phi_yy;  // Phi = [[Pzz, 0], [Pyz, Pyy]]
@@ -140,8 +145,11 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
     const auto level = [&](int l) -> const detail::RefineLevel& {
         if (!levels[l].ready) {
             const double share = static_cast<double>(1u << l);
+            // A level's pieces are halves of the level above's, which was made first (a piece
+            // of level l comes from halving one of level l - 1): its `half` is their noise.
             levels[l] = detail::refine_level(a, b, D, l == 0 ? c.dt : c.dt / share,
-                                             l == 0 ? bridge_var : std::numeric_limits<double>::quiet_NaN());
+                                             l == 0 ? bridge_var : std::numeric_limits<double>::quiet_NaN(),
+                                             l > 0 && levels[l - 1].ready ? &levels[l - 1].half : nullptr);
             // A piece's chances to cross: its share of the interval's, at least one.
             levels[l].plausible_limit = plausible_limit(levels[l].bridge_var, std::max(1.0, excursions / share));
         }
