@@ -62,6 +62,20 @@ def test_noise_event_counts_do_not_depend_on_the_sample_rate(photon_rate: float,
         assert agree(a, b), (pol, a, b)
 
 
+def test_a_pixel_that_is_mostly_refractory_keeps_its_counts_when_its_intervals_are_refined() -> None:
+    # A 200 Hz follower in the dark fires ~900 times a second, so its 1 ms refractory period
+    # covers most of the time. At 1 kHz (b dt = 1.26) every interval where a crossing is
+    # plausible is refined, and the pieces inside the refractory period run whole (nothing
+    # can fire there); at 16 kHz (b dt = 0.08) nothing is refined. The counts must agree.
+    params = PixelParams(cutoff_hz=200.0, refractory_s=1e-3, threshold_sigma=0.03)
+    refined, _ = static_run(params, 2e6, 1.0, 1000.0)
+    fine, _ = static_run(params, 2e6, 1.0, 16000.0)
+    assert len(fine) > 150_000  # ~900 events a pixel a second on 256 pixels
+    for pol in (0, 1):
+        a, b = int(np.sum(refined["p"] == pol)), int(np.sum(fine["p"] == pol))
+        assert agree(a, b), (pol, a, b)
+
+
 def test_the_sampled_model_depends_on_the_sample_rate_the_continuous_one_does_not() -> None:
     # The paper's per-sample Poisson counts: finer samples, more noise (why the model exists).
     pixel = {"pr_pole": True, "theta_on": 0.08, "theta_off": 0.06, **QUIET}
