@@ -223,65 +223,134 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     // skips the lit ones, ahead already), as the dense path does (geo-stare's sky on the
     // IMX636: through run_pixels those pixels cost 10-20 % more, and a copy of their states).
     const bool dense = SPARSE_DENSE_SHARE * static_cast<double>(npix) < static_cast<double>(busy.size());
+    const bool judged_busy = std::isfinite(base_dt);  // sparse_busy_ holds this step's judgement
     if (sparse_mark_.size() != npix) sparse_mark_.assign(npix, 0);
-    std::uint8_t* in_group = sparse_mark_.data();  // 1: lit in this group, 2: sampled in it; 0 after the call
-    std::size_t at_end = 0;  // pixels the last group took to the step's end (its last sample is a base time)
+    std::uint8_t* in_group = sparse_mark_.data();  // 1: listed once; 0 between uses
+    // Each group's start: the step's start, then the previous group's last sample (a base time).
+    std::vector<double> starts(n_groups);
+    for (std::size_t g = 0; g < n_groups; ++g) starts[g] = g == 0 ? t_begin : step.t_s[g * group - 1];
+    // The base samples of groups [g0, g1).
+    const auto base_times = [&](std::size_t g0, std::size_t g1) {
+        std::vector<double> base;
+        for (std::size_t k = g0 * group; k < std::min(n, g1 * group); ++k)
+            if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
+        return base;
+    };
+    // A pixel's base samples run ahead of the groups: from group `from` (where it stands, or
+    // stood still before) to the group where it is lit next (`next`, n_groups: none), or
+    // sooner, to the first group that starts once its levels have settled (busy pixels take
+    // every group). Those groups' base samples are then one run_pixels call for the pixels
+    // that stop alike, not one call a group, which took every settling pixel through the
+    // kernel's set-up once for each group's few base samples (mcreynolds: 8,500 settling
+    // pixels for 0.28 s after a light source passed, a call each group of 4 ms). The same
+    // samples for each pixel as group by group, so the same events.
+    const auto base_stop = [&](std::uint32_t px, std::size_t from, std::size_t next) {
+        std::size_t stop = next;
+        if (!(judged_busy && sparse_busy_[px]))
+            stop = std::min<std::size_t>(stop, static_cast<std::size_t>(std::lower_bound(starts.begin(), starts.end(),
+                                                                                          settle_until_[px]) -
+                                                                         starts.begin()));
+        return std::max(stop, from);
+    };
+    std::map<std::size_t, std::vector<std::uint32_t>> ahead;  // the groups' end (exclusive) -> pixels
+    std::size_t at_end = 0;  // pixels the groups took to the step's end (its last sample is a base time)
+    // The pixels of `ahead`, from group `from` on.
+    const auto run_ahead = [&](std::size_t from) {
+        for (auto& [stop, pixels] : ahead) {
+            std::sort(pixels.begin(), pixels.end());
+            // Those that stood still so far (in the step, or waiting from an earlier one):
+            // one long step at the static light to the start.
+            std::vector<std::uint32_t> entering;
+            for (const std::uint32_t px : pixels)
+                if (state_[px].t < starts[from]) entering.push_back(px);
+            long_step(entering, starts[from]);
+            const std::vector<double> base = base_times(from, stop);
+            const std::vector<double> rate = static_rates(pixels);
+            take(run_pixels(pixels.data(), pixels.size(), rate.data(), base.data(), base.size(), true));
+            updates += pixels.size() * base.size();
+            if (stop == n_groups) at_end += pixels.size();
+        }
+        ahead.clear();
+    };
+    // The group each lit pixel is lit in next (n_groups: not again in this step), found from
+    // the last group back; sparse_column_ holds each pixel's next group meanwhile (-1: none),
+    // its first in the step at the end.
+    std::vector<std::vector<std::uint32_t>> next_lit(n_groups);
+    for (std::size_t g = n_groups; g-- > 0;) {
+        const std::vector<std::uint32_t>& pixels = lit[g].pixels;
+        next_lit[g].resize(pixels.size());
+        for (std::size_t j = 0; j < pixels.size(); ++j) {
+            const std::uint32_t px = pixels[j];
+            next_lit[g][j] = column[px] < 0 ? static_cast<std::uint32_t>(n_groups) : static_cast<std::uint32_t>(column[px]);
+            column[px] = static_cast<std::int32_t>(g);
+        }
+    }
     try {
+        if (!dense) {
+            // The pixels still settling from an earlier step, and those that take the base
+            // samples throughout: ahead from the step's start.
+            for (const std::vector<std::uint32_t>* list : {&settling_, &busy})
+                for (const std::uint32_t px : *list) {
+                    if (in_group[px]) continue;
+                    in_group[px] = 1;
+                    const std::size_t next = column[px] < 0 ? n_groups : static_cast<std::size_t>(column[px]);
+                    const std::size_t stop = base_stop(px, 0, next);
+                    if (stop > 0) ahead[stop].push_back(px);
+                }
+            for (const std::vector<std::uint32_t>* list : {&settling_, &busy})
+                for (const std::uint32_t px : *list) in_group[px] = 0;
+        }
+        for (const SparseRun& r : lit)
+            for (const std::uint32_t px : r.pixels) column[px] = -1;
+        run_ahead(0);
         for (std::size_t g = 0; g < n_groups; ++g) {
             const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
-            const double t_start = k0 == 0 ? t_begin : step.t_s[k0 - 1], t_end = step.t_s[k1 - 1];
+            const double t_start = starts[g], t_end = step.t_s[k1 - 1];
             const SparseRun& r = lit[g];
-            for (const std::uint32_t px : r.pixels) in_group[px] = 1;
-            std::vector<std::uint32_t> settle;  // the base samples through run_pixels (not dense)
-            for (const std::uint32_t px : settling_)
-                if (!dense && in_group[px] == 0 && settle_until_[px] > t_start) {
-                    in_group[px] = 2;
-                    settle.push_back(px);
-                }
-            for (const std::uint32_t px : busy)
-                if (!dense && in_group[px] == 0) {
-                    in_group[px] = 2;
-                    settle.push_back(px);
-                }
-            std::sort(settle.begin(), settle.end());
             {
-                // Those that stood still so far (in the step, or waiting from an earlier one):
-                // one long step at the static light to the group's start.
+                // Those that stood still so far: one long step at the static light to the
+                // group's start.
                 std::vector<std::uint32_t> entering;
-                for (const std::vector<std::uint32_t>* list : {&r.pixels, static_cast<const std::vector<std::uint32_t>*>(&settle)})
-                    for (const std::uint32_t px : *list)
-                        if (state_[px].t < t_start) entering.push_back(px);
-                std::sort(entering.begin(), entering.end());
+                for (const std::uint32_t px : r.pixels)
+                    if (state_[px].t < t_start) entering.push_back(px);
                 long_step(entering, t_start);
             }
             if (!r.pixels.empty()) {
                 take(run_pixels(r.pixels.data(), r.pixels.size(), r.rate.data(), r.times.data(), r.times.size()));
                 updates += r.pixels.size() * r.times.size();
             }
-            std::vector<double> base;
-            for (std::size_t k = k0; k < k1; ++k)
-                if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
             if (dense) {
+                const std::vector<double> base = base_times(g, g + 1);
                 take(run(step.static_rate, base.data(), base.size(), nullptr, nullptr, true));
                 updates += (npix - r.pixels.size()) * base.size();
-            } else if (!settle.empty()) {
-                const std::vector<double> rate = static_rates(settle);
-                take(run_pixels(settle.data(), settle.size(), rate.data(), base.data(), base.size(), true));
-                updates += settle.size() * base.size();
             }
-            // A lit pixel relaxes from the group's end on; the settling list keeps those with
-            // time still ahead, each once.
-            for (const std::uint32_t px : r.pixels) {
-                const bool listed = settle_until_[px] > t_start;
+            // A lit pixel relaxes from the group's end on: ahead through the groups until it
+            // has settled or is lit again.
+            for (std::size_t j = 0; j < r.pixels.size(); ++j) {
+                const std::uint32_t px = r.pixels[j];
                 settle_until_[px] = t_end + settle_time_s(step.static_rate[px]);
-                if (!listed) settling_.push_back(px);
+                if (dense) continue;
+                const std::size_t stop = base_stop(px, g + 1, next_lit[g][j]);
+                if (stop > g + 1) ahead[stop].push_back(px);
             }
-            settling_.erase(std::remove_if(settling_.begin(), settling_.end(),
-                                           [&](std::uint32_t px) { return !(settle_until_[px] > t_end); }),
-                            settling_.end());
-            for (const std::uint32_t px : r.pixels) in_group[px] = 0;
-            for (const std::uint32_t px : settle) in_group[px] = 0;
-            at_end = r.pixels.size() + settle.size();
+            run_ahead(g + 1);
+        }
+        at_end += lit[n_groups - 1].pixels.size();
+        // The pixels still settling after the step, for the next: the earlier ones and this
+        // step's lit ones, each once.
+        {
+            const double t_last = step.t_s[n - 1];
+            std::vector<std::uint32_t> still;
+            const auto keep = [&](std::uint32_t px) {
+                if (in_group[px] || !(settle_until_[px] > t_last)) return;
+                in_group[px] = 1;
+                still.push_back(px);
+            };
+            for (const std::uint32_t px : settling_) keep(px);
+            for (const SparseRun& r : lit)
+                for (const std::uint32_t px : r.pixels) keep(px);
+            for (const std::uint32_t px : still) in_group[px] = 0;
+            settling_.swap(still);
         }
         // The last group's pixels stand at the step's end already (its last sample is a base
         // time).
