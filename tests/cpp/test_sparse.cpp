@@ -152,8 +152,10 @@ TEST(run_sparse_is_the_same_whatever_the_threads) {
     const int w = 48, h = 16;
     std::vector<double> background(w * h, 3e5), t0{0.0};
     for (const double cutoff_hz : {1.0, 100.0}) {
-        std::vector<Event> runs[2];
-        for (int threads : {1, 2}) {
+        // Three blocks of pixels: with 2 threads run_sparse's parts are blocks {0, 2} and {1},
+        // with 3 one block each.
+        std::vector<Event> runs[3];
+        for (int threads : {1, 2, 3}) {
             Sensor s(w, h, sparse_params(cutoff_hz), 5, threads);
             s.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
             for (int unit = 0; unit < 3; ++unit) {
@@ -177,6 +179,7 @@ TEST(run_sparse_is_the_same_whatever_the_threads) {
         }
         CHECK(runs[0].size() > 50);
         CHECK(same_events(runs[0], runs[1]));
+        CHECK(same_events(runs[0], runs[2]));
     }
 }
 

@@ -17,6 +17,7 @@
 #include <exception>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -302,7 +303,7 @@ public:
     }
 
     /// Why each event of the last run / run_pixels call fired (EventLabel), in its order.
-    const std::vector<std::uint8_t>& last_labels() const { return labels_; }
+    const std::vector<std::uint8_t>& last_labels() const { return calls_.labels; }
 
     /// Per-pixel thresholds (mismatch included), row-major.
     std::vector<double> thresholds(bool on) const {
@@ -361,7 +362,10 @@ public:
     template <class Real>
     std::size_t run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
                                 const Real* photon_rate, const double* t_s, std::size_t n_samples,
-                                bool static_rates = false);
+                                bool static_rates = false) {
+        check_usable();
+        return run_pixels_with(calls_, storage, pixels, n_pixels, photon_rate, t_s, n_samples, static_rates);
+    }
 
     /// Advance every pixel through one step of a sparse scene (SparseStep) with time steps
     /// per pixel: in each group of the step's samples, the pixels a source's light touches
@@ -401,6 +405,7 @@ public:
     }
 
 private:
+    struct CallBuffers;  // one call's working memory (defined below, after RawEvent)
     /// run()'s vector kernel (Kernel::Auto) takes a block where at least this many quarters of its pixels
     /// advance at a sample (the others stand past it, sampled finely by run_pixels): it runs
     /// over the whole block, so below that the array-of-structures kernel over the pixels
@@ -457,15 +462,15 @@ private:
     /// for_each_block, marking the sensor stopped when a block throws (in run(), the pixels
     /// of the other blocks have advanced). A block does not start once the call is over max_events.
     template <class Check, class Fn, class Prepare, class Part>
-    void guarded_for_each_block(std::size_t nblocks, std::size_t updates, Check& check, Fn&& fn, Prepare&& prepare,
-                                Part&& part) {
+    void guarded_for_each_block(CallBuffers& calls, std::size_t nblocks, std::size_t updates, Check& check, Fn&& fn,
+                                Prepare&& prepare, Part&& part) {
         try {
             for_each_block(
                 nblocks, updates, check,
                 [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
-                    if (events_in_call_.load(std::memory_order_relaxed) > max_events_) throw_max_events();
+                    if (calls.events_in_call.load(std::memory_order_relaxed) > max_events_) throw_max_events();
                     fn(b, poisson, scratch);
-                    note_events(block_events_[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
+                    note_events(calls, calls.block_events[b].size() % EVENT_COUNT_STEP);  // the rest of this block's count
                 },
                 prepare, part);
         } catch (...) {
@@ -550,6 +555,22 @@ private:
     static_assert(sizeof(RawEvent) == 8, "RawEvent is two 32-bit words");
     static_assert(LABEL_HOT_PIXEL < 8, "RawEvent::code keeps the label in 3 bits");
     static_assert(MAX_PIXELS <= (std::uint64_t{1} << 28), "RawEvent::code keeps the pixel in 28 bits");
+    /// One call's working memory (run(), run_pixels()): the listed pixels' working states,
+    /// each block's events, the call's labels and its event count. The sensor's own serve
+    /// its calls; run_sparse()'s threads each keep one more, for the calls each makes alone
+    /// on its own pixels at the same time as the others.
+    struct CallBuffers {
+        /// run_pixels_into()'s working copies of the listed pixels' states, in the list's
+        /// order (kept from call to call for its memory: as large as the longest list so
+        /// far, at most state_'s size).
+        std::vector<PixelState> pixel_states;
+        std::vector<std::vector<RawEvent>> block_events;
+        std::vector<std::vector<std::int64_t>> block_full_t;  ///< each block's full event times, if kept (RawEvent)
+        std::vector<std::vector<std::uint32_t>> block_sample_ends;  ///< each block's event count after each sample
+        std::size_t blocks_in_call = 0, samples_in_call = 0;
+        std::vector<std::uint8_t> labels;
+        std::atomic<std::size_t> events_in_call{0};
+    };
     static std::uint32_t event_code(std::uint32_t pixel, Polarity pol, std::uint8_t label) {
         return pixel << 4 | static_cast<std::uint32_t>(label) << 1 | (static_cast<std::uint32_t>(pol) & 1u);
     }
@@ -601,8 +622,8 @@ private:
         }
     }
 
-    /// A block's event list, taken out of block_events_ while the block runs and put back
-    /// after it (also when it throws). The vectors' headers lie side by side in block_events_,
+    /// A block's event list, taken out of its call's block_events while the block runs and put
+    /// back after it (also when it throws). The vectors' headers lie side by side there,
     /// and blocks are handed out in order, so two threads appending to neighbouring blocks'
     /// lists wrote the same cache line (the end pointer) on every event: false sharing that
     /// cost the event-heavy load ~15 % more CPU an event on 2 threads than on 1.
@@ -633,6 +654,7 @@ private:
     template <class SampleEndUs>
     struct BlockEmit {
         Sensor& sensor;
+        CallBuffers& calls;
         TakenEvents& taken;
         const std::uint32_t* ends;
         const std::uint32_t& pixel;
@@ -653,7 +675,7 @@ private:
                 keep_full_time(taken.full_t, out, ends, sample, sample_end_us, t_us);
                 full_times = true;
             }
-            if (out.size() % EVENT_COUNT_STEP == 0) sensor.note_events(EVENT_COUNT_STEP);  // memory bound, checked as it grows
+            if (out.size() % EVENT_COUNT_STEP == 0) sensor.note_events(calls, EVENT_COUNT_STEP);  // memory bound, checked as it grows
         }
     };
 
@@ -675,20 +697,20 @@ private:
     static constexpr double US_TOLERANCE = 1e-3;
 
     /// Clear the blocks' event lists (keeping their memory) and size their per-sample marks.
-    void start_call(std::size_t nblocks, std::size_t n_samples) {
-        blocks_in_call_ = nblocks;
-        samples_in_call_ = n_samples;
-        if (block_events_.size() < nblocks) {
-            block_events_.resize(nblocks);
-            block_full_t_.resize(nblocks);
-            block_sample_ends_.resize(nblocks);
+    static void start_call(CallBuffers& calls, std::size_t nblocks, std::size_t n_samples) {
+        calls.blocks_in_call = nblocks;
+        calls.samples_in_call = n_samples;
+        if (calls.block_events.size() < nblocks) {
+            calls.block_events.resize(nblocks);
+            calls.block_full_t.resize(nblocks);
+            calls.block_sample_ends.resize(nblocks);
         }
         for (std::size_t b = 0; b < nblocks; ++b) {
-            block_events_[b].clear();
-            block_full_t_[b].clear();
-            block_sample_ends_[b].assign(n_samples, 0);
+            calls.block_events[b].clear();
+            calls.block_full_t[b].clear();
+            calls.block_sample_ends[b].assign(n_samples, 0);
         }
-        events_in_call_.store(0, std::memory_order_relaxed);
+        calls.events_in_call.store(0, std::memory_order_relaxed);
     }
 
     void check_times(const double* t_s, std::size_t n) const {
@@ -785,18 +807,28 @@ private:
                    PoissonSampler& poisson, BlockModel::BlockScratch& scratch, const std::int32_t* probe_slot,
                    std::size_t n_probe, TraceSample* trace);
 
+    /// run_pixels_into() on the given working memory (`calls`): the sensor's own, or one of
+    /// run_sparse()'s threads', whose calls run alone on that thread (a call made inside a
+    /// parallel region runs its blocks on the calling thread only) on pixels no other thread
+    /// touches. The call's labels are left in calls.labels. It does not check_usable(): its
+    /// callers have.
+    template <class Real>
+    std::size_t run_pixels_with(CallBuffers& calls, const EventStorage& storage, const std::uint32_t* pixels,
+                                std::size_t n_pixels, const Real* photon_rate, const double* t_s,
+                                std::size_t n_samples, bool static_rates);
+
     /// The sparse counterpart of run_block: entries [lo, hi) of a pixel list, each with its
     /// own column of rates; sample k's row at rate + k * sample_stride (0: one row for all).
     template <class Real>
-    void run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
+    void run_pixel_block(CallBuffers& calls, std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
                          std::size_t sample_stride, const double* t_s, std::size_t n_samples,
                          const std::vector<SampleConstants>& consts, PoissonSampler& poisson,
                          BlockModel::BlockScratch& scratch);
 
     /// Count n more events of this call; throw once the call passes max_events_ (whichever
     /// thread gets there first; the exception is rethrown after the parallel region).
-    void note_events(std::size_t n) {
-        const std::size_t now = events_in_call_.fetch_add(n, std::memory_order_relaxed) + n;
+    void note_events(CallBuffers& calls, std::size_t n) {
+        const std::size_t now = calls.events_in_call.fetch_add(n, std::memory_order_relaxed) + n;
         if (now > max_events_) throw_max_events();
     }
 
@@ -826,6 +858,7 @@ private:
     /// What collect_prepare() lays out for collect_sample(): the output, the blocks that made
     /// events, and where each sample's events start in the output.
     struct CollectPlan {
+        CallBuffers* calls = nullptr;  ///< the call's blocks and labels
         const EventStorage* storage = nullptr;
         Event* events = nullptr;  ///< storage's room for the call's `total` events
         std::size_t total = 0;
@@ -867,8 +900,8 @@ private:
     /// returns false; returns whether it never did. time: from_low(the record's t_lo) where the
     /// block keeps only the low bits, else from_full(the block's full_t of it).
     template <class FromLow, class FromFull, class Fn>
-    bool for_each_event_in_sample(std::uint32_t b, std::size_t k, FromLow&& from_low, FromFull&& from_full,
-                                  Fn&& fn) const;
+    static bool for_each_event_in_sample(const CallBuffers& calls, std::uint32_t b, std::size_t k, FromLow&& from_low,
+                                         FromFull&& from_full, Fn&& fn);
 
     /// for_each_event_in_sample with each event's offset d = t_us - lo from a microsecond lo
     /// less than 2^31 before the sample's end, where t_us - lo lies in [0, 2^31); any other
@@ -876,12 +909,12 @@ private:
     /// within 2^31 us of its sample's end (emit()), so the difference of the low bits is the
     /// offset: 32-bit arithmetic in the counting sort's loops.
     template <class Fn>
-    bool for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const;
+    static bool for_each_offset_in_sample(const CallBuffers& calls, std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn);
 
     /// for_each_event_in_sample with each event's full time (event_time from the sample's end
     /// end_us, or the block's full_t).
     template <class Fn>
-    bool for_each_in_sample(std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn) const;
+    static bool for_each_in_sample(const CallBuffers& calls, std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn);
 
     /// counting_sort_in_interval() stages a sample's records by coarse spans of time from this
     /// many events (their 13-byte records fill far more than a core's first-level cache).
@@ -923,7 +956,7 @@ private:
                                    Put put) const;
 
     /// Keep the blocks' memory for the next call, unless a flood made it large.
-    void collect_finish();
+    static void collect_finish(CallBuffers& calls);
 
     BlockModel model_;
     int width_, height_;
@@ -931,10 +964,6 @@ private:
     Philox4x32Key key_;
     int num_threads_ = 1;
     std::vector<PixelState> state_;
-    /// run_pixels_into()'s working copies of the listed pixels' states, in the list's order
-    /// (kept from call to call for its memory: as large as the longest list so far, at most
-    /// state_'s size).
-    std::vector<PixelState> pixel_states_;
     std::uint64_t samples_ = 0;
     double last_t_ = -std::numeric_limits<double>::infinity();
     /// Per block: nonzero when every pixel of it stands at last_t_ after at least one sample
@@ -944,11 +973,8 @@ private:
     /// array). A call that throws part-way leaves the flags of the blocks it ran set, but
     /// also stops the sensor until reset().
     std::vector<std::uint8_t> block_synced_;
-    std::vector<std::vector<RawEvent>> block_events_;
-    std::vector<std::vector<std::int64_t>> block_full_t_;  ///< each block's full event times, if kept (RawEvent)
-    std::vector<std::vector<std::uint32_t>> block_sample_ends_;  ///< each block's event count after each sample
-    std::size_t blocks_in_call_ = 0, samples_in_call_ = 0;
-    std::vector<std::uint8_t> labels_;
+    /// The calls' working memory (run_sparse()'s threads': sparse_calls_).
+    CallBuffers calls_;
     std::vector<double> hot_map_;
     std::vector<std::uint16_t> hot_chain_map_;  ///< per pixel, its hot_chains index (empty: all 0)
     std::size_t max_events_ = DEFAULT_MAX_EVENTS;
@@ -970,8 +996,11 @@ private:
     std::vector<double> sparse_static_;
     double sparse_busy_dt_ = 0.0;
     std::uint64_t last_pixel_updates_ = 0;
-    std::atomic<std::size_t> events_in_call_{0};
-    bool stopped_ = false;
+    /// run_sparse()'s threads' working memory, one each (made as a step first needs them).
+    std::vector<std::unique_ptr<CallBuffers>> sparse_calls_;
+    /// Set by a call that stopped part-way; an atomic since run_sparse()'s threads' calls may
+    /// set it at the same time.
+    std::atomic<bool> stopped_{false};
 };
 
 }  // namespace evstwin

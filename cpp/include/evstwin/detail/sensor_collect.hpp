@@ -23,24 +23,25 @@ EVSTWIN_FP_STRICT_BEGIN
 namespace evstwin {
 
 inline std::size_t Sensor::collect_prepare(CollectPlan& plan, bool pixel_ordered) {
-    const std::size_t nblocks = blocks_in_call_, n_samples = samples_in_call_;
+    CallBuffers& calls = *plan.calls;
+    const std::size_t nblocks = calls.blocks_in_call, n_samples = calls.samples_in_call;
     std::size_t total = 0;
-    for (std::size_t b = 0; b < nblocks; ++b) total += block_events_[b].size();
+    for (std::size_t b = 0; b < nblocks; ++b) total += calls.block_events[b].size();
     if (total > max_events_) {
         stopped_ = true;
         throw_max_events();
     }
     plan.pixel_ordered = pixel_ordered;
     plan.row = detail::PixelDivider(static_cast<std::uint32_t>(width_));
-    labels_.resize(total);
+    calls.labels.resize(total);
     if (total == 0) return 0;
     plan.events = (*plan.storage)(total);
     plan.total = total;
     for (std::size_t b = 0; b < nblocks; ++b)
-        if (!block_events_[b].empty()) plan.busy.push_back(static_cast<std::uint32_t>(b));
+        if (!calls.block_events[b].empty()) plan.busy.push_back(static_cast<std::uint32_t>(b));
     plan.base.assign(n_samples + 1, 0);
     for (const std::uint32_t b : plan.busy) {
-        const std::uint32_t* ends = block_sample_ends_[b].data();
+        const std::uint32_t* ends = calls.block_sample_ends[b].data();
         std::uint32_t prev = 0;
         for (std::size_t k = 0; k < n_samples; ++k) {
             plan.base[k + 1] += ends[k] - prev;
@@ -52,11 +53,11 @@ inline std::size_t Sensor::collect_prepare(CollectPlan& plan, bool pixel_ordered
 }
 
 template <class FromLow, class FromFull, class Fn>
-inline bool Sensor::for_each_event_in_sample(std::uint32_t b, std::size_t k, FromLow&& from_low, FromFull&& from_full,
-                              Fn&& fn) const {
-    const RawEvent* out = block_events_[b].data();
-    const std::uint32_t first = k == 0 ? 0u : block_sample_ends_[b][k - 1], end = block_sample_ends_[b][k];
-    const std::int64_t* full_t = block_full_t_[b].empty() ? nullptr : block_full_t_[b].data();
+inline bool Sensor::for_each_event_in_sample(const CallBuffers& calls, std::uint32_t b, std::size_t k, FromLow&& from_low,
+                                            FromFull&& from_full, Fn&& fn) {
+    const RawEvent* out = calls.block_events[b].data();
+    const std::uint32_t first = k == 0 ? 0u : calls.block_sample_ends[b][k - 1], end = calls.block_sample_ends[b][k];
+    const std::int64_t* full_t = calls.block_full_t[b].empty() ? nullptr : calls.block_full_t[b].data();
     if (!full_t) {
         for (std::uint32_t e = first; e < end; ++e)
             if (!fn(from_low(out[e].t_lo), out[e])) return false;
@@ -68,10 +69,11 @@ inline bool Sensor::for_each_event_in_sample(std::uint32_t b, std::size_t k, Fro
 }
 
 template <class Fn>
-inline bool Sensor::for_each_offset_in_sample(std::uint32_t b, std::size_t k, std::int64_t lo, Fn&& fn) const {
+inline bool Sensor::for_each_offset_in_sample(const CallBuffers& calls, std::uint32_t b, std::size_t k, std::int64_t lo,
+                                             Fn&& fn) {
     const std::uint32_t lo_bits = static_cast<std::uint32_t>(lo);
     return for_each_event_in_sample(
-        b, k, [lo_bits](std::uint32_t t_lo) { return t_lo - lo_bits; },
+        calls, b, k, [lo_bits](std::uint32_t t_lo) { return t_lo - lo_bits; },
         [lo](std::int64_t t_us) {
             const std::uint64_t d = static_cast<std::uint64_t>(t_us) - static_cast<std::uint64_t>(lo);
             return static_cast<std::uint32_t>(std::min<std::uint64_t>(d, 0xFFFFFFFFu));
@@ -80,9 +82,10 @@ inline bool Sensor::for_each_offset_in_sample(std::uint32_t b, std::size_t k, st
 }
 
 template <class Fn>
-inline bool Sensor::for_each_in_sample(std::uint32_t b, std::size_t k, std::int64_t end_us, Fn&& fn) const {
+inline bool Sensor::for_each_in_sample(const CallBuffers& calls, std::uint32_t b, std::size_t k, std::int64_t end_us,
+                                      Fn&& fn) {
     return for_each_event_in_sample(
-        b, k, [end_us](std::uint32_t t_lo) { return event_time(end_us, t_lo); },
+        calls, b, k, [end_us](std::uint32_t t_lo) { return event_time(end_us, t_lo); },
         [](std::int64_t t_us) { return t_us; }, fn);
 }
 
@@ -90,7 +93,8 @@ inline void Sensor::collect_sample(CollectPlan& plan, std::size_t k, SortScratch
     const std::size_t base = plan.base[k], n_k = plan.base[k + 1] - base;
     if (n_k == 0) return;
     Event* events = plan.events + base;
-    std::uint8_t* labels = labels_.data() + base;
+    const CallBuffers& calls = *plan.calls;
+    std::uint8_t* labels = plan.calls->labels.data() + base;
     const detail::PixelDivider row = plan.row;
     const std::int64_t end_us = floor_us(plan.t_s[k]);
     // Captured by value: the records' byte stores may alias anything, so what the loops
@@ -104,7 +108,7 @@ inline void Sensor::collect_sample(CollectPlan& plan, std::size_t k, SortScratch
     if (plan.pixel_ordered && plan.intervals_known && counting_sort_in_interval(plan, k, end_us, sort, put)) return;
     std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
     for (const std::uint32_t b : plan.busy)
-        for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent) {
+        for_each_in_sample(calls, b, k, end_us, [&](std::int64_t t_us, RawEvent) {
             lo = std::min(lo, t_us);
             hi = std::max(hi, t_us);
             return true;
@@ -115,13 +119,13 @@ inline void Sensor::collect_sample(CollectPlan& plan, std::size_t k, SortScratch
         std::vector<std::uint32_t>& slots = sort.slots;
         slots.assign(span + 2, 0);
         for (const std::uint32_t b : plan.busy)
-            for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent) {
+            for_each_in_sample(calls, b, k, end_us, [&](std::int64_t t_us, RawEvent) {
                 ++slots[static_cast<std::size_t>(t_us - lo) + 1];
                 return true;
             });
         for (std::size_t d = 1; d < slots.size(); ++d) slots[d] += slots[d - 1];
         for (const std::uint32_t b : plan.busy)
-            for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
+            for_each_in_sample(calls, b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
                 put(slots[static_cast<std::size_t>(t_us - lo)]++, t_us, e);
                 return true;
             });
@@ -129,7 +133,7 @@ inline void Sensor::collect_sample(CollectPlan& plan, std::size_t k, SortScratch
         std::vector<TimedEvent>& sample_events = sort.sample_events;
         sample_events.clear();
         for (const std::uint32_t b : plan.busy)
-            for_each_in_sample(b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
+            for_each_in_sample(calls, b, k, end_us, [&](std::int64_t t_us, RawEvent e) {
                 sample_events.push_back(TimedEvent{t_us, e});
                 return true;
             });
@@ -154,7 +158,7 @@ inline bool Sensor::counting_sort_in_interval(const CollectPlan& plan, std::size
     sort.slots.assign(span + 2, 0);
     std::uint32_t* slots = sort.slots.data();  // a pointer of our own: put()'s stores cannot move it
     for (const std::uint32_t b : plan.busy) {
-        const bool inside = for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent) {
+        const bool inside = for_each_offset_in_sample(*plan.calls, b, k, lo, [&](std::uint32_t d, RawEvent) {
             if (d > span) return false;
             ++slots[d + 1];
             return true;
@@ -177,7 +181,7 @@ inline bool Sensor::counting_sort_in_interval(const CollectPlan& plan, std::size
         RawEvent* staged = sort.staged.data();
         for (std::size_t c = 0; c < n_coarse; ++c) coarse[c] = slots[c << shift];  // where span c starts
         for (const std::uint32_t b : plan.busy)
-            for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent e) {
+            for_each_offset_in_sample(*plan.calls, b, k, lo, [&](std::uint32_t d, RawEvent e) {
                 staged[coarse[d >> shift]++] = RawEvent(d, e.code);
                 return true;
             });
@@ -188,17 +192,17 @@ inline bool Sensor::counting_sort_in_interval(const CollectPlan& plan, std::size
         return true;
     }
     for (const std::uint32_t b : plan.busy)
-        for_each_offset_in_sample(b, k, lo, [&](std::uint32_t d, RawEvent e) {
+        for_each_offset_in_sample(*plan.calls, b, k, lo, [&](std::uint32_t d, RawEvent e) {
             put(slots[d]++, lo + static_cast<std::int64_t>(d), e);
             return true;
         });
     return true;
 }
 
-inline void Sensor::collect_finish() {
-    for (auto& b : block_events_)
+inline void Sensor::collect_finish(CallBuffers& calls) {
+    for (auto& b : calls.block_events)
         if (b.capacity() > (std::size_t{1} << 18)) std::vector<RawEvent>().swap(b);
-    for (auto& b : block_full_t_)
+    for (auto& b : calls.block_full_t)
         if (b.capacity() > (std::size_t{1} << 17)) std::vector<std::int64_t>().swap(b);
 }
 

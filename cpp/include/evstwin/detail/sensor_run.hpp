@@ -30,7 +30,7 @@ inline std::size_t Sensor::run_into(const EventStorage& storage, const Real* pho
     const std::size_t npix = state_.size();
     check_usable();
     if (n_samples == 0) {
-        labels_.clear();
+        calls_.labels.clear();
         return 0;
     }
     check_times(t_s, n_samples);
@@ -58,15 +58,16 @@ inline std::size_t Sensor::run_into(const EventStorage& storage, const Real* pho
     }
 
     const std::size_t nblocks = (npix + BLOCK - 1) / BLOCK;
-    start_call(nblocks, n_samples);
+    start_call(calls_, nblocks, n_samples);
 
     CollectPlan plan;
+    plan.calls = &calls_;
     plan.storage = &storage;
     plan.t_s = t_s;
     plan.intervals_known = true;
     plan.t_before = last_t_;
     guarded_for_each_block(
-        nblocks, npix * n_samples, rate_check,
+        calls_, nblocks, npix * n_samples, rate_check,
         [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
             run_block(b, photon_rate, sample_stride, n_samples, consts, poisson, scratch,
                       probe_slot.empty() ? nullptr : probe_slot.data(), n_probe, trace ? trace->data() : nullptr);
@@ -83,16 +84,16 @@ inline std::size_t Sensor::run_into(const EventStorage& storage, const Real* pho
 
     samples_ += n_samples;
     last_t_ = t_s[n_samples - 1];
-    collect_finish();
+    collect_finish(calls_);
     return plan.total;
 }
 
 template <class Real>
-inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const std::uint32_t* pixels, std::size_t n_pixels,
-                            const Real* photon_rate, const double* t_s, std::size_t n_samples, bool static_rates) {
-    check_usable();
+inline std::size_t Sensor::run_pixels_with(CallBuffers& calls, const EventStorage& storage, const std::uint32_t* pixels,
+                                           std::size_t n_pixels, const Real* photon_rate, const double* t_s,
+                                           std::size_t n_samples, bool static_rates) {
     if (n_pixels == 0 || n_samples == 0) {
-        labels_.clear();
+        calls.labels.clear();
         return 0;
     }
     const std::size_t npix = state_.size();
@@ -134,26 +135,28 @@ inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const st
     std::vector<SampleConstants> consts(n_samples);
     for (std::size_t k = 1; k < n_samples; ++k) consts[k] = model_.constants(t_s[k - 1], t_s[k]);
     const std::size_t nblocks = (n_pixels + BLOCK - 1) / BLOCK;
-    start_call(nblocks, n_samples);
+    start_call(calls, nblocks, n_samples);
     // The rates are checked block by block, each block's columns just before it steps them
     // (they are then in the cache for its steps: a separate pass over the whole array read it
     // from memory once more, 7 % of mcreynolds' run_pixels calls), and the blocks' new
-    // states wait in pixel_states_ until every block has passed: a bad value anywhere leaves
+    // states wait in calls.pixel_states until every block has passed: a bad value anywhere leaves
     // every pixel as it was, and the error names the first one in the array.
     const std::size_t rows = static_rates ? 1 : n_samples, sample_stride = static_rates ? 0 : n_pixels;
     const std::size_t total = rows * n_pixels;
     std::vector<std::size_t> block_bad(nblocks, total);
-    if (pixel_states_.size() < n_pixels) pixel_states_.resize(n_pixels);
+    std::vector<PixelState>& pixel_states = calls.pixel_states;
+    if (pixel_states.size() < n_pixels) pixel_states.resize(n_pixels);
     NoCheck no_check{total};
     // The listed pixels need not be in increasing order: each sample's events are sorted
     // by (t, pixel), not only by t.
     CollectPlan plan;
+    plan.calls = &calls;
     plan.storage = &storage;
     plan.t_s = t_s;
     std::size_t bad = total;
     try {
         guarded_for_each_block(
-            nblocks, total, no_check,
+            calls, nblocks, total, no_check,
             [&](std::size_t b, PoissonSampler& poisson, BlockModel::BlockScratch& scratch) {
                 const std::size_t lo = b * BLOCK, m = std::min(n_pixels, lo + BLOCK) - lo;
                 for (std::size_t k = 0; k < rows; ++k) {
@@ -163,13 +166,13 @@ inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const st
                         return;
                     }
                 }
-                run_pixel_block(b, pixels, n_pixels, photon_rate, sample_stride, t_s, n_samples, consts, poisson, scratch);
+                run_pixel_block(calls, b, pixels, n_pixels, photon_rate, sample_stride, t_s, n_samples, consts, poisson, scratch);
             },
             [&]() -> std::size_t {
                 bad = *std::min_element(block_bad.begin(), block_bad.end());
                 if (bad < total) return 0;
                 for (std::size_t j = 0; j < n_pixels; ++j) {
-                    state_[pixels[j]] = pixel_states_[j];
+                    state_[pixels[j]] = pixel_states[j];
                     block_synced_[pixels[j] / BLOCK] = 0;  // this block's pixels now stand apart
                 }
                 return collect_prepare(plan, false);
@@ -177,7 +180,7 @@ inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const st
             [&](std::size_t k, SortScratch& sort) { collect_sample(plan, k, sort); });
     } catch (...) {
         // A block's error (max_events) before every block's rates were checked: a bad rate
-        // is still the error, and no pixel has moved (the states wait in pixel_states_).
+        // is still the error, and no pixel has moved (the states wait in calls.pixel_states).
         bad = first_bad_rate(photon_rate, total);
         if (bad >= total) throw;
         stopped_ = false;
@@ -185,7 +188,7 @@ inline std::size_t Sensor::run_pixels_into(const EventStorage& storage, const st
     if (bad < total)
         throw_bad_rate("photon_rate[" + std::to_string(bad / n_pixels) + ", " + std::to_string(bad % n_pixels) + "]",
                        static_cast<double>(photon_rate[bad]));
-    collect_finish();
+    collect_finish(calls);
     return plan.total;
 }
 
@@ -265,12 +268,12 @@ inline void Sensor::run_block(std::size_t b, const Real* rate, std::size_t sampl
                std::size_t n_probe, TraceSample* trace) {
     const std::size_t npix = state_.size();
     const std::size_t lo = b * BLOCK, hi = std::min(npix, lo + BLOCK);
-    TakenEvents taken(block_events_[b], block_full_t_[b]);
+    TakenEvents taken(calls_.block_events[b], calls_.block_full_t[b]);
     std::vector<RawEvent>& out = taken.out;
     std::uint32_t pixel = 0;
-    std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
+    std::uint32_t* ends = calls_.block_sample_ends[b].data();  // out.size() after each sample
     const auto sample_end_us = [&consts](std::size_t j) { return floor_us(consts[j].t1); };
-    BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
+    BlockEmit<decltype(sample_end_us)> emit{*this, calls_, taken, ends, pixel, sample_end_us};
     const bool kernel = !probe_slot && kernel_ != Kernel::PerPixel && model_.has_block_kernel();
     const bool soa_kernel = kernel && kernel_ != Kernel::Blocks && model_.has_soa_kernel();
     const bool soa_always = kernel_ == Kernel::Vector;  // not Auto's judgement of where it pays
@@ -438,24 +441,24 @@ inline void Sensor::run_block(std::size_t b, const Real* rate, std::size_t sampl
 }
 
 template <class Real>
-inline void Sensor::run_pixel_block(std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
+inline void Sensor::run_pixel_block(CallBuffers& calls, std::size_t b, const std::uint32_t* pixels, std::size_t n_pixels, const Real* rate,
                                     std::size_t sample_stride, const double* t_s, std::size_t n_samples,
                                     const std::vector<SampleConstants>& consts, PoissonSampler& poisson,
                                     BlockModel::BlockScratch& scratch) {
     const std::size_t lo = b * BLOCK, hi = std::min(n_pixels, lo + BLOCK);
-    TakenEvents taken(block_events_[b], block_full_t_[b]);
+    TakenEvents taken(calls.block_events[b], calls.block_full_t[b]);
     std::vector<RawEvent>& out = taken.out;
     std::uint32_t pixel = 0;
-    std::uint32_t* ends = block_sample_ends_[b].data();  // out.size() after each sample
+    std::uint32_t* ends = calls.block_sample_ends[b].data();  // out.size() after each sample
     const auto sample_end_us = [t_s](std::size_t j) { return floor_us(t_s[j]); };
-    BlockEmit<decltype(sample_end_us)> emit{*this, taken, ends, pixel, sample_end_us};
+    BlockEmit<decltype(sample_end_us)> emit{*this, calls, taken, ends, pixel, sample_end_us};
     emit.start_sample(0);
     // The listed pixels' states are gathered into a contiguous block, advanced sample-major
     // (each sample reads one contiguous stretch of its row of rates) and scattered back.
     // The first interval starts at each pixel's own last sample; after it, every pixel
     // stands at the same time and the block kernel applies.
     const std::size_t m = hi - lo;
-    PixelState* local = pixel_states_.data() + lo;  // run_pixels_into() puts them back
+    PixelState* local = calls.pixel_states.data() + lo;  // run_pixels_with() puts them back
     for (std::size_t j = 0; j < m; ++j) local[j] = state_[pixels[lo + j]];
     const bool kernel = kernel_ != Kernel::PerPixel && model_.has_block_kernel();
     // Usually every listed pixel stands at the same time (the previous base sample).

@@ -184,40 +184,6 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     }
 
     // --- the runs, group by group, then the long step of everyone else to the step's end ---
-    std::vector<Event> events;
-    std::vector<std::uint8_t> labels;
-    std::uint64_t updates = 0;
-    const auto take = [&](const std::vector<Event>& part) {
-        events.insert(events.end(), part.begin(), part.end());
-        labels.insert(labels.end(), labels_.begin(), labels_.end());
-    };
-    // The static light of some pixels: one row, the same at each of their samples.
-    const auto static_rates = [&](const std::vector<std::uint32_t>& pixels) {
-        std::vector<double> out(pixels.size());
-        for (std::size_t j = 0; j < pixels.size(); ++j) out[j] = step.static_rate[pixels[j]];
-        return out;
-    };
-    // One long step of some pixels (increasing indices, each behind t) at the static light
-    // to t, in one run_pixels call per time they stand at, so that each call's blocks start
-    // together and take the block kernels.
-    const auto long_step = [&](const std::vector<std::uint32_t>& pixels, double t) {
-        std::map<double, std::vector<std::uint32_t>> by_start;
-        std::vector<std::uint32_t>* last = nullptr;
-        double last_t = 0.0;
-        for (const std::uint32_t px : pixels) {
-            const double t0 = state_[px].t;
-            if (!last || t0 != last_t) {
-                last = &by_start[t0];
-                last_t = t0;
-            }
-            last->push_back(px);
-        }
-        for (const auto& start : by_start) {
-            const std::vector<double> rate = static_rates(start.second);
-            take(run_pixels(start.second.data(), start.second.size(), rate.data(), &t, 1, true));
-            updates += start.second.size();
-        }
-    };
     // Where most pixels take the base samples anyway, the step runs densely: each group's lit
     // pixels through run_pixels, then every pixel through run() at the group's base times (it
     // skips the lit ones, ahead already), as the dense path does (geo-stare's sky on the
@@ -229,21 +195,14 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     // Each group's start: the step's start, then the previous group's last sample (a base time).
     std::vector<double> starts(n_groups);
     for (std::size_t g = 0; g < n_groups; ++g) starts[g] = g == 0 ? t_begin : step.t_s[g * group - 1];
-    // The base samples of groups [g0, g1).
-    const auto base_times = [&](std::size_t g0, std::size_t g1) {
-        std::vector<double> base;
-        for (std::size_t k = g0 * group; k < std::min(n, g1 * group); ++k)
-            if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
-        return base;
-    };
     // A pixel's base samples run ahead of the groups: from group `from` (where it stands, or
     // stood still before) to the group where it is lit next (`next`, n_groups: none), or
     // sooner, to the first group that starts once its levels have settled (busy pixels take
-    // every group). Those groups' base samples are then one run_pixels call for the pixels
-    // that stop alike, not one call a group, which took every settling pixel through the
-    // kernel's set-up once for each group's few base samples (mcreynolds: 8,500 settling
-    // pixels for 0.28 s after a light source passed, a call each group of 4 ms). The same
-    // samples for each pixel as group by group, so the same events.
+    // every group); returns the end (exclusive). Those groups' base samples are then one
+    // run_pixels call for the pixels that stop alike, not one call a group, which took every
+    // settling pixel through the kernel's set-up once for each group's few base samples
+    // (mcreynolds: 8,500 settling pixels for 0.28 s after a light source passed, a call each
+    // group of 4 ms). The same samples for each pixel as group by group, so the same events.
     const auto base_stop = [&](std::uint32_t px, std::size_t from, std::size_t next) {
         std::size_t stop = next;
         if (!(judged_busy && sparse_busy_[px]))
@@ -251,26 +210,6 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
                                                                                           settle_until_[px]) -
                                                                          starts.begin()));
         return std::max(stop, from);
-    };
-    std::map<std::size_t, std::vector<std::uint32_t>> ahead;  // the groups' end (exclusive) -> pixels
-    std::size_t at_end = 0;  // pixels the groups took to the step's end (its last sample is a base time)
-    // The pixels of `ahead`, from group `from` on.
-    const auto run_ahead = [&](std::size_t from) {
-        for (auto& [stop, pixels] : ahead) {
-            std::sort(pixels.begin(), pixels.end());
-            // Those that stood still so far (in the step, or waiting from an earlier one):
-            // one long step at the static light to the start.
-            std::vector<std::uint32_t> entering;
-            for (const std::uint32_t px : pixels)
-                if (state_[px].t < starts[from]) entering.push_back(px);
-            long_step(entering, starts[from]);
-            const std::vector<double> base = base_times(from, stop);
-            const std::vector<double> rate = static_rates(pixels);
-            take(run_pixels(pixels.data(), pixels.size(), rate.data(), base.data(), base.size(), true));
-            updates += pixels.size() * base.size();
-            if (stop == n_groups) at_end += pixels.size();
-        }
-        ahead.clear();
     };
     // The group each lit pixel is lit in next (n_groups: not again in this step), found from
     // the last group back; sparse_column_ holds each pixel's next group meanwhile (-1: none),
@@ -285,61 +224,196 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             column[px] = static_cast<std::int32_t>(g);
         }
     }
-    try {
-        if (!dense) {
-            // The pixels still settling from an earlier step, and those that take the base
-            // samples throughout: ahead from the step's start.
-            for (const std::vector<std::uint32_t>* list : {&settling_, &busy})
-                for (const std::uint32_t px : *list) {
-                    if (in_group[px]) continue;
-                    in_group[px] = 1;
-                    const std::size_t next = column[px] < 0 ? n_groups : static_cast<std::size_t>(column[px]);
-                    const std::size_t stop = base_stop(px, 0, next);
-                    if (stop > 0) ahead[stop].push_back(px);
-                }
-            for (const std::vector<std::uint32_t>* list : {&settling_, &busy})
-                for (const std::uint32_t px : *list) in_group[px] = 0;
+    // The pixels still settling from an earlier step, and those that take the base samples
+    // throughout, each once: ahead from the step's start to their end (not dense).
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> ahead_at_start;  // (pixel, end)
+    if (!dense) {
+        for (const std::vector<std::uint32_t>* list : {&settling_, &busy})
+            for (const std::uint32_t px : *list) {
+                if (in_group[px]) continue;
+                in_group[px] = 1;
+                const std::size_t next = column[px] < 0 ? n_groups : static_cast<std::size_t>(column[px]);
+                const std::size_t stop = base_stop(px, 0, next);
+                if (stop > 0) ahead_at_start.emplace_back(px, static_cast<std::uint32_t>(stop));
+            }
+        for (const std::vector<std::uint32_t>* list : {&settling_, &busy})
+            for (const std::uint32_t px : *list) in_group[px] = 0;
+    }
+    for (const SparseRun& r : lit)
+        for (const std::uint32_t px : r.pixels) column[px] = -1;
+
+    // One part of the pixels through the whole step: those of blocks b (of BLOCK pixels, run()'s:
+    // its per-block flags then belong to one part) with b % n_parts == part, their calls made
+    // one after another on `calls`. Without `dense`, the parts share no pixel and run at once,
+    // one a thread, each call alone on its thread: one parallel region a step rather than a
+    // few calls a group each with its own (a lit group is ~1,000 pixels over a few samples, too
+    // little for a region of its own: mcreynolds ran on one thread). Each pixel takes the same
+    // calls whatever the parts, so the events do not depend on them. With `dense` (one part)
+    // the groups' run() calls are the sensor's, in parallel themselves.
+    struct Part {
+        std::vector<Event> events;
+        std::vector<std::uint8_t> labels;
+        std::uint64_t updates = 0;
+        std::size_t at_end = 0;  // pixels the groups took to the step's end (its last sample is a base time)
+    };
+    // A call's events and labels onto a part's.
+    const auto take_into = [](Part& out, const CallBuffers& calls, const std::vector<Event>& events) {
+        out.events.insert(out.events.end(), events.begin(), events.end());
+        out.labels.insert(out.labels.end(), calls.labels.begin(), calls.labels.end());
+    };
+    const auto run_listed = [&](CallBuffers& calls, Part& out, const std::vector<std::uint32_t>& pixels,
+                                const double* rate, const double* t, std::size_t n_t, bool static_rates) {
+        std::vector<Event> events;
+        run_pixels_with(calls, detail::vector_storage(events), pixels.data(), pixels.size(), rate, t, n_t, static_rates);
+        take_into(out, calls, events);
+        out.updates += pixels.size() * n_t;
+    };
+    // The static light of some pixels: one row, the same at each of their samples.
+    const auto static_rates = [&](const std::vector<std::uint32_t>& pixels) {
+        std::vector<double> rates(pixels.size());
+        for (std::size_t j = 0; j < pixels.size(); ++j) rates[j] = step.static_rate[pixels[j]];
+        return rates;
+    };
+    // One long step of some pixels (increasing indices, each behind t) at the static light to
+    // t, in one run_pixels call per time they stand at, so that each call's blocks start
+    // together and take the block kernels.
+    const auto long_step = [&](CallBuffers& calls, Part& out, const std::vector<std::uint32_t>& pixels, double t) {
+        std::map<double, std::vector<std::uint32_t>> by_start;
+        std::vector<std::uint32_t>* last = nullptr;
+        double last_t = 0.0;
+        for (const std::uint32_t px : pixels) {
+            const double t0 = state_[px].t;
+            if (!last || t0 != last_t) {
+                last = &by_start[t0];
+                last_t = t0;
+            }
+            last->push_back(px);
         }
-        for (const SparseRun& r : lit)
-            for (const std::uint32_t px : r.pixels) column[px] = -1;
+        for (const auto& at : by_start) run_listed(calls, out, at.second, static_rates(at.second).data(), &t, 1, true);
+    };
+    const auto run_part = [&](CallBuffers& calls, std::size_t part, std::size_t n_parts, Part& out) {
+        const auto mine = [&](std::uint32_t px) { return n_parts == 1 || (px / BLOCK) % n_parts == part; };
+        // The base samples of groups [g0, g1).
+        const auto base_times = [&](std::size_t g0, std::size_t g1) {
+            std::vector<double> base;
+            for (std::size_t k = g0 * group; k < std::min(n, g1 * group); ++k)
+                if ((k + 1) % step.base_every == 0) base.push_back(step.t_s[k]);
+            return base;
+        };
+        std::map<std::size_t, std::vector<std::uint32_t>> ahead;  // end (exclusive) -> pixels
+        // The pixels of `ahead` from group `from` on; those that stood still so far (in the
+        // step, or waiting from an earlier one) first take one long step to its start.
+        const auto run_ahead = [&](std::size_t from) {
+            for (auto& [stop, pixels] : ahead) {
+                std::sort(pixels.begin(), pixels.end());
+                std::vector<std::uint32_t> entering;
+                for (const std::uint32_t px : pixels)
+                    if (state_[px].t < starts[from]) entering.push_back(px);
+                long_step(calls, out, entering, starts[from]);
+                const std::vector<double> base = base_times(from, stop);
+                run_listed(calls, out, pixels, static_rates(pixels).data(), base.data(), base.size(), true);
+                if (stop == n_groups) out.at_end += pixels.size();
+            }
+            ahead.clear();
+        };
+        for (const auto& [px, stop] : ahead_at_start)
+            if (mine(px)) ahead[stop].push_back(px);
         run_ahead(0);
+        SparseRun own;  // this part's lit pixels of a group, where there are other parts
+        std::vector<std::uint32_t> own_next;
         for (std::size_t g = 0; g < n_groups; ++g) {
             const std::size_t k0 = g * group, k1 = std::min(n, k0 + group);
             const double t_start = starts[g], t_end = step.t_s[k1 - 1];
-            const SparseRun& r = lit[g];
+            const SparseRun* r = &lit[g];
+            const std::vector<std::uint32_t>* next = &next_lit[g];
+            if (n_parts > 1) {
+                const std::size_t m = r->pixels.size(), nk = r->times.size();
+                own.pixels.clear();
+                own_next.clear();
+                std::vector<std::size_t> cols;
+                for (std::size_t j = 0; j < m; ++j)
+                    if (mine(r->pixels[j])) {
+                        cols.push_back(j);
+                        own.pixels.push_back(r->pixels[j]);
+                        own_next.push_back((*next)[j]);
+                    }
+                own.rate.resize(nk * cols.size());
+                for (std::size_t k = 0; k < nk; ++k)
+                    for (std::size_t c = 0; c < cols.size(); ++c) own.rate[k * cols.size() + c] = r->rate[k * m + cols[c]];
+                own.times = r->times;
+                r = &own;
+                next = &own_next;
+            }
             {
                 // Those that stood still so far: one long step at the static light to the
                 // group's start.
                 std::vector<std::uint32_t> entering;
-                for (const std::uint32_t px : r.pixels)
+                for (const std::uint32_t px : r->pixels)
                     if (state_[px].t < t_start) entering.push_back(px);
-                long_step(entering, t_start);
+                long_step(calls, out, entering, t_start);
             }
-            if (!r.pixels.empty()) {
-                take(run_pixels(r.pixels.data(), r.pixels.size(), r.rate.data(), r.times.data(), r.times.size()));
-                updates += r.pixels.size() * r.times.size();
-            }
+            if (!r->pixels.empty())
+                run_listed(calls, out, r->pixels, r->rate.data(), r->times.data(), r->times.size(), false);
             if (dense) {
                 const std::vector<double> base = base_times(g, g + 1);
-                take(run(step.static_rate, base.data(), base.size(), nullptr, nullptr, true));
-                updates += (npix - r.pixels.size()) * base.size();
+                take_into(out, calls, run(step.static_rate, base.data(), base.size(), nullptr, nullptr, true));
+                out.updates += (npix - r->pixels.size()) * base.size();
             }
             // A lit pixel relaxes from the group's end on: ahead through the groups until it
             // has settled or is lit again.
-            for (std::size_t j = 0; j < r.pixels.size(); ++j) {
-                const std::uint32_t px = r.pixels[j];
+            for (std::size_t j = 0; j < r->pixels.size(); ++j) {
+                const std::uint32_t px = r->pixels[j];
                 settle_until_[px] = t_end + settle_time_s(step.static_rate[px]);
                 if (dense) continue;
-                const std::size_t stop = base_stop(px, g + 1, next_lit[g][j]);
+                const std::size_t stop = base_stop(px, g + 1, (*next)[j]);
                 if (stop > g + 1) ahead[stop].push_back(px);
             }
             run_ahead(g + 1);
+            if (g + 1 == n_groups) out.at_end += r->pixels.size();
         }
-        at_end += lit[n_groups - 1].pixels.size();
+    };
+
+    std::vector<Event> events;
+    std::vector<std::uint8_t> labels;
+    std::uint64_t updates = 0;
+    std::size_t at_end = 0;
+    try {
+        std::size_t n_parts = 1;
+#if EVSTWIN_HAS_OPENMP
+        if (!dense && num_threads_ > 1) n_parts = static_cast<std::size_t>(num_threads_);
+#endif
+        std::vector<Part> parts(n_parts);
+        if (n_parts == 1) {
+            run_part(calls_, 0, 1, parts[0]);
+        } else {
+            while (sparse_calls_.size() < n_parts) sparse_calls_.push_back(std::make_unique<CallBuffers>());
+            std::vector<std::exception_ptr> errors(n_parts);
+#if EVSTWIN_HAS_OPENMP
+#pragma omp parallel for num_threads(num_threads_) schedule(static, 1)
+#endif
+            for (std::int64_t i = 0; i < static_cast<std::int64_t>(n_parts); ++i) {
+                const std::size_t part = static_cast<std::size_t>(i);
+                try {
+                    run_part(*sparse_calls_[part], part, n_parts, parts[part]);
+                } catch (...) {
+                    errors[part] = std::current_exception();
+                }
+            }
+            // The first part's error: which one does not depend on timing unless two parts
+            // fail (max_events, counted per call).
+            for (const std::exception_ptr& e : errors)
+                if (e) std::rethrow_exception(e);
+        }
+        for (Part& part : parts) {
+            events.insert(events.end(), part.events.begin(), part.events.end());
+            labels.insert(labels.end(), part.labels.begin(), part.labels.end());
+            updates += part.updates;
+            at_end += part.at_end;
+        }
         // The pixels still settling after the step, for the next: the earlier ones and this
         // step's lit ones, each once.
+        const double t_last = step.t_s[n - 1];
         {
-            const double t_last = step.t_s[n - 1];
             std::vector<std::uint32_t> still;
             const auto keep = [&](std::uint32_t px) {
                 if (in_group[px] || !(settle_until_[px] > t_last)) return;
@@ -354,14 +428,14 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         }
         // The last group's pixels stand at the step's end already (its last sample is a base
         // time).
-        const double t_last = step.t_s[n - 1];
+        Part rest;
         if (dense) {
             // Every pixel stands at t_last: the last group's run() took them there.
         } else if (step.reach_all) {
             // run() skips the pixels already there; a block whose pixels stand apart takes the
             // kernel for those that start together (run_block).
-            take(run(step.static_rate, &t_last, 1, nullptr, nullptr, true));
-            updates += npix - at_end;
+            take_into(rest, calls_, run(step.static_rate, &t_last, 1, nullptr, nullptr, true));
+            rest.updates += npix - at_end;
         } else {
             std::vector<std::uint32_t> reach;
             for (std::size_t i = 0; i < step.n_reach; ++i) {
@@ -373,8 +447,11 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             }
             for (const std::uint32_t px : reach) in_group[px] = 0;
             std::sort(reach.begin(), reach.end());
-            long_step(reach, t_last);
+            long_step(calls_, rest, reach, t_last);
         }
+        events.insert(events.end(), rest.events.begin(), rest.events.end());
+        labels.insert(labels.end(), rest.labels.begin(), rest.labels.end());
+        updates += rest.updates;
         sparse_end_ = t_last;
     } catch (...) {
         stopped_ = true;  // earlier groups' pixels have moved
@@ -390,13 +467,14 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
         return static_cast<std::uint32_t>(ea.y) * static_cast<std::uint32_t>(width_) + ea.x <
                static_cast<std::uint32_t>(eb.y) * static_cast<std::uint32_t>(width_) + eb.x;
     });
-    labels_.resize(idx.size());
+    std::vector<std::uint8_t>& out_labels = calls_.labels;
+    out_labels.resize(idx.size());
     last_pixel_updates_ = updates;
     if (idx.empty()) return 0;
     Event* out = storage(idx.size());
     for (std::size_t i = 0; i < idx.size(); ++i) {
         out[i] = events[idx[i]];
-        labels_[i] = labels[idx[i]];
+        out_labels[i] = labels[idx[i]];
     }
     return idx.size();
 }
