@@ -3,9 +3,13 @@
 // threads, bad input refused before any pixel moves.
 #include <evstwin/evstwin.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
+#include <map>
+#include <memory>
 #include <vector>
 
 #include "check.hpp"
@@ -180,6 +184,95 @@ TEST(run_sparse_is_the_same_whatever_the_threads) {
         CHECK(runs[0].size() > 50);
         CHECK(same_events(runs[0], runs[1]));
         CHECK(same_events(runs[0], runs[2]));
+    }
+}
+
+TEST(run_sparse_is_the_calls_its_rule_makes_by_hand) {
+    // The rule the header states, followed with public calls on a sensor of its own: in each
+    // group the lit pixels take one long step at the static light to the group's start (those
+    // behind it, one call per time they stand at) and then the group's fine samples; the
+    // pixels still settling (within settle_time_s of the end of a group they were lit in) take
+    // the group's base samples, after the same long step; at the step's end one run() of the
+    // static map. run_sparse makes other calls (a settling pixel's base samples ahead of the
+    // groups, in one call; the pixels in parts, one a thread) but must give the same events,
+    // bit for bit, on 1, 2 and 3 threads, over three steps (the settling carried from step to
+    // step), at settling times beyond the three steps (1 Hz) and within them (5 Hz).
+    const int w = 48, h = 16;
+    const std::size_t n = 400, base_every = 4, group_base = 5, group = base_every * group_base;
+    const double light = 3e5;
+    for (const double cutoff_hz : {1.0, 5.0}) {
+        const std::vector<double> background(w * h, light), t0{0.0};
+        Sensor ref(w, h, sparse_params(cutoff_hz), 5, 1);
+        ref.run(background.data(), t0.data(), 1, nullptr, nullptr, true);
+        const double settle_s = ref.settle_time_s(light);
+        std::vector<double> at(w * h, 0.0), settle_until(w * h, -std::numeric_limits<double>::infinity());
+        std::vector<std::unique_ptr<Sensor>> sparse;
+        for (int threads : {1, 2, 3}) {
+            sparse.push_back(std::make_unique<Sensor>(w, h, sparse_params(cutoff_hz), 5, threads));
+            sparse.back()->run(background.data(), t0.data(), 1, nullptr, nullptr, true);
+        }
+        std::size_t settled_within = 0;  // pixels whose settling ended inside a step
+        double step_start = 0.0;
+        for (int unit = 0; unit < 3; ++unit) {
+            std::vector<double> t(n);
+            for (std::size_t k = 0; k < n; ++k) t[k] = 0.1 * unit + 2.5e-4 * static_cast<double>(k + 1);
+            const Spot spot(w, h, t);
+            std::vector<Event> expected;
+            const auto take = [&](const std::vector<Event>& ev) { expected.insert(expected.end(), ev.begin(), ev.end()); };
+            const auto long_step = [&](const std::vector<std::uint32_t>& pixels, double to) {
+                std::map<double, std::vector<std::uint32_t>> by_start;
+                for (const std::uint32_t px : pixels)
+                    if (at[px] < to) by_start[at[px]].push_back(px);
+                for (const auto& [from, list] : by_start) {
+                    const std::vector<double> rate(list.size(), light);
+                    take(ref.run_pixels(list.data(), list.size(), rate.data(), &to, 1, true));
+                    for (const std::uint32_t px : list) at[px] = to;
+                }
+            };
+            for (std::size_t k0 = 0; k0 < n; k0 += group) {
+                const double t_start = k0 == 0 ? step_start : t[k0 - 1], t_end = t[k0 + group - 1];
+                std::vector<std::uint32_t> lit;
+                for (std::size_t i = 0; i < spot.rate.size(); ++i)
+                    if (spot.sample[i] >= k0 && spot.sample[i] < k0 + group) lit.push_back(spot.pixel[i]);
+                std::sort(lit.begin(), lit.end());
+                lit.erase(std::unique(lit.begin(), lit.end()), lit.end());
+                std::vector<double> rate(group * lit.size(), light);
+                for (std::size_t i = 0; i < spot.rate.size(); ++i)
+                    if (spot.sample[i] >= k0 && spot.sample[i] < k0 + group) {
+                        const std::size_t j = static_cast<std::size_t>(
+                            std::lower_bound(lit.begin(), lit.end(), spot.pixel[i]) - lit.begin());
+                        rate[(spot.sample[i] - k0) * lit.size() + j] += spot.rate[i];
+                    }
+                long_step(lit, t_start);
+                if (!lit.empty()) take(ref.run_pixels(lit.data(), lit.size(), rate.data(), t.data() + k0, group));
+                std::vector<std::uint32_t> settling;
+                for (std::uint32_t px = 0; px < static_cast<std::uint32_t>(w * h); ++px)
+                    if (settle_until[px] > t_start && !std::binary_search(lit.begin(), lit.end(), px)) {
+                        settling.push_back(px);
+                        if (!(settle_until[px] > t_end)) ++settled_within;
+                    }
+                long_step(settling, t_start);
+                std::vector<double> base;
+                for (std::size_t k = k0 + base_every - 1; k < k0 + group; k += base_every) base.push_back(t[k]);
+                const std::vector<double> settle_rate(settling.size(), light);
+                if (!settling.empty())
+                    take(ref.run_pixels(settling.data(), settling.size(), settle_rate.data(), base.data(), base.size(), true));
+                for (const std::uint32_t px : lit) settle_until[px] = t_end + settle_s;
+                for (const std::uint32_t px : lit) at[px] = t_end;
+                for (const std::uint32_t px : settling) at[px] = t_end;
+            }
+            take(ref.run(background.data(), &t[n - 1], 1, nullptr, nullptr, true));
+            std::fill(at.begin(), at.end(), t[n - 1]);
+            step_start = t[n - 1];
+            std::stable_sort(expected.begin(), expected.end(), [&](const Event& a, const Event& b) {
+                if (a.t != b.t) return a.t < b.t;
+                return a.y * w + a.x < b.y * w + b.x;
+            });
+            CHECK(expected.size() > 20);
+            for (const auto& s : sparse)
+                CHECK(same_events(s->run_sparse(spot.step(background, t, base_every, group_base)), expected));
+        }
+        if (cutoff_hz > 2.0) CHECK(settled_within > 10);  // the 5 Hz pixels settle 0.16 s after they were lit
     }
 }
 

@@ -11,11 +11,15 @@
 // Then one run() of the static map at the step's end moves every pixel that stands earlier
 // there in one long exact step (run() skips the pixels already there); or, where the step
 // lets pixels wait (reach_all false), only the pixels it lists, whose light changes there.
-// Where most pixels take the base samples anyway, the step runs densely instead (each
-// group's lit pixels, then run() of every pixel at its base times). Which pixel takes which
-// grid depends on the step alone, so the events do not depend on the threads or on how a
-// simulation is cut into steps of the same groups. Every call it makes is an ordinary
-// run_pixels / run call; the step's events are their events, merged by (t, pixel).
+// A pixel's base samples run ahead of the groups, in one call from where it stands to its
+// settling or its next lit group, with the pixels that stop alike. Where most pixels take
+// the base samples anyway, the step runs densely instead (each group's lit pixels, then
+// run() of every pixel at its base times). Otherwise the pixels are cut into parts (blocks b
+// with b % threads == part), one a thread, each part's calls made on its own thread. Which
+// pixel takes which grid depends on the step alone, so the events do not depend on the
+// threads or on how a simulation is cut into steps of the same groups. Every call it makes
+// is an ordinary run_pixels / run call; the step's events are their events, merged by
+// (t, pixel).
 #pragma once
 
 #include <algorithm>
