@@ -205,8 +205,8 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
     // every group); returns the end (exclusive). Those groups' base samples are then one
     // run_pixels call for the pixels that stop alike, not one call a group, which took every
     // settling pixel through the kernel's set-up once for each group's few base samples
-    // (mcreynolds: 8,500 settling pixels for 0.28 s after a light source passed, a call each
-    // group of 4 ms). The same samples for each pixel as group by group, so the same events.
+    // (mcreynolds: ~8,500 pixels settle for 0.28 s after a light source passed, and its
+    // groups are 4-44 ms). The same samples for each pixel as group by group, so the same events.
     const auto base_stop = [&](std::uint32_t px, std::size_t from, std::size_t next) {
         std::size_t stop = next;
         if (!(judged_busy && sparse_busy_[px]))
