@@ -192,9 +192,12 @@ void PixelModel::refine_and_compare(PixelState& s, double x1, double z1, double 
         // the refractory period (nothing fires there: only the noise at its end counts, drawn
         // already; cutting such pieces cost the event-heavy load half its instructions), or
         // once the interval has been halved MAX_REFINE_SPLITS times (a line that crosses a
-        // level in every piece: a leak firing every few seconds over a year-long sample).
+        // level in every piece: a leak firing every few seconds over a year-long sample). A
+        // piece with a background event due in it is halved on to the deepest level: the
+        // event resets the reference to the level there, which only a resolved piece's line
+        // puts near the noise's path (continuous_finish).
         if (piece.level == deepest || splits == MAX_REFINE_SPLITS || s.refr_until >= span.t1 ||
-            (piece.level > 0 && !crossing_within(s, y_end, span, leak_g, lv.plausible_limit))) {
+            (piece.level > 0 && !pulses.due(span.t1) && !crossing_within(s, y_end, span, leak_g, lv.plausible_limit))) {
             // The comparator over the piece with its bridge (its draws keyed by the piece's
             // end); the background's events due by its end are its own (compare takes them).
             compare_bridged(s, y_end, piece.ny, span, leak_g, lv.bridge_var, pulses, key, pixel,
