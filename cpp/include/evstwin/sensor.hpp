@@ -22,11 +22,8 @@
 #include <string>
 #include <vector>
 
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
-
 #include "config.hpp"
+#include "detail/sensor_support.hpp"
 #include "event.hpp"
 #include "kernels/block_model.hpp"
 #include "pixel.hpp"
@@ -36,50 +33,6 @@
 EVSTWIN_FP_STRICT_BEGIN
 
 namespace evstwin {
-
-namespace detail {
-/// n / d for a pixel index n < 2^26 and a row width 1 <= d <= 65535 by a multiply and a
-/// shift (collect_sample() turns every event's pixel into (x, y); a 32-bit division there cost more
-/// than the rest of the copy). With l = ceil(log2 d), k = 26 + l and m = ceil(2^k / d),
-/// n m / 2^k = n / d + n (m d - 2^k) / (d 2^k) lies below n / d + 1 / d, so its floor is
-/// floor(n / d) (Granlund and Montgomery, PLDI 1994); n m < 2^26 (2^27 + 1) fits in 64 bits.
-struct PixelDivider {
-    static constexpr int INDEX_BITS = 26;
-    explicit PixelDivider(std::uint32_t d) : d_(d) {
-        if (d < 1 || d > 65535) throw std::invalid_argument("PixelDivider needs a divisor in [1, 65535]; got " + std::to_string(d));
-        int l = 0;
-        while ((std::uint32_t{1} << l) < d) ++l;
-        shift_ = INDEX_BITS + l;
-        m_ = ((std::uint64_t{1} << shift_) + d - 1) / d;
-    }
-    /// floor(n / d) for n < 2^26.
-    std::uint32_t quotient(std::uint32_t n) const { return static_cast<std::uint32_t>((n * m_) >> shift_); }
-    std::uint32_t divisor() const { return d_; }
-
-private:
-    std::uint32_t d_;
-    int shift_ = 0;
-    std::uint64_t m_ = 0;
-};
-
-/// Ask Linux to back the 2 MiB pages inside [p, p + bytes) with huge pages (transparent huge
-/// pages in "madvise" mode, the usual default; NumPy asks the same for its large arrays). A
-/// call's event output is fresh memory written once: with 4 KiB pages its page faults took
-/// 5 ns an event, more than sorting it (100 ms for 19 M events, against 20 ms; the
-/// documentation's decisions page). A hint: the memory and its contents are the same either way.
-inline void advise_huge_pages(void* p, std::size_t bytes) {
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-    constexpr std::uintptr_t HUGE_PAGE = std::uintptr_t{1} << 21;
-    if (bytes < 2 * HUGE_PAGE) return;
-    const std::uintptr_t a = (reinterpret_cast<std::uintptr_t>(p) + HUGE_PAGE - 1) & ~(HUGE_PAGE - 1);
-    const std::uintptr_t e = (reinterpret_cast<std::uintptr_t>(p) + bytes) & ~(HUGE_PAGE - 1);
-    if (e > a) (void)madvise(reinterpret_cast<void*>(a), e - a, MADV_HUGEPAGE);
-#else
-    (void)p;
-    (void)bytes;
-#endif
-}
-}  // namespace detail
 
 /// Where run_into() / run_pixels_into() put a call's events: called once, from one thread,
 /// once the call's count n_events is known and before any event is written; returns room for
