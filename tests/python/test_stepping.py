@@ -263,3 +263,29 @@ def test_run_sparse_names_a_bad_argument() -> None:
     # Nothing moved: the sensor still takes the step.
     assert sensor.run_sparse(np.full((4, 8), 1e3), t).dtype.names is not None
     assert sensor.last_pixel_updates == 32
+
+
+def test_long_steps_keep_the_timing_bias_of_the_dense_run() -> None:
+    # The timing-bias statistics of issue 33's "same physics": mcreynolds' LEDs cross their
+    # pixels once in 1 s; the delay of each event after its pixel's crossing (the ground
+    # truth's closest approach) must have the same law whether every pixel takes the base
+    # rate or the pixels with constant light take 0.5 s steps (OFF events come ~110 ms after a
+    # crossing, while the pixel settles: a settling pixel stepped too long would shift them).
+    from scipy.stats import ks_2samp
+
+    from evstwin.validation import timing_bias
+
+    delays: dict[str, list[np.ndarray]] = {"dense": [], "stepped": []}
+    for seed in (1, 2, 3):
+        for path, step in (("dense", 0.0), ("stepped", 0.5)):
+            r = simulate("mcreynolds", seed=seed, num_threads=2,
+                         sets=["duration_s=1", f"sampling.static_step_s={step}"])
+            table = timing_bias(r.events, r.meta["truth"])
+            delays[path].append(np.column_stack([table["delay_s"], table["p"]]))
+    dense, stepped = np.concatenate(delays["dense"]), np.concatenate(delays["stepped"])
+    for pol, name in ((1, "ON"), (0, "OFF")):
+        a, b = dense[dense[:, 1] == pol, 0], stepped[stepped[:, 1] == pol, 0]
+        assert a.size > 2000 and b.size > 2000, (name, a.size, b.size)
+        assert abs(a.size - b.size) < 4 * math.sqrt(a.size + b.size), (name, a.size, b.size)
+        p = ks_2samp(a, b).pvalue
+        assert p > 1e-3, f"{name} delays differ (KS p = {p:.2g}): medians {np.median(a):.4f} s, {np.median(b):.4f} s"
