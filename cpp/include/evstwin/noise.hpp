@@ -183,11 +183,18 @@ inline void noise_interval_begin(NoiseCoeffs& k, NoiseIntervalStage& stage, doub
         k.bridge_var = qh / (1.0 + ph * ph);
     }
 }
+/// The two-pole system's innovation covariance Q(T) (zz, zy, yy), as noise_interval_end() makes it.
+struct Ou2Covariance {
+    double zz = 0, zy = 0, yy = 0;
+};
 /// noise_coeffs_interval()'s second stage (noise_interval_begin()'s k and stage; b, D as there).
-inline void noise_interval_end(NoiseCoeffs& k, const NoiseIntervalStage& stage, double b, double D) {
+/// q: where to keep Q(T) itself (two poles only), for a caller that needs it beside its factor.
+inline void noise_interval_end(NoiseCoeffs& k, const NoiseIntervalStage& stage, double b, double D,
+                               Ou2Covariance* q = nullptr) {
     if (!stage.two_poles) return;
     double qzz, qzy, qyy;
     ou2_covariance_of(stage.h, stage.a, b, D, qzz, qzy, qyy);
+    if (q) *q = {qzz, qzy, qyy};
     if (qzz > 0) {
         k.l_zz = std::sqrt(qzz);
         k.l_yz = qzy / k.l_zz;
@@ -212,21 +219,13 @@ inline NoiseCoeffs noise_coeffs_interval(double a, double b, double D, double T,
     return k;
 }
 
-/// The two-pole system's bridge_var into k (noise_coeffs_interval()'s, the same a, b, D, T, sf
-/// and pole); nothing to do with one low-pass.
-inline void noise_coeffs_bridge(NoiseCoeffs& k, double a, double b, double D, double T, const SfTerms* sf = nullptr,
-                                const PoleTerms* pole = nullptr) {
-    if (!(a > 0 && b > 0)) return;
-    a = detail::separated_pole_rate(a, b);
-    const bool kept = sf != nullptr && sf->b == b && sf->T == T;
-    const bool pole_kept = pole != nullptr && pole->a == a && pole->T == T;
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    // Cov(mid | ends) = Qh - Qh Ph^T (Ph Qh Ph^T + Qh)^-1 Ph Qh, half-interval Ph, Qh.
-    const double h = 0.5 * T;
-    double hzz, hzy, hyy;
-    ou2_covariance(a, b, D, h, hzz, hzy, hyy, kept ? sf->ome_2bh : nan, pole_kept ? pole->ome_aT : nan);
-    const double pzz = std::exp(-a * h), pyy = kept ? sf->exp_bh : std::exp(-b * h);
-    const double pyz = cross_gain(a, b, h, pzz);
+namespace detail {
+/// The two-pole system's variance of n_y at an interval's middle given the whole state at both
+/// ends, from the half interval's transition (pzz, pyz, pyy) and innovation covariance (hzz,
+/// hzy, hyy): Cov(mid | ends) = Qh - Qh Ph^T (Ph Qh Ph^T + Qh)^-1 Ph Qh. Into `out` where that
+/// system is not singular (returns whether it was not).
+inline bool bridge_var_from_halves(double pzz, double pyz, double pyy, double hzz, double hzy, double hyy,
+                                   double& out) {
     // P = Ph Qh (rows of Ph times Qh): [[pzz, 0], [pyz, pyy]] [[hzz, hzy], [hzy, hyy]]
     const double Pzz = pzz * hzz, Pzy = pzz * hzy;
     const double Pyz = pyz * hzz + pyy * hzy, Pyy = pyz * hzy + pyy * hyy;
@@ -235,12 +234,32 @@ inline void noise_coeffs_bridge(NoiseCoeffs& k, double a, double b, double D, do
     const double Mzy = Pzz * pyz + Pzy * pyy + hzy;
     const double Myy = Pyz * pyz + Pyy * pyy + hyy;
     const double det = Mzz * Myy - Mzy * Mzy;
-    if (det > 0) {
-        // Cov_yy = hyy - (Qh Ph^T)_y. M^-1 (Ph Qh)_.y, and (Qh Ph^T)_y. = (P_.y)^T.
-        const double iz = (Myy * Pzy - Mzy * Pyy) / det;  // (M^-1 P)_{z,y}
-        const double iy = (Mzz * Pyy - Mzy * Pzy) / det;  // (M^-1 P)_{y,y}
-        k.bridge_var = std::max(0.0, hyy - (Pzy * iz + Pyy * iy));
-    }
+    if (!(det > 0)) return false;
+    // Cov_yy = hyy - (Qh Ph^T)_y. M^-1 (Ph Qh)_.y, and (Qh Ph^T)_y. = (P_.y)^T.
+    const double iz = (Myy * Pzy - Mzy * Pyy) / det;  // (M^-1 P)_{z,y}
+    const double iy = (Mzz * Pyy - Mzy * Pzy) / det;  // (M^-1 P)_{y,y}
+    out = std::max(0.0, hyy - (Pzy * iz + Pyy * iy));
+    return true;
+}
+}  // namespace detail
+
+/// The two-pole system's bridge_var into k (noise_coeffs_interval()'s, the same a, b, D, T, sf
+/// and pole); nothing to do with one low-pass. Its half interval's terms are
+/// noise_coeffs_interval(a, b, D, T / 2)'s, the same expressions on the same values: a caller
+/// that makes those anyway (refine_level) takes bridge_var_from_halves() from them.
+inline void noise_coeffs_bridge(NoiseCoeffs& k, double a, double b, double D, double T, const SfTerms* sf = nullptr,
+                                const PoleTerms* pole = nullptr) {
+    if (!(a > 0 && b > 0)) return;
+    a = detail::separated_pole_rate(a, b);
+    const bool kept = sf != nullptr && sf->b == b && sf->T == T;
+    const bool pole_kept = pole != nullptr && pole->a == a && pole->T == T;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double h = 0.5 * T;
+    double hzz, hzy, hyy;
+    ou2_covariance(a, b, D, h, hzz, hzy, hyy, kept ? sf->ome_2bh : nan, pole_kept ? pole->ome_aT : nan);
+    const double pzz = std::exp(-a * h), pyy = kept ? sf->exp_bh : std::exp(-b * h);
+    const double pyz = cross_gain(a, b, h, pzz);
+    detail::bridge_var_from_halves(pzz, pyz, pyy, hzz, hzy, hyy, k.bridge_var);
 }
 
 /// Stationary covariance of (n_z, n_y): the noise a pixel has carried since long before t = 0.

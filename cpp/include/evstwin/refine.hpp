@@ -53,24 +53,41 @@ struct RefineLevel {
 /// RefineLevel of pieces of length T behind the pole a (0: the follower alone) and the follower b.
 /// bridge_var: the piece's, where the caller has it (the whole interval's); else NaN, and
 /// `piece_coeffs` (if not null) holds noise_coeffs_interval(a, b, D, T): the level above's `half`,
-/// the same bits as computing it again.
+/// the same bits as computing it again. Each number is the expression it always was on the same
+/// values; those that two of them share are evaluated once (a bright pixel's interval, its pole
+/// rate its own, makes its levels afresh at every refinement: leo-pass on the DAVIS346 made 3.75
+/// a refinement).
 inline RefineLevel refine_level(double a, double b, double D, double T, double bridge_var,
                                 const NoiseCoeffs* piece_coeffs = nullptr) {
     RefineLevel v;
     v.ready = true;
+    const bool two_poles = a > 0.0 && b > 0.0;
+    // The level above's half is this level's piece: its decays are exp(-a T) (where the closed
+    // form kept a: detail::separated_pole_rate) and exp(-b T) (two poles, or the follower alone).
     if (a > 0.0) {
-        v.pole_decay = std::exp(-a * T);
+        v.pole_decay = piece_coeffs && two_poles && detail::separated_pole_rate(a, b) == a ? piece_coeffs->phi_zz
+                                                                                          : std::exp(-a * T);
         v.pole_ramp = one_minus_exp_over(a * T);
     }
-    v.sf_decay = std::exp(-b * T);
+    v.sf_decay = piece_coeffs && (two_poles || !(a > 0.0)) ? piece_coeffs->phi_yy : std::exp(-b * T);
     v.sf_ramp = one_minus_exp_over(b * T);
+    // The half piece's coefficients; with two poles its transition and covariance are also
+    // what noise_coeffs_bridge() would make again for this level's bridge_var.
+    NoiseIntervalStage stage;
+    Ou2Covariance half_q;
+    noise_interval_begin(v.half, stage, a, b, D, 0.5 * T);
+    noise_interval_end(v.half, stage, b, D, &half_q);
     if (std::isnan(bridge_var)) {
-        NoiseCoeffs piece = piece_coeffs ? *piece_coeffs : noise_coeffs_interval(a, b, D, T);
-        noise_coeffs_bridge(piece, a, b, D, T);
-        bridge_var = piece.bridge_var;
+        if (two_poles) {
+            bridge_var = 0.0;  // noise_coeffs_interval()'s, where the system is singular
+            detail::bridge_var_from_halves(v.half.phi_zz, v.half.phi_yz, v.half.phi_yy, half_q.zz, half_q.zy,
+                                           half_q.yy, bridge_var);
+        } else {
+            // One low-pass: noise_coeffs_interval() makes its bridge_var itself.
+            bridge_var = piece_coeffs ? piece_coeffs->bridge_var : noise_coeffs_interval(a, b, D, T).bridge_var;
+        }
     }
     v.bridge_var = bridge_var;
-    v.half = noise_coeffs_interval(a, b, D, 0.5 * T);
     const NoiseCoeffs& q = v.half;
     if (a > 0.0) {
         const double Qzz = q.l_zz * q.l_zz, Qzy = q.l_zz * q.l_yz, Qyy = q.l_yz * q.l_yz + q.l_yy * q.l_yy;
