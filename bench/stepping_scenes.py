@@ -97,10 +97,13 @@ def main() -> None:
     print(f"\n{args.scenario}{changed}, seeds {args.seeds}, long steps {args.step:g} s, {args.threads} threads; "
           f"mean wall time a run: base rate {wall['base rate'] / len(seeds):.2f} s, "
           f"long steps {wall['long steps'] / len(seeds):.2f} s")
+    # A statistic with nothing to compare (no event attributed to a crossing: a source that
+    # crosses no pixel) is left out rather than printed as NaN.
     names = [n for n in rows["base rate"][0]
-             if not all(math.isnan(r[n]) for path in rows.values() for r in path)]
+             if not all(math.isnan(r[n]) or r[n] == 0 for path in rows.values() for r in path)]
     if len(names) < len(rows["base rate"][0]):
-        print("(no event was attributed to a crossing in some runs: their delay rows are left out)")
+        print("(left out, zero or undefined in every run: "
+              f"{', '.join(n for n in rows['base rate'][0] if n not in names)})")
     print(f"{'':22s} {'base rate':>24s} {'long steps':>24s} {'diff / SE':>9s} {'sd ratio':>8s}")
     for name in names:
         a = np.array([r[name] for r in rows["base rate"]], dtype=np.float64)
