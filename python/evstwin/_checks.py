@@ -30,11 +30,15 @@ class WrongTypeError(TypeError, ValueError):
 
 def is_real(value: Any) -> bool:
     """A real number (Python or numpy, ints included), not a bool."""
+    if type(value) is float or type(value) is int:  # the common case, without the ABC's checks
+        return True  # (a bool's type is bool)
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def is_integer(value: Any) -> bool:
     """An integer (Python or numpy), not a bool; ``2.0`` is not one."""
+    if type(value) is int:  # the common case, without the ABC's checks (a bool's type is bool)
+        return True
     return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
 
 
