@@ -54,9 +54,9 @@ struct RefineLevel {
 /// bridge_var: the piece's, where the caller has it (the whole interval's); else NaN, and
 /// `piece_coeffs` (if not null) holds noise_coeffs_interval(a, b, D, T): the level above's `half`,
 /// the same bits as computing it again. Each number is the expression it always was on the same
-/// values; those that two of them share are evaluated once (a bright pixel's interval, its pole
-/// rate its own, makes its levels afresh at every refinement: leo-pass on the DAVIS346 made 3.75
-/// a refinement).
+/// values; those that two of them share are evaluated once. A pixel whose light is its own (a
+/// moving source's, a star's) makes its levels afresh at every refinement, its pole rate and
+/// noise intensity being its own: leo-pass on the DAVIS346 made 3.75 a refinement.
 inline RefineLevel refine_level(double a, double b, double D, double T, double bridge_var,
                                 const NoiseCoeffs* piece_coeffs = nullptr) {
     RefineLevel v;
