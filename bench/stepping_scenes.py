@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -30,7 +32,8 @@ import evstwin
 from evstwin.simulate import SimulationResult
 from evstwin.validation import timing_attribution
 
-BINS = 6  # shares of pixels with 0 .. BINS - 2 events, and BINS - 1 or more
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from stepping_statistics import BINS, count_shares, difference_in_se  # noqa: E402
 
 
 def seeds_of(text: str) -> list[int]:
@@ -45,9 +48,7 @@ def seeds_of(text: str) -> list[int]:
 def statistics(result: SimulationResult, radius_px: float) -> dict[str, float]:
     """One run's figures, by name."""
     ev = result.events
-    w, h = int(result.meta["width"]), int(result.meta["height"])
-    per_pixel = np.bincount(ev["y"].astype(np.int64) * w + ev["x"], minlength=w * h)
-    shares = np.bincount(np.minimum(per_pixel, BINS - 1), minlength=BINS) / per_pixel.size
+    shares = count_shares(ev, int(result.meta["width"]), int(result.meta["height"]))
     on = int(np.count_nonzero(ev["p"] == 1))
     row: dict[str, float] = {"ON": on, "OFF": len(ev) - on}
     row.update({f"share {k}" + ("+" if k == BINS - 1 else ""): float(s) for k, s in enumerate(shares)})
@@ -108,8 +109,7 @@ def main() -> None:
         a = np.array([r[name] for r in rows["base rate"]], dtype=np.float64)
         b = np.array([r[name] for r in rows["long steps"]], dtype=np.float64)
         sa, sb = a.std(ddof=1), b.std(ddof=1)
-        se = math.sqrt((sa**2 + sb**2) / len(seeds))
-        z = (b.mean() - a.mean()) / se if se > 0 else math.nan
+        z = float(difference_in_se(a, b))
         cell = "{:>12.6g} +- {:<9.3g}"
         print(f"{name:22s} {cell.format(a.mean(), sa)} {cell.format(b.mean(), sb)} {z:>+9.2f} "
               f"{sb / sa if sa > 0 else math.nan:>8.2f}")

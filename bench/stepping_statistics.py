@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import time
 
 import numpy as np
@@ -47,11 +46,23 @@ def pixel_params(scenario: str, sets: list[str]) -> PixelParams:
     return dataclasses.replace(params, **changes)
 
 
+def count_shares(events: np.ndarray, width: int, height: int) -> np.ndarray:
+    """The share of the width x height pixels with 0 .. BINS - 2 events, and BINS - 1 or more."""
+    per_pixel = np.bincount(events["y"].astype(np.int64) * width + events["x"], minlength=width * height)
+    return np.bincount(np.minimum(per_pixel, BINS - 1), minlength=BINS) / per_pixel.size
+
+
+def difference_in_se(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(mean of b - mean of a) over the standard error of that difference (Welch), column by
+    column of two (seeds x statistics) tables; NaN where neither varies."""
+    se = np.sqrt(a.var(axis=0, ddof=1) / len(a) + b.var(axis=0, ddof=1) / len(b))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(se > 0, (b.mean(axis=0) - a.mean(axis=0)) / se, np.nan)
+
+
 def counts(events: np.ndarray, side: int) -> tuple[np.ndarray, int, int]:
-    per_pixel = np.bincount(events["y"].astype(np.int64) * side + events["x"], minlength=side * side)
-    shares = np.bincount(np.minimum(per_pixel, BINS - 1), minlength=BINS) / per_pixel.size
     on = int(np.count_nonzero(events["p"] == 1))
-    return shares, on, len(events) - on
+    return count_shares(events, side, side), on, len(events) - on
 
 
 def run(params: PixelParams, seed: int, side: int, duration_s: float, rate_hz: float, step_s: float,
@@ -96,16 +107,13 @@ def main() -> None:
     print(f"{args.scenario}'s pixel{changed} in the dark, {args.side} x {args.side} px, {args.duration:g} s, "
           f"base rate {args.rate:g} Hz, long steps {args.step:g} s, seeds 1-{args.seeds} "
           f"({time.perf_counter() - start:.0f} s)")
-    means, sems = {}, {}
+    tables = {}
     for label, runs in rows.items():
-        table = np.array([[*shares, on, off] for shares, on, off in runs])
-        means[label] = table.mean(axis=0)
-        sems[label] = table.std(axis=0, ddof=1) / math.sqrt(len(runs))
+        table = tables[label] = np.array([[*shares, on, off] for shares, on, off in runs])
         on, off = int(table[:, BINS].sum()), int(table[:, BINS + 1].sum())
-        shares = " ".join(f"{v:.5f}" for v in means[label][:BINS])
+        shares = " ".join(f"{v:.5f}" for v in table.mean(axis=0)[:BINS])
         print(f"{label:11s} events {on + off:,} (ON {on:,}, OFF {off:,}); pixels with 0..{BINS - 1}+ events: {shares}")
-    a, b = means["base rate"], means["long steps"]
-    z = (b - a) / np.sqrt(sems["base rate"] ** 2 + sems["long steps"] ** 2 + 1e-300)
+    z = np.nan_to_num(difference_in_se(tables["base rate"], tables["long steps"]))  # 0 where both agree exactly
     names = [f"share {k}" for k in range(BINS - 1)] + [f"share {BINS - 1}+", "ON", "OFF"]
     print("long steps - base rate, in standard errors: " + ", ".join(f"{n} {v:+.1f}" for n, v in zip(names, z)))
 

@@ -408,12 +408,7 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             for (const std::exception_ptr& e : errors)
                 if (e) std::rethrow_exception(e);
         }
-        for (Part& part : parts) {
-            events.insert(events.end(), part.events.begin(), part.events.end());
-            labels.insert(labels.end(), part.labels.begin(), part.labels.end());
-            updates += part.updates;
-            at_end += part.at_end;
-        }
+        for (const Part& part : parts) at_end += part.at_end;
         // The pixels still settling after the step, for the next: the earlier ones and this
         // step's lit ones, each once.
         const double t_last = step.t_s[n - 1];
@@ -431,8 +426,8 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             settling_.swap(still);
         }
         // The last group's pixels stand at the step's end already (its last sample is a base
-        // time).
-        Part rest;
+        // time). The rest reach it on the sensor's own buffers, their events after the parts'.
+        Part& rest = parts.emplace_back();
         if (dense) {
             // Every pixel stands at t_last: the last group's run() took them there.
         } else if (step.reach_all) {
@@ -453,9 +448,11 @@ inline std::size_t Sensor::run_sparse_into(const EventStorage& storage, const Sp
             std::sort(reach.begin(), reach.end());
             long_step(calls_, rest, reach, t_last);
         }
-        events.insert(events.end(), rest.events.begin(), rest.events.end());
-        labels.insert(labels.end(), rest.labels.begin(), rest.labels.end());
-        updates += rest.updates;
+        for (const Part& part : parts) {
+            events.insert(events.end(), part.events.begin(), part.events.end());
+            labels.insert(labels.end(), part.labels.begin(), part.labels.end());
+            updates += part.updates;
+        }
         sparse_end_ = t_last;
     } catch (...) {
         stopped_ = true;  // earlier groups' pixels have moved
