@@ -168,6 +168,34 @@ def test_bad_biases_get_one_line_naming_key_and_value(preset: str, biases: dict,
     assert "\n" not in str(err.value)
 
 
+def test_davis_bias_currents_are_refused_on_a_prophesee_preset() -> None:
+    # eq. 8-9 and the follower's law are the DAVIS pixel's: on the IMX636 the DAVIS346 set would give
+    # theta 0.206 / 0.093, a 10 Hz follower and 1 ms refractory period under the IMX636's name.
+    for preset in ("imx636", "prophesee_gen3_vga"):
+        for change, named in ((lambda s: s["sensor"].update(bias_set="fast_pr_slow_sf_balanced_th"),
+                               r"sensor\.bias_set='fast_pr_slow_sf_balanced_th'"),
+                              (lambda s: s.update(biases={"i_on_a": 1e-7}), r"biases\.i_on_a=1e-07"),
+                              (lambda s: s["sensor"].update(k=1.0), r"sensor\.k=1\.0")):
+            s = small(preset)
+            change(s)
+            with pytest.raises(ScenarioError, match=named + rf".* do not apply to preset '{preset}'.*"
+                                                             r"sensor\.bias_set=\"none\"") as err:
+                build(s)
+            assert "\n" not in str(err.value)
+    # A base scenario's set is dropped with "none": the preset's own pixel, bit for bit.
+    own = get_preset("imx636").pixel
+    scene = build({"base": "geo-stare", "sensor": {"preset": "imx636", "bias_set": "none"}}, duration_s=0.1)
+    assert (scene.params.theta_on, scene.params.theta_off, scene.params.cutoff_hz, scene.params.refractory_s) == \
+        (own.theta_on, own.theta_off, own.cutoff_hz, own.refractory_s)
+    assert set_value(load("geo-stare"), "sensor.bias_set", "none")["sensor"]["bias_set"] == "none"
+    # On the DAVIS346 "none" is its preset's own set; a named set still applies there.
+    assert build(dict(small("davis346"), sensor={"preset": "davis346", "roi": [0, 0, 6, 6], "bias_set": "none"})
+                 ).params == get_preset("davis346").pixel.replace(pr_pole=True)  # a scenario's pr_pole default
+    assert build(dict(small("davis346"), sensor={"preset": "davis346", "roi": [0, 0, 6, 6],
+                                                 "bias_set": "paper_run_3"})).params.theta_off == \
+        pytest.approx(0.2181, abs=5e-4)  # Table 2 run 3
+
+
 def test_unknown_bias_name_and_set_syntax() -> None:
     with pytest.raises(ScenarioError, match=r"unknown scenario key 'biases\.bias_fooo'; allowed: .*bias_refr"):
         set_value(load(small("imx636")), "biases.bias_fooo", 3)

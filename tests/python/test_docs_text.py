@@ -85,3 +85,6 @@ def test_the_scenarios_the_guides_show_load(page: str, toml_text: str, tmp_path:
     path.write_text(toml_text, encoding="utf-8")
     loaded = scenario.load(path)
     assert loaded["sensor"]["preset"]
+    # and builds: a key that loads can still be refused with the rest (a DAVIS bias set on the IMX636)
+    built = scenario.build(path, duration_s=0.05)
+    assert built.params.theta_on > 0

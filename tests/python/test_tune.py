@@ -876,6 +876,8 @@ def test_target_tracking_measures_the_target_at_rest(tmp_path: Path) -> None:
     (["--preset", "davis346", "--focal-length-mm", "50", "--f-number", "2", "--window", "400x64"],
      ["--window 400x64", "346x260"]),
     (["--preset", "davis346", "--focal-length-mm", "50", "--f-number", "2", "--bias-set", "fast"], ["--bias-set", "fast"]),
+    (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--bias-set", "paper_run_3"],
+     ["--bias-set paper_run_3", "--preset imx636", "Prophesee"]),
     (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--airmass", "0.5"], ["--airmass", "0.5"]),
     (["--preset", "imx636", "--focal-length-mm", "50", "--f-number", "2", "--declination-deg", "95"],
      ["--declination-deg", "95"]),

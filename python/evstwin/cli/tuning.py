@@ -400,6 +400,9 @@ def _setup(args: argparse.Namespace) -> Setup | None:
             get_bias_set(args.bias_set)
         except ValueError as exc:
             raise ValueError(f"--bias-set: {exc}") from None
+        if preset.vendor_biases is not None:
+            raise ValueError(f"--bias-set {args.bias_set}: the DAVIS bias sets do not apply to --preset {preset.name}, "
+                             "whose biases are Prophesee's; leave --bias-set out for its own")
     if args.scintillation:
         from ..sky.atmosphere import MIN_SAMPLES_PER_SCINTILLATION_TAU, Scintillation
 

@@ -10,7 +10,9 @@ The tables mirror the Python objects:
                   map stay in the sensor's coordinates and are cut and shifted to the ROI's,
                   and the events come out as a w x h recording in the ROI's coordinates,
                   x - x0 and y - y0), ``bias_set`` (a name from
-                  ``evstwin.presets.BIAS_SETS``), ``k`` (eq. 8-9 factor),
+                  ``evstwin.presets.BIAS_SETS``, DAVIS bias currents: the DAVIS346 presets
+                  only; ``"none"``: the preset's own biases, dropping a ``base``'s set),
+                  ``k`` (eq. 8-9 factor, with the currents),
                   ``temperature_c`` (the sensor's temperature [degC], -30 to 70: the dark
                   current, leak, background and hot-pixel rates scale from the preset's
                   25 degC by ``SensorPreset.at_temperature``, doubling every 6.5 degC).

@@ -137,8 +137,10 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     params = preset.pixel
     bias_table = dict(s.get("biases", {}))
     vendor = {name: bias_table.pop(name) for name in PROPHESEE_BIAS_NAMES if name in bias_table}
-    set_name = s["sensor"].get("bias_set")
+    set_name = _bias_set_name(s)
     k = s["sensor"].get("k")
+    if not vendor:
+        _davis_currents_only_on_davis(preset, set_name, bias_table, k)
     if vendor:
         params = _vendor_biases(s, preset, vendor, bias_table)
     elif set_name or bias_table:
@@ -362,6 +364,33 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     )
 
 
+def _bias_set_name(s: dict[str, Any]) -> str | None:
+    """sensor.bias_set, None where absent or ``"none"`` (the preset's own biases: what a scene
+    whose ``base`` names a set and whose preset is a Prophesee sensor gives)."""
+    name = s["sensor"].get("bias_set")
+    return None if name is None or name.lower() == "none" else name
+
+
+def _davis_currents_only_on_davis(preset: SensorPreset, set_name: str | None, currents: dict[str, Any],
+                                  k: Any) -> None:
+    """Refuse the DAVIS bias currents (sensor.bias_set, biases.i_on_a ..., sensor.k) on a
+    preset with Prophesee biases: eq. 8-9 and the follower's and refractory laws are the DAVIS
+    pixel's circuit, so on the IMX636 they would give it a DAVIS346's thresholds, 10 Hz follower
+    and 1 ms refractory period under its own name (what ``geo-stare`` with only
+    ``sensor.preset=imx636`` set gave before this was refused)."""
+    if preset.vendor_biases is None:
+        return
+    given = ([f"sensor.bias_set={set_name!r}"] if set_name else []) + [
+        f"biases.{name}={value!r}" for name, value in currents.items()] + ([f"sensor.k={k!r}"] if k is not None else [])
+    if given:
+        raise ScenarioError(
+            f"{', '.join(given)}: the DAVIS bias currents (and their eq. 8-9 factor) do not apply to preset "
+            f"{preset.name!r}, whose biases are "
+            f"Prophesee's (biases.{', biases.'.join(PROPHESEE_BIAS_NAMES)}); set sensor.bias_set=\"none\" for the "
+            "preset's own biases (a base scenario's set included), or give pixel.theta_on, pixel.theta_off, "
+            "pixel.cutoff_hz ... directly")
+
+
 def _vendor_biases(s: dict[str, Any], preset: SensorPreset, vendor: dict[str, Any],
                    currents: dict[str, Any]) -> PixelParams:
     """The preset's pixel with the vendor's biases of [biases] (``bias_diff_on`` ...) mapped
@@ -373,7 +402,7 @@ def _vendor_biases(s: dict[str, Any], preset: SensorPreset, vendor: dict[str, An
             f"biases.{first}: preset {preset.name!r} has no Prophesee biases (its biases are the DAVIS bias "
             f"currents, biases.{', biases.'.join(_BIAS_KEYS)}, or sensor.bias_set); Prophesee biases: "
             f"{', '.join(VENDOR_BIAS_PRESETS)}")
-    mixed = [f"biases.{k}" for k in currents] + (["sensor.bias_set"] if s["sensor"].get("bias_set") else []) + (
+    mixed = [f"biases.{k}" for k in currents] + (["sensor.bias_set"] if _bias_set_name(s) else []) + (
         ["sensor.k"] if "k" in s["sensor"] else [])
     if mixed:
         raise ScenarioError(f"biases.{first} (a Prophesee bias) cannot be combined with {', '.join(mixed)} (the "
