@@ -139,10 +139,10 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
     vendor = {name: bias_table.pop(name) for name in PROPHESEE_BIAS_NAMES if name in bias_table}
     set_name = _bias_set_name(s)
     k = s["sensor"].get("k")
-    if not vendor:
-        _davis_currents_only_on_davis(preset, set_name, bias_table, k)
     if vendor:
         params = _vendor_biases(s, preset, vendor, bias_table)
+    elif preset.vendor_biases is not None:
+        _refuse_davis_currents(preset, set_name, bias_table, k)
     elif set_name or bias_table:
         base_set = _wrap("sensor.bias_set", get_bias_set, set_name) if set_name else None
         fields = {} if base_set is None else {f: getattr(base_set, f) for f in _BIAS_KEYS}
@@ -365,21 +365,18 @@ def build(scenario: str | Path | dict, duration_s: float | None = None, seed: in
 
 
 def _bias_set_name(s: dict[str, Any]) -> str | None:
-    """sensor.bias_set, None where absent or ``"none"`` (the preset's own biases: what a scene
-    whose ``base`` names a set and whose preset is a Prophesee sensor gives)."""
+    """sensor.bias_set; None where it is absent or ``"none"``: the preset's own biases, also
+    where a ``base`` scenario names a set (a Prophesee preset over ``geo-stare``)."""
     name = s["sensor"].get("bias_set")
     return None if name is None or name.lower() == "none" else name
 
 
-def _davis_currents_only_on_davis(preset: SensorPreset, set_name: str | None, currents: dict[str, Any],
-                                  k: Any) -> None:
-    """Refuse the DAVIS bias currents (sensor.bias_set, biases.i_on_a ..., sensor.k) on a
-    preset with Prophesee biases: eq. 8-9 and the follower's and refractory laws are the DAVIS
+def _refuse_davis_currents(preset: SensorPreset, set_name: str | None, currents: dict[str, Any], k: Any) -> None:
+    """Refuse any DAVIS bias current (sensor.bias_set, biases.i_on_a ..., sensor.k) given for
+    a preset with Prophesee biases: eq. 8-9 and the follower's and refractory laws are the DAVIS
     pixel's circuit, so on the IMX636 they would give it a DAVIS346's thresholds, 10 Hz follower
     and 1 ms refractory period under its own name (what ``geo-stare`` with only
     ``sensor.preset=imx636`` set gave before this was refused)."""
-    if preset.vendor_biases is None:
-        return
     given = ([f"sensor.bias_set={set_name!r}"] if set_name else []) + [
         f"biases.{name}={value!r}" for name, value in currents.items()] + ([f"sensor.k={k!r}"] if k is not None else [])
     if given:
