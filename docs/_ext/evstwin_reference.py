@@ -503,7 +503,10 @@ def presets_markdown() -> str:
             if f not in scalar:
                 lines += _preset_value_md(f.name, getattr(p, f.name), 0)
     if getattr(presets, "BIAS_SETS", None):
-        lines += ["## Bias sets", "", "`[sensor] bias_set = NAME`; the thresholds follow from eq. 8-9.", "",
+        lines += ["## Bias sets", "",
+                  "`[sensor] bias_set = NAME`; the thresholds follow from eq. 8-9. They are the DAVIS pixel's "
+                  "bias currents: the Prophesee presets refuse them (their own biases are `[biases] bias_diff_on` "
+                  "...), and `bias_set = \"none\"` drops a `base` scenario's set.", "",
                   "| name | I_on [A] | I_off [A] | I_diff [A] | I_pr [A] | I_sf [A] | I_refr [A] | source |",
                   "|---|---|---|---|---|---|---|---|"]
         for n, b in presets.BIAS_SETS.items():
