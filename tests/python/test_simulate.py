@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from evstwin.presets import get_preset
 from evstwin.scenario import ScenarioError, build, builtin_names, load, parse_assignment, set_value, to_toml
 from evstwin.simulate import simulate
 
@@ -52,6 +53,15 @@ def test_builtin_scenarios_build() -> None:
     assert math.isclose(base.params.theta_on, 0.2061, rel_tol=1e-3)
     geo = build("geo-stare")
     assert geo.targets[0].label == "geo" and len(geo.targets) == 41
+    # geo-stare's telescope on the IMX636: its own pixel (not geo-stare's DAVIS346 bias set), the
+    # satellite at 15.04 arcsec/s = 30 px/s at 4.86 um / 2 m = 0.501 arcsec/px, long steps on.
+    imx = build("geo-stare-imx636")
+    own = get_preset("imx636").pixel
+    assert (imx.width, imx.height, imx.params.theta_on, imx.params.theta_off, imx.params.cutoff_hz) == \
+        (1280, 720, own.theta_on, own.theta_off, own.cutoff_hz)
+    assert imx.static_step_s == 0.5 and len(imx.targets) == 41 and imx.targets[0].label == "geo"
+    assert math.isclose(imx.optics.plate_scale_arcsec_per_px, 4.86e-6 / 2.0 * 206264.8, rel_tol=1e-4)
+    assert math.isclose(imx.targets[0].vx_px_s, 15.04 / (4.86e-6 / 2.0 * 206264.8), rel_tol=1e-3)
 
 
 def test_set_overrides_one_value_and_names_bad_keys() -> None:
