@@ -128,6 +128,7 @@ public:
         // most of its page faults (a hint: the memory is the same either way).
         state_.reserve(static_cast<std::size_t>(n));
         detail::advise_huge_pages(state_.data(), static_cast<std::size_t>(n) * sizeof(PixelState));
+        detail::touch_in_parallel(state_.data(), static_cast<std::size_t>(n) * sizeof(PixelState), num_threads_);
         state_.resize(static_cast<std::size_t>(n));
         reset();
     }

@@ -1,13 +1,17 @@
-// Two helpers of Sensor's that know nothing of pixels' physics: PixelDivider, the row
+// Three helpers of Sensor's that know nothing of pixels' physics: PixelDivider, the row
 // width's division by a multiply and a shift (collect_sample() turns every event's pixel into
-// (x, y)), and advise_huge_pages(), the huge-page hint for its large arrays (the state, a
-// call's event output). Included by sensor.hpp.
+// (x, y)), advise_huge_pages(), the huge-page hint for its large arrays (the state, a
+// call's event output), and touch_in_parallel(), the state's first touch. Included by sensor.hpp.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <stdexcept>
 #include <string>
+
+#include "../config.hpp"
 
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -56,6 +60,25 @@ inline void advise_huge_pages(void* p, std::size_t bytes) {
     (void)p;
     (void)bytes;
 #endif
+}
+
+/// Fault in [p, p + bytes) from `threads` threads at once (zeros, 2 MiB a piece), before the
+/// caller constructs its objects there: a fresh process's first touch of the IMX636 array's
+/// 162 MB took 0.1-0.65 s on one thread of a virtual machine (the hypervisor backing fresh huge
+/// pages), and 0.02-0.13 s on two. Only where the memory is first touched changes.
+inline void touch_in_parallel(void* p, std::size_t bytes, int threads) {
+    constexpr std::size_t PIECE = std::size_t{1} << 21;
+    const std::int64_t pieces = static_cast<std::int64_t>((bytes + PIECE - 1) / PIECE);
+    unsigned char* base = static_cast<unsigned char*>(p);
+#if EVSTWIN_HAS_OPENMP
+#pragma omp parallel for num_threads(threads) schedule(static) if (pieces >= 4)
+#else
+    (void)threads;
+#endif
+    for (std::int64_t k = 0; k < pieces; ++k) {
+        const std::size_t at = static_cast<std::size_t>(k) * PIECE;
+        std::memset(base + at, 0, std::min(PIECE, bytes - at));
+    }
 }
 }  // namespace detail
 
