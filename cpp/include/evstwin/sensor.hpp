@@ -125,7 +125,8 @@ public:
                                         " GB of pixel state");
         set_num_threads(num_threads);
         // 176 bytes a pixel (162 MB for the IMX636 array): huge pages spare the construction
-        // most of its page faults (a hint: the memory is the same either way).
+        // most of its page faults (a hint: the memory is the same either way), and the
+        // sensor's threads take those left.
         state_.reserve(static_cast<std::size_t>(n));
         detail::advise_huge_pages(state_.data(), static_cast<std::size_t>(n) * sizeof(PixelState));
         detail::touch_in_parallel(state_.data(), static_cast<std::size_t>(n) * sizeof(PixelState), num_threads_);

@@ -63,9 +63,11 @@ inline void advise_huge_pages(void* p, std::size_t bytes) {
 }
 
 /// Fault in [p, p + bytes) from `threads` threads at once (zeros, 2 MiB a piece), before the
-/// caller constructs its objects there: a fresh process's first touch of the IMX636 array's
-/// 162 MB took 0.1-0.65 s on one thread of a virtual machine (the hypervisor backing fresh huge
-/// pages), and 0.02-0.13 s on two. Only where the memory is first touched changes.
+/// caller constructs its objects there: on a virtual machine whose hypervisor backs fresh huge
+/// pages slowly, a 162 MB array (the IMX636's state) touched once in a fresh process took
+/// 0.04-0.65 s on one thread and 0.015-0.13 s on two (NumPy); the sensor's build, 0.13-0.71 s
+/// before and 0.11-0.41 s after (bench/bench_sensor_build.py). Only where memory is first
+/// touched changes.
 inline void touch_in_parallel(void* p, std::size_t bytes, int threads) {
     constexpr std::size_t PIECE = std::size_t{1} << 21;
     const std::int64_t pieces = static_cast<std::int64_t>((bytes + PIECE - 1) / PIECE);
