@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
-#include <cstring>
 #include <stdexcept>
 #include <string>
 
@@ -62,14 +61,15 @@ inline void advise_huge_pages(void* p, std::size_t bytes) {
 #endif
 }
 
-/// Fault in [p, p + bytes) from `threads` threads at once (zeros, 2 MiB a piece), before the
-/// caller constructs its objects there: on a virtual machine whose hypervisor backs fresh huge
-/// pages slowly, a 162 MB array (the IMX636's state) touched once in a fresh process took
-/// 0.04-0.65 s on one thread and 0.015-0.13 s on two (NumPy); the sensor's build, 0.13-0.71 s
-/// before and 0.11-0.41 s after (bench/bench_sensor_build.py). Only where memory is first
-/// touched changes.
+/// Fault in [p, p + bytes) from `threads` threads at once (2 MiB a thread's piece, one zero
+/// byte a 4 KiB page: the kernel zeroes each page it maps, so writing the rest would only
+/// write it again), before the caller constructs its objects there. On a virtual machine whose
+/// hypervisor backs fresh huge pages slowly, a 162 MB array (the IMX636's state) touched once
+/// in a fresh process took 0.04-0.65 s on one thread and 0.015-0.13 s on two (NumPy); the
+/// sensor's build, 0.12-0.75 s before and 0.14-0.42 s after (bench/bench_sensor_build.py).
+/// Only where memory is first touched changes.
 inline void touch_in_parallel(void* p, std::size_t bytes, int threads) {
-    constexpr std::size_t PIECE = std::size_t{1} << 21;
+    constexpr std::size_t PIECE = std::size_t{1} << 21, PAGE = std::size_t{1} << 12;
     const std::int64_t pieces = static_cast<std::int64_t>((bytes + PIECE - 1) / PIECE);
     unsigned char* base = static_cast<unsigned char*>(p);
 #if EVSTWIN_HAS_OPENMP
@@ -78,8 +78,9 @@ inline void touch_in_parallel(void* p, std::size_t bytes, int threads) {
     (void)threads;
 #endif
     for (std::int64_t k = 0; k < pieces; ++k) {
-        const std::size_t at = static_cast<std::size_t>(k) * PIECE;
-        std::memset(base + at, 0, std::min(PIECE, bytes - at));
+        const std::size_t end = std::min(bytes, static_cast<std::size_t>(k + 1) * PIECE);
+        for (std::size_t at = static_cast<std::size_t>(k) * PIECE; at < end; at += PAGE)
+            *static_cast<volatile unsigned char*>(base + at) = 0;
     }
 }
 }  // namespace detail
